@@ -1,0 +1,55 @@
+# hptvsim: the two commands of the README are `make run` and `make test`.
+# Each sets everything up from a fresh clone (virtual environment, packages) and then runs.
+
+PYTHON ?= python3
+VENV   := .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed-stamp
+# pytest workers: the machines this runs on have 2 cores
+WORKERS ?= 2
+
+.PHONY: run test test-slow lint typecheck unit bench bench-quick fmus setup system-deps clean
+
+$(STAMP): pyproject.toml
+	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	# torch first and exactly: a looser spec anywhere would pull several GB of CUDA wheels
+	$(BIN)/python -m pip install --quiet "torch==2.13.0"
+	$(BIN)/python -m pip install --quiet -e ".[all,dev]"
+	touch $(STAMP)
+
+setup: $(STAMP)
+
+# System packages the tests need (a clean CI machine has none of them).
+system-deps:
+	@true
+
+run: setup
+	$(BIN)/hptvsim demo
+
+lint: setup
+	$(BIN)/ruff check hptvsim services tests
+	$(BIN)/ruff format --check hptvsim services tests
+
+typecheck: setup
+	$(BIN)/mypy
+
+unit: setup system-deps
+	$(BIN)/pytest -n $(WORKERS)
+
+test: lint typecheck unit
+
+test-slow: setup system-deps
+	$(BIN)/pytest -n $(WORKERS) -m slow
+
+bench: setup
+	$(BIN)/hptvsim bench dynamics
+
+bench-quick: setup
+	$(BIN)/hptvsim bench dynamics --quick
+
+fmus: setup
+	$(BIN)/hptvsim fmu build
+
+clean:
+	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache hptvsim-out

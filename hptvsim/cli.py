@@ -1,0 +1,146 @@
+"""The ``hptvsim`` command line.
+
+Each command imports what it needs when it runs, so ``hptvsim --help`` stays fast. Packages
+add their commands through a module listed in :data:`COMMAND_MODULES`: each such module
+defines ``register(main: click.Group, bench: click.Group) -> None`` and adds its commands to
+the top-level group and, for benchmarks, to ``hptvsim bench``.
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+import click
+
+from hptvsim import __version__
+
+COMMAND_MODULES: tuple[str, ...] = ()
+"""Modules whose ``register(main, bench)`` adds commands (one line per package)."""
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="hptvsim")
+def main() -> None:
+    """hptvsim: underwater pursuit-evasion simulator, FMUs, environments, training, service."""
+
+
+# --- fmu --------------------------------------------------------------------------------------
+
+
+@main.group()
+def fmu() -> None:
+    """Build and check the vehicle FMUs (FMI 2.0 Co-Simulation)."""
+
+
+@fmu.command("build")
+@click.option(
+    "--out",
+    "out_dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="Folder for the .fmu files (default: the repository's fmus/).",
+)
+@click.option("--type", "vehicle_types", multiple=True, help="Vehicle type(s) to build (default: all).")
+def fmu_build(out_dir: Path | None, vehicle_types: tuple[str, ...]) -> None:
+    """Generate C from the CasADi model, compile it and pack one FMU per vehicle type."""
+    from hptvsim.dynamics import VEHICLE_TYPES
+    from hptvsim.fmu import fmu_dir
+    from hptvsim.fmu.build import build_fmu
+
+    target = out_dir if out_dir is not None else fmu_dir()
+    for vt in vehicle_types or tuple(VEHICLE_TYPES):
+        path = build_fmu(vt, target)
+        click.echo(f"built {path}")
+
+
+@fmu.command("check")
+@click.option(
+    "--dir",
+    "fmu_folder",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="Folder holding the .fmu files (default: the repository's fmus/).",
+)
+def fmu_check(fmu_folder: Path | None) -> None:
+    """Fail when an FMU's sources drift from what the model generates, or it fails validation."""
+    from fmpy.validation import validate_fmu
+
+    from hptvsim.dynamics import FMU_NAMES
+    from hptvsim.fmu import fmu_dir
+    from hptvsim.fmu.build import check_fmu
+
+    folder = fmu_folder if fmu_folder is not None else fmu_dir()
+    bad = False
+    for vt, ident in FMU_NAMES.items():
+        path = folder / f"{ident}.fmu"
+        drift = check_fmu(vt, path)
+        problems = validate_fmu(str(path))
+        click.echo(str(drift))
+        for p in problems:
+            click.echo(f"  validation: {p}")
+        bad = bad or not drift.ok or bool(problems)
+    if bad:
+        sys.exit(1)
+
+
+# --- bench ------------------------------------------------------------------------------------
+
+
+@main.group()
+def bench() -> None:
+    """Benchmarks: each prints costs and ratios to a floor or peer measured in the same run."""
+
+
+def emit(result: Any, as_json: bool) -> None:
+    """Print a benchmark result (anything with ``table()`` and ``as_dict()``)."""
+    if as_json:
+        click.echo(json.dumps(result.as_dict(), indent=2))
+    else:
+        click.echo(result.table())
+
+
+@bench.command("dynamics")
+@click.option("--quick", is_flag=True, help="Seconds instead of a minute.")
+@click.option("--type", "vehicle_type", default="work_class", show_default=True)
+@click.option("--json", "as_json", is_flag=True, help="Print JSON instead of a table.")
+def bench_dynamics_cmd(quick: bool, vehicle_type: str, as_json: bool) -> None:
+    """µs per vehicle-step: FMPy high-level calls, the lean hot path, the compiled C floor."""
+    from hptvsim.bench.dynamics import bench_dynamics
+
+    emit(bench_dynamics(quick=quick, vehicle_type=vehicle_type), as_json)
+
+
+# --- demo -------------------------------------------------------------------------------------
+
+
+@main.command()
+@click.option(
+    "--out",
+    "out_dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=Path("hptvsim-out"),
+    show_default=True,
+    help="Folder for the plot.",
+)
+@click.option("--duration", type=float, default=120.0, show_default=True, help="Simulated seconds.")
+def demo(out_dir: Path, duration: float) -> None:
+    """Both vehicle types manoeuvre through their FMUs; writes a trajectory plot."""
+    from hptvsim.demo import run_demo
+
+    path = run_demo(out_dir, duration=duration)
+    click.echo(f"trajectory plot: {path.resolve()}")
+
+
+def _register() -> None:
+    for name in COMMAND_MODULES:
+        importlib.import_module(name).register(main, bench)
+
+
+_register()
+
+if __name__ == "__main__":
+    main()
