@@ -18,7 +18,7 @@ import click
 
 from hptvsim import __version__
 
-COMMAND_MODULES: tuple[str, ...] = ()
+COMMAND_MODULES: tuple[str, ...] = ("hptvsim.cosim.cli",)
 """Modules whose ``register(main, bench)`` adds commands (one line per package)."""
 
 

@@ -1,5 +1,66 @@
-"""Co-simulation: FMI 2.0 CS FMUs stepped through FMPy's library with lean, checked calls."""
+"""Co-simulation: FMI 2.0 CS FMUs wired by a graph, the vehicle composition, a batched backend.
 
-from hptvsim.cosim.fmi2 import Fmu2Instance, FmuError, FmuModel, FmuVariableError, Variable
+* :mod:`hptvsim.cosim.fmi2`: lean, checked FMI 2.0 calls on preallocated buffers;
+* :mod:`hptvsim.cosim.graph`: the graph description (dataclasses; TOML/JSON files);
+* :mod:`hptvsim.cosim.orchestrator`: the master (fixed macro steps, Jacobi or Gauss-Seidel);
+* :mod:`hptvsim.cosim.system`: B sub-environments x N vehicles (reset, pause, resume,
+  snapshot, restore) on the FMU path;
+* :mod:`hptvsim.cosim.batched`: the same system, bit for bit, through the FMU binaries'
+  batch entry points, for training speed.
+"""
 
-__all__ = ["Fmu2Instance", "FmuError", "FmuModel", "FmuVariableError", "Variable"]
+from hptvsim.cosim.batched import BatchedSnapshot, BatchedVehicleSystem, NonFiniteStateError
+from hptvsim.cosim.fmi2 import Fmu2Instance, FmuError, FmuModel, FmuVariableError, Variable, load_model
+from hptvsim.cosim.graph import (
+    Component,
+    Connection,
+    ExternalInput,
+    ExternalOutput,
+    Graph,
+    GraphError,
+    Port,
+    load_graph,
+    save_graph,
+)
+from hptvsim.cosim.orchestrator import Orchestrator, SimulationFailedError, SimulationPausedError, Snapshot
+from hptvsim.cosim.system import (
+    FmuSystemSnapshot,
+    FmuVehicleSystem,
+    SystemSpec,
+    VehicleSpec,
+    VehicleSystem,
+    make_system,
+    vehicle_graph,
+)
+
+__all__ = [
+    "BatchedSnapshot",
+    "BatchedVehicleSystem",
+    "Component",
+    "Connection",
+    "ExternalInput",
+    "ExternalOutput",
+    "Fmu2Instance",
+    "FmuError",
+    "FmuModel",
+    "FmuSystemSnapshot",
+    "FmuVariableError",
+    "FmuVehicleSystem",
+    "Graph",
+    "GraphError",
+    "NonFiniteStateError",
+    "Orchestrator",
+    "Port",
+    "SimulationFailedError",
+    "SimulationPausedError",
+    "Snapshot",
+    "SystemSpec",
+    "Variable",
+    "VehicleSpec",
+    "VehicleSystem",
+    "load_graph",
+    "load_model",
+    "make_system",
+    "save_graph",
+    "vehicle_graph",
+]

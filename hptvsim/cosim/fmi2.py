@@ -16,6 +16,7 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import itertools
+import math
 import shutil
 import tempfile
 import threading
@@ -309,22 +310,32 @@ class Fmu2Instance:
             FmuVariableError: Unknown name (the message lists the valid parameters and inputs).
             FmuError: The FMU rejected a value (non-finite, out of range).
         """
+        real_vr: list[int] = []
+        real_val: list[float] = []
+        other: list[tuple[str, Variable, float]] = []
         for name, value in values.items():
             var = self.model.variable(name, causality=("parameter", "input"))
-            vr = (ctypes.c_uint * 1)(var.value_reference)
             if var.type == "Real":
-                val = (ctypes.c_double * 1)(float(value))
-                self._check("fmi2SetReal", self._fn["fmi2SetReal"](self._c, vr, 1, val))
-            elif var.type in ("Integer", "Enumeration"):
-                if float(value) != int(value):
-                    raise FmuError(self.name, "fmi2SetInteger", 3, [f"{name} = {value} is not an integer"])
-                ival = (ctypes.c_int * 1)(int(value))
-                self._check("fmi2SetInteger", self._fn["fmi2SetInteger"](self._c, vr, 1, ival))
-            elif var.type == "Boolean":
-                bval = (ctypes.c_int * 1)(int(bool(value)))
-                self._check("fmi2SetBoolean", self._fn["fmi2SetBoolean"](self._c, vr, 1, bval))
+                real_vr.append(var.value_reference)
+                real_val.append(float(value))
+            elif var.type in ("Integer", "Enumeration", "Boolean"):
+                other.append((name, var, float(value)))
             else:
                 raise FmuVariableError(f"{name!r} is a {var.type} variable; only numbers can be set")
+        if real_vr:  # one call: the FMU checks every value before it applies any
+            n = len(real_vr)
+            vals = (ctypes.c_double * n)(*real_val)
+            self._check("fmi2SetReal", self._fn["fmi2SetReal"](self._c, _vr_array(real_vr), n, vals))
+        for name, var, value in other:
+            vr = (ctypes.c_uint * 1)(var.value_reference)
+            if var.type == "Boolean":
+                bval = (ctypes.c_int * 1)(int(bool(value)))
+                self._check("fmi2SetBoolean", self._fn["fmi2SetBoolean"](self._c, vr, 1, bval))
+                continue
+            if not math.isfinite(value) or value != int(value):
+                raise FmuError(self.name, "fmi2SetInteger", 3, [f"{name} = {value} is not an integer"])
+            ival = (ctypes.c_int * 1)(int(value))
+            self._check("fmi2SetInteger", self._fn["fmi2SetInteger"](self._c, vr, 1, ival))
 
     def get_values(self, names: Sequence[str]) -> dict[str, float]:
         """Read Real or Integer variables by name."""
@@ -359,6 +370,11 @@ class Fmu2Instance:
         self._check("fmi2Reset", self._fn["fmi2Reset"](self._c))
         self.log.clear()
         self.time = 0.0
+
+    @property
+    def freed(self) -> bool:
+        """Whether :meth:`free` has released the instance."""
+        return self._freed
 
     def free(self) -> None:
         """Free the instance; the object is unusable afterwards."""

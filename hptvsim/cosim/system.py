@@ -1,0 +1,589 @@
+"""The default vehicle composition: B environments x N vehicles, stepped as one system.
+
+This is the paper's GazeboEnv role below the RL environments: it holds every vehicle of every
+sub-environment, takes commands and ocean currents, advances all of them in lockstep by one
+control step, and offers reset (all or chosen sub-environments, with initial poses and
+per-episode parameters), pause, resume, snapshot and restore.
+
+Two backends give the same numbers, bit for bit (tests/cosim/test_batched.py):
+
+* :class:`FmuVehicleSystem`: the standards path; each vehicle is an FMI 2.0 CS FMU instance in
+  a graph run by :class:`~hptvsim.cosim.orchestrator.Orchestrator`;
+* :class:`~hptvsim.cosim.batched.BatchedVehicleSystem`: the training path; the same FMU
+  binaries' batch entry points step all vehicles of a type in one call.
+
+Composition: one FMU per vehicle, plant and low-level controller together
+    The low-level controller (surge-speed and yaw-rate PI with anti-windup, Eqs. 15-16 to tau)
+    is a continuous-time controller whose loop is much faster than the control step: its
+    natural frequencies are 1.5-3 rad/s (work-class) and 3-6 rad/s (spherical) while the macro
+    step is 0.25 s. Inside one FMU the controller and the plant are integrated together by
+    the same RK4 sub-steps (``h_max``), which is the closed loop the paper's Gazebo controller
+    plugin approximates. As two FMUs connected in a graph, thrust would be held constant over
+    each 0.25 s macro step: a sampled controller with omega_n * T up to 1.5, which adds lag
+    and overshoot and at the sphere's gains approaches instability, unless the macro step
+    shrank to ~0.01 s (25x the FMI calls). One FMU also halves the calls per vehicle-step.
+    Users who bring their own controller set ``control_mode = 1`` and drive the raw
+    ``tau_X_cmd, tau_Y_cmd, tau_N_cmd`` inputs (from their own FMU in a graph, or through
+    :attr:`VehicleSystem.inputs`).
+
+Arrays (B sub-environments, N vehicles, vehicle order as in :class:`SystemSpec`):
+
+* :attr:`VehicleSystem.inputs` ``(B, N, 7)``: :data:`INPUT_NAMES`, written by the caller before
+  :meth:`VehicleSystem.step`; :attr:`VehicleSystem.commands` (``v_cmd, omega_cmd``) and
+  :attr:`VehicleSystem.currents` (``current_x, current_y`` [m/s], north and east, in {n})
+  are views of it;
+* :attr:`VehicleSystem.outputs` ``(B, N, 9)``: :data:`OUTPUT_NAMES`; :attr:`VehicleSystem.observations`
+  is its view ``x, y, psi, u, v, r`` (NED; ``psi`` wrapped to [-pi, pi)).
+"""
+
+from __future__ import annotations
+
+import abc
+import contextlib
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any, Final
+
+import numpy as np
+import numpy.typing as npt
+
+from hptvsim.cosim.fmi2 import F64Array
+from hptvsim.cosim.graph import Component, ExternalInput, ExternalOutput, Graph, Port
+from hptvsim.cosim.orchestrator import Orchestrator, SimulationFailedError, SimulationPausedError, Snapshot
+from hptvsim.dynamics import (
+    INPUT_NAMES,
+    MODEL_PARAMETER_NAMES,
+    OUTPUT_NAMES,
+    VEHICLE_TYPES,
+    ParameterError,
+    VehicleParameters,
+    vehicle_parameters,
+)
+
+__all__ = [
+    "BACKENDS",
+    "INPUT_NAMES",
+    "OBSERVATION_NAMES",
+    "OUTPUT_NAMES",
+    "FmuSystemSnapshot",
+    "FmuVehicleSystem",
+    "SimulationFailedError",
+    "SimulationPausedError",
+    "SystemSpec",
+    "VehicleSpec",
+    "VehicleSystem",
+    "make_system",
+    "vehicle_graph",
+]
+
+OBSERVATION_NAMES: Final = OUTPUT_NAMES[:6]
+"""The pose and velocity outputs: x, y [m], psi [rad], u, v [m/s], r [rad/s]."""
+INIT_NAMES: Final = ("x_0", "y_0", "psi_0", "u_0", "v_0", "r_0")
+BACKENDS: Final = ("batched", "fmu")
+DEFAULT_H_MAX: Final = 0.01  # s, the FMUs' default largest internal step
+
+
+@dataclass(frozen=True, kw_only=True)
+class VehicleSpec:
+    """One vehicle of the system.
+
+    Attributes:
+        name: Unique name (letters, digits, ``_`` and ``-``).
+        type: Vehicle type (``"work_class"`` or ``"spherical"``).
+        parameters: Overrides of the type's parameters (e.g. ``{"v_max": 2.5}``), applied at
+            every reset.
+
+    Raises:
+        ParameterError: Unknown type or parameter name, or an invalid value (the message says
+            which and what is valid).
+    """
+
+    name: str
+    type: str
+    parameters: Mapping[str, float] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if not self.name or not self.name.replace("_", "").replace("-", "").isalnum():
+            raise ParameterError(f"vehicle name {self.name!r} must be letters, digits, '_' or '-'")
+        if self.type not in VEHICLE_TYPES:
+            raise ParameterError(
+                f"vehicle {self.name!r}: unknown type {self.type!r} (valid: {', '.join(VEHICLE_TYPES)})"
+            )
+        try:
+            VehicleParameters.from_mapping(self.parameters, base=vehicle_parameters(self.type))
+        except ParameterError as exc:
+            raise ParameterError(f"vehicle {self.name!r}: {exc}") from None
+        object.__setattr__(
+            self, "parameters", MappingProxyType({k: float(v) for k, v in self.parameters.items()})
+        )
+
+    @property
+    def parameter_values(self) -> VehicleParameters:
+        """The vehicle's parameters: its type's, with the overrides applied."""
+        return VehicleParameters.from_mapping(self.parameters, base=vehicle_parameters(self.type))
+
+
+@dataclass(frozen=True, kw_only=True)
+class SystemSpec:
+    """The vehicles of one sub-environment and how they are stepped.
+
+    Attributes:
+        vehicles: The N vehicles, in array order.
+        step_size: Control (macro) step [s]; the paper's 0.25 s.
+        h_max: Largest internal RK4 step [s] (the FMUs default to 0.01 s; scenarios use
+            0.05 s for training speed).
+    """
+
+    vehicles: tuple[VehicleSpec, ...]
+    step_size: float = 0.25  # s
+    h_max: float = DEFAULT_H_MAX  # s
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "vehicles", tuple(self.vehicles))
+        if not self.vehicles:
+            raise ValueError("a system needs at least one vehicle")
+        names = [v.name for v in self.vehicles]
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            raise ValueError(f"vehicle names must be unique; repeated: {', '.join(dup)}")
+        for attr in ("step_size", "h_max"):
+            value = getattr(self, attr)
+            if not (math.isfinite(value) and value > 0.0):
+                raise ValueError(f"{attr} = {value} is invalid (valid: a finite number > 0 [s])")
+
+    @property
+    def num_vehicles(self) -> int:
+        """N."""
+        return len(self.vehicles)
+
+    @property
+    def substeps(self) -> int:
+        """RK4 sub-steps per control step (as the FMU computes it)."""
+        return max(1, math.ceil(self.step_size / self.h_max - 1e-9))
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> SystemSpec:
+        """Build from ``{"vehicles": [{"name", "type", "parameters"}], "step_size", "h_max"}``.
+
+        Raises:
+            ValueError: Unknown keys (named) or invalid values.
+        """
+        unknown = sorted(set(data) - {"vehicles", "step_size", "h_max"})
+        if unknown:
+            raise ValueError(f"unknown key(s) {unknown} in a system spec (valid: vehicles, step_size, h_max)")
+        vehicles = []
+        for k, v in enumerate(data.get("vehicles", [])):
+            bad = sorted(set(v) - {"name", "type", "parameters"})
+            if bad:
+                raise ValueError(f"vehicles[{k}]: unknown key(s) {bad} (valid: name, type, parameters)")
+            vehicles.append(VehicleSpec(name=v["name"], type=v["type"], parameters=v.get("parameters", {})))
+        return cls(
+            vehicles=tuple(vehicles),
+            step_size=float(data.get("step_size", 0.25)),
+            h_max=float(data.get("h_max", DEFAULT_H_MAX)),
+        )
+
+
+def _component_name(env: int, vehicle: str) -> str:
+    return f"e{env}_{vehicle}"
+
+
+def vehicle_graph(spec: SystemSpec, num_envs: int = 1) -> Graph:
+    """The co-simulation graph of the default composition.
+
+    One component per vehicle and sub-environment (``e<b>_<name>``, FMU ``vehicle:<type>``,
+    parameters: the vehicle's overrides and ``h_max``); every FMU input is an external input
+    named ``e<b>/<name>/<input>`` and every output an external output ``e<b>/<name>/<output>``,
+    ordered so that they reshape to ``(B, N, 7)`` and ``(B, N, 9)``. The vehicles exchange
+    nothing through the graph (they interact through the world and the RL environment).
+    """
+    components = []
+    inputs = []
+    outputs = []
+    for b in range(num_envs):
+        for v in spec.vehicles:
+            comp = _component_name(b, v.name)
+            params = {**v.parameters, "h_max": spec.h_max}
+            components.append(Component(name=comp, fmu=f"vehicle:{v.type}", parameters=params))
+            for name in INPUT_NAMES:
+                port = Port(component=comp, variable=name)
+                inputs.append(ExternalInput(name=f"e{b}/{v.name}/{name}", targets=(port,), start=0.0))
+            for name in OUTPUT_NAMES:
+                port = Port(component=comp, variable=name)
+                outputs.append(ExternalOutput(name=f"e{b}/{v.name}/{name}", source=port))
+    return Graph(
+        name=f"vehicles-{num_envs}x{spec.num_vehicles}",
+        components=tuple(components),
+        inputs=tuple(inputs),
+        outputs=tuple(outputs),
+        step_size=spec.step_size,
+        algorithm="jacobi",
+    )
+
+
+class VehicleSystem(abc.ABC):
+    """B sub-environments x N vehicles advanced in lockstep (see the module docstring).
+
+    Subclasses provide the stepping; this class holds the arrays' views, argument checking
+    and pause/resume.
+    """
+
+    spec: SystemSpec
+    num_envs: int
+    _inputs: F64Array
+    _outputs: F64Array
+    time: F64Array
+
+    def __init__(self, spec: SystemSpec, num_envs: int) -> None:
+        if num_envs < 1:
+            raise ValueError(f"num_envs = {num_envs} is invalid (valid: >= 1)")
+        self.spec = spec
+        self.num_envs = int(num_envs)
+        self._paused = False
+        self.time = np.zeros(self.num_envs)
+        """Simulated time [s] of each sub-environment since its last reset."""
+
+    # -- views ----------------------------------------------------------------------------------
+
+    @property
+    def num_vehicles(self) -> int:
+        """N."""
+        return self.spec.num_vehicles
+
+    @property
+    def vehicle_names(self) -> tuple[str, ...]:
+        """The vehicles' names, in array order."""
+        return tuple(v.name for v in self.spec.vehicles)
+
+    @property
+    def vehicle_types(self) -> tuple[str, ...]:
+        """The vehicles' types, in array order."""
+        return tuple(v.type for v in self.spec.vehicles)
+
+    @property
+    def inputs(self) -> F64Array:
+        """``(B, N, 7)`` inputs (:data:`INPUT_NAMES`); write into it before :meth:`step`."""
+        return self._inputs
+
+    @property
+    def outputs(self) -> F64Array:
+        """``(B, N, 9)`` outputs (:data:`OUTPUT_NAMES`), refreshed by :meth:`step` and :meth:`reset`."""
+        return self._outputs
+
+    @property
+    def commands(self) -> F64Array:
+        """``(B, N, 2)`` view of :attr:`inputs`: ``v_cmd`` [m/s], ``omega_cmd`` [rad/s] (Eq. 16)."""
+        return self.inputs[:, :, 0:2]
+
+    @property
+    def currents(self) -> F64Array:
+        """``(B, N, 2)`` view of :attr:`inputs`: ocean current north and east [m/s] in {n}."""
+        return self.inputs[:, :, 5:7]
+
+    @property
+    def observations(self) -> F64Array:
+        """``(B, N, 6)`` view of :attr:`outputs`: x, y [m], psi [rad], u, v [m/s], r [rad/s]."""
+        return self.outputs[:, :, 0:6]
+
+    @property
+    def paused(self) -> bool:
+        """Whether :meth:`step` is refused until :meth:`resume`."""
+        return self._paused
+
+    def pause(self) -> None:
+        """Hold the simulation: :meth:`step` raises ``SimulationPausedError`` until :meth:`resume`.
+
+        While paused, states can be read, inputs written, resets done and snapshots taken
+        and restored; simulated time does not advance.
+        """
+        self._paused = True
+
+    def resume(self) -> None:
+        """Let :meth:`step` advance the simulation again."""
+        self._paused = False
+
+    # -- argument handling ----------------------------------------------------------------------
+
+    def _env_index(self, env_ids: Sequence[int] | npt.ArrayLike | None) -> npt.NDArray[np.intp]:
+        if env_ids is None:
+            return np.arange(self.num_envs, dtype=np.intp)
+        idx = np.asarray(env_ids)
+        if idx.dtype == np.bool_:
+            if idx.shape != (self.num_envs,):
+                raise ValueError(f"an env mask must have shape ({self.num_envs},), got {idx.shape}")
+            return np.flatnonzero(idx).astype(np.intp)
+        idx = np.atleast_1d(idx).astype(np.intp)
+        if idx.ndim != 1 or (idx.size and (idx.min() < 0 or idx.max() >= self.num_envs)):
+            raise ValueError(
+                f"env ids must be integers in [0, {self.num_envs}); got {np.asarray(env_ids).tolist()}"
+            )
+        if len(set(idx.tolist())) != len(idx):
+            raise ValueError("env ids must not repeat")
+        return idx
+
+    def _per_vehicle(self, what: str, value: npt.ArrayLike | None, k: int, width: int) -> F64Array:
+        """Broadcast ``value`` to ``(k, N, width)`` and check it is finite."""
+        n = self.num_vehicles
+        if value is None:
+            return np.zeros((k, n, width))
+        arr = np.asarray(value, dtype=np.float64)
+        try:
+            out = np.broadcast_to(arr, (k, n, width)).copy()
+        except ValueError:
+            raise ValueError(
+                f"{what} has shape {arr.shape}; expected ({k}, {n}, {width}) or broadcastable to it"
+            ) from None
+        if not np.isfinite(out).all():
+            raise ValueError(f"{what} contains non-finite values")
+        return out
+
+    def _parameter_arrays(
+        self, parameters: Mapping[str, npt.ArrayLike] | None, k: int
+    ) -> dict[str, F64Array]:
+        """Broadcast per-vehicle parameter overrides to ``(k, N)`` arrays, checking names and bounds."""
+        if not parameters:
+            return {}
+        out: dict[str, F64Array] = {}
+        from hptvsim.dynamics import PARAMETER_SPECS
+
+        specs = {s.name: s for s in PARAMETER_SPECS}
+        for name, value in parameters.items():
+            if name not in specs:
+                raise ParameterError(
+                    f"unknown vehicle parameter {name!r}; valid names: {', '.join(MODEL_PARAMETER_NAMES)}"
+                )
+            arr = np.asarray(value, dtype=np.float64)
+            try:
+                full = np.broadcast_to(arr, (k, self.num_vehicles)).copy()
+            except ValueError:
+                raise ValueError(
+                    f"parameter {name!r} has shape {arr.shape}; expected ({k}, {self.num_vehicles}) or "
+                    "broadcastable to it"
+                ) from None
+            spec = specs[name]
+            bad = ~np.isfinite(full)
+            if spec.lower is not None:
+                bad |= (full <= spec.lower) if spec.lower_open else (full < spec.lower)
+            if spec.upper is not None:
+                bad |= full > spec.upper
+            if spec.integer:
+                bad |= full != np.floor(full)
+            if bad.any():
+                b, n = (int(j[0]) for j in np.nonzero(bad))
+                why = spec.check(float(full[b, n])) or f"parameter {name!r} = {full[b, n]} is invalid"
+                raise ParameterError(f"vehicle {self.vehicle_names[n]!r}: {why}")
+            out[name] = full
+        return out
+
+    def _check_inputs(self) -> None:
+        if not np.isfinite(self.inputs).all():
+            b, n, i = (int(j[0]) for j in np.nonzero(~np.isfinite(self.inputs)))
+            raise ValueError(
+                f"env {b}, vehicle {self.vehicle_names[n]!r}: input '{INPUT_NAMES[i]}' = "
+                f"{self.inputs[b, n, i]} is not finite"
+            )
+
+    def _check_can_step(self) -> None:
+        if self._paused:
+            raise SimulationPausedError("the simulation is paused; call resume() before step()")
+
+    # -- the interface ----------------------------------------------------------------------------
+
+    @abc.abstractmethod
+    def reset(
+        self,
+        env_ids: Sequence[int] | npt.ArrayLike | None = None,
+        *,
+        poses: npt.ArrayLike | None = None,
+        velocities: npt.ArrayLike | None = None,
+        parameters: Mapping[str, npt.ArrayLike] | None = None,
+    ) -> F64Array:
+        """Start new episodes in the chosen sub-environments (default: all).
+
+        Each vehicle returns to its spec's parameters, then ``parameters`` apply for this
+        episode; the controller integrators and all inputs are zeroed.
+
+        Args:
+            env_ids: Sub-environments to reset: indices or a boolean mask (default: all).
+            poses: Initial ``x_0, y_0`` [m], ``psi_0`` [rad]; broadcastable to ``(k, N, 3)``.
+            velocities: Initial ``u_0, v_0`` [m/s], ``r_0`` [rad/s]; broadcastable to ``(k, N, 3)``.
+            parameters: Per-episode parameter values by name, each broadcastable to ``(k, N)``.
+
+        Returns:
+            :attr:`outputs`.
+        """
+
+    @abc.abstractmethod
+    def step(self) -> F64Array:
+        """Advance every sub-environment by one control step with the current :attr:`inputs`.
+
+        Returns:
+            :attr:`outputs`.
+        """
+
+    @abc.abstractmethod
+    def set_parameters(
+        self, parameters: Mapping[str, npt.ArrayLike], env_ids: Sequence[int] | npt.ArrayLike | None = None
+    ) -> None:
+        """Change tunable parameters between steps (until the next reset)."""
+
+    @abc.abstractmethod
+    def parameters(self, name: str) -> F64Array:
+        """The current value of one parameter for every vehicle, shape ``(B, N)``."""
+
+    @abc.abstractmethod
+    def snapshot(self) -> object:
+        """Capture the whole system; restore it with :meth:`restore` any number of times."""
+
+    @abc.abstractmethod
+    def restore(self, snapshot: object) -> F64Array:
+        """Return to a snapshot taken from this system; returns :attr:`outputs`."""
+
+    @abc.abstractmethod
+    def close(self) -> None:
+        """Release native resources (idempotent)."""
+
+    def __enter__(self) -> VehicleSystem:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def __del__(self) -> None:
+        with contextlib.suppress(Exception):
+            self.close()
+
+
+@dataclass(frozen=True)
+class FmuSystemSnapshot:
+    """A snapshot of a :class:`FmuVehicleSystem`: the orchestrator's and the env times."""
+
+    orchestrator: Snapshot
+    time: F64Array
+
+
+class FmuVehicleSystem(VehicleSystem):
+    """The default composition on the standards path: one FMU instance per vehicle.
+
+    Built from :func:`vehicle_graph` and run by an :class:`~hptvsim.cosim.orchestrator.Orchestrator`
+    (Jacobi; the vehicles are not coupled through the graph, so the algorithm does not change
+    the numbers). The arrays are views of the orchestrator's external inputs and outputs.
+
+    Args:
+        spec: The vehicles and step settings.
+        num_envs: B, sub-environments (each its own N FMU instances).
+    """
+
+    def __init__(self, spec: SystemSpec, num_envs: int = 1) -> None:
+        super().__init__(spec, num_envs)
+        self.graph = vehicle_graph(spec, num_envs)
+        self._orch = Orchestrator(self.graph)
+        n = spec.num_vehicles
+        self._inputs = self._orch.inputs.reshape(num_envs, n, len(INPUT_NAMES))
+        self._outputs = self._orch.outputs.reshape(num_envs, n, len(OUTPUT_NAMES))
+
+    @property
+    def orchestrator(self) -> Orchestrator:
+        """The orchestrator that runs the graph."""
+        return self._orch
+
+    def _components(self, env: int) -> list[str]:
+        return [_component_name(env, v.name) for v in self.spec.vehicles]
+
+    def reset(
+        self,
+        env_ids: Sequence[int] | npt.ArrayLike | None = None,
+        *,
+        poses: npt.ArrayLike | None = None,
+        velocities: npt.ArrayLike | None = None,
+        parameters: Mapping[str, npt.ArrayLike] | None = None,
+    ) -> F64Array:
+        """See :meth:`VehicleSystem.reset`."""
+        idx = self._env_index(env_ids)
+        k = len(idx)
+        pose = self._per_vehicle("poses", poses, k, 3)
+        vel = self._per_vehicle("velocities", velocities, k, 3)
+        params = self._parameter_arrays(parameters, k)
+        values: dict[str, dict[str, float]] = {}
+        names: list[str] = []
+        for i, b in enumerate(idx):
+            for n, comp in enumerate(self._components(int(b))):
+                init = np.concatenate([pose[i, n], vel[i, n]])
+                v = {name: float(x) for name, x in zip(INIT_NAMES, init, strict=True)}
+                v.update({name: float(arr[i, n]) for name, arr in params.items()})
+                values[comp] = v
+                names.append(comp)
+        self.inputs[idx] = 0.0
+        self._orch.reset(None if env_ids is None else names, parameters=values)
+        self.time[idx] = 0.0
+        return self.outputs
+
+    def step(self) -> F64Array:
+        """See :meth:`VehicleSystem.step`."""
+        self._check_can_step()
+        self._check_inputs()
+        self._orch.step()
+        self.time += self.spec.step_size
+        return self.outputs
+
+    def set_parameters(
+        self, parameters: Mapping[str, npt.ArrayLike], env_ids: Sequence[int] | npt.ArrayLike | None = None
+    ) -> None:
+        """See :meth:`VehicleSystem.set_parameters`."""
+        idx = self._env_index(env_ids)
+        params = self._parameter_arrays(parameters, len(idx))
+        for i, b in enumerate(idx):
+            for n, comp in enumerate(self._components(int(b))):
+                self._orch.set_parameters(comp, {name: float(arr[i, n]) for name, arr in params.items()})
+
+    def parameters(self, name: str) -> F64Array:
+        """See :meth:`VehicleSystem.parameters`."""
+        if name not in MODEL_PARAMETER_NAMES:
+            raise ParameterError(
+                f"unknown vehicle parameter {name!r}; valid names: {', '.join(MODEL_PARAMETER_NAMES)}"
+            )
+        out = np.empty((self.num_envs, self.num_vehicles))
+        for b in range(self.num_envs):
+            for n, comp in enumerate(self._components(b)):
+                out[b, n] = self._orch.instance(comp).get_values([name])[name]
+        return out
+
+    def snapshot(self) -> FmuSystemSnapshot:
+        """See :meth:`VehicleSystem.snapshot`."""
+        return FmuSystemSnapshot(orchestrator=self._orch.snapshot(), time=self.time.copy())
+
+    def restore(self, snapshot: object) -> F64Array:
+        """See :meth:`VehicleSystem.restore`."""
+        if not isinstance(snapshot, FmuSystemSnapshot):
+            raise TypeError(f"expected a FmuSystemSnapshot, got {type(snapshot).__name__}")
+        self._orch.restore(snapshot.orchestrator)
+        self.time[:] = snapshot.time
+        return self.outputs
+
+    def close(self) -> None:
+        """See :meth:`VehicleSystem.close`."""
+        orch = getattr(self, "_orch", None)
+        if orch is not None:
+            orch.close()
+
+
+def make_system(
+    spec: SystemSpec, num_envs: int = 1, *, backend: str = "batched", threads: int | None = None
+) -> VehicleSystem:
+    """Create a vehicle system on the chosen backend (:data:`BACKENDS`).
+
+    Args:
+        spec: The vehicles and step settings.
+        num_envs: B.
+        backend: ``"batched"`` (training speed) or ``"fmu"`` (one FMI instance per vehicle).
+        threads: Threads for the batched backend (default: up to 2); ignored by ``"fmu"``.
+    """
+    if backend == "batched":
+        from hptvsim.cosim.batched import BatchedVehicleSystem
+
+        return BatchedVehicleSystem(spec, num_envs, threads=threads)
+    if backend == "fmu":
+        return FmuVehicleSystem(spec, num_envs)
+    raise ValueError(f"unknown backend {backend!r} (valid: {', '.join(BACKENDS)})")
