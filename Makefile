@@ -44,9 +44,11 @@ test-slow: setup system-deps
 
 bench: setup
 	$(BIN)/hptvsim bench dynamics
+	$(BIN)/hptvsim bench sensors
 
 bench-quick: setup
 	$(BIN)/hptvsim bench dynamics --quick
+	$(BIN)/hptvsim bench sensors --quick
 
 fmus: setup
 	$(BIN)/hptvsim fmu build

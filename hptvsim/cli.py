@@ -18,7 +18,11 @@ import click
 
 from hptvsim import __version__
 
-COMMAND_MODULES: tuple[str, ...] = ("hptvsim.cosim.cli",)
+COMMAND_MODULES: tuple[str, ...] = (
+    "hptvsim.cosim.cli",
+    "hptvsim.world.cli",
+    "hptvsim.sensors.cli",
+)
 """Modules whose ``register(main, bench)`` adds commands (one line per package)."""
 
 

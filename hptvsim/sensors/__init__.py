@@ -1,1 +1,56 @@
-"""Sensors: multi-beam sonar (geometric and signal-level), shared error model, acoustic link."""
+"""Sensors: multi-beam sonar (geometric and signal-level), shared error model, acoustic link.
+
+* :class:`SonarConfig`, :class:`GaussMarkovConfig`, :class:`AcousticLinkConfig`: settings
+  (frozen dataclasses, loaded from scenario files);
+* :class:`Sonar`: the sonar as environments use it (fidelity plus Eq. 3 errors), built on
+  :class:`GeometricSonar` (batched ray casts, compiled kernel) and :class:`SignalSonar`
+  (echoes, the matched filter of Eq. 1, the spatial periodogram of Eq. 2);
+* :class:`GaussMarkov`: the error model of Eq. 3;
+* :class:`AcousticLink`: the IoUT link that reports the target's position (section IV-A).
+
+The classes other than the settings are imported on first use, so that importing the settings
+(as the scenario loader and the command line do) stays cheap.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+from hptvsim.sensors.config import AcousticLinkConfig, GaussMarkovConfig, SonarConfig
+
+if TYPE_CHECKING:
+    from hptvsim.sensors.acoustic import AcousticLink
+    from hptvsim.sensors.errors import GaussMarkov
+    from hptvsim.sensors.signal import SignalSonar
+    from hptvsim.sensors.sonar import GeometricSonar, Sonar, SonarScan, vehicle_radii
+
+__all__ = [
+    "AcousticLink",
+    "AcousticLinkConfig",
+    "GaussMarkov",
+    "GaussMarkovConfig",
+    "GeometricSonar",
+    "SignalSonar",
+    "Sonar",
+    "SonarConfig",
+    "SonarScan",
+    "vehicle_radii",
+]
+
+_LAZY = {
+    "AcousticLink": "hptvsim.sensors.acoustic",
+    "GaussMarkov": "hptvsim.sensors.errors",
+    "SignalSonar": "hptvsim.sensors.signal",
+    "GeometricSonar": "hptvsim.sensors.sonar",
+    "Sonar": "hptvsim.sensors.sonar",
+    "SonarScan": "hptvsim.sensors.sonar",
+    "vehicle_radii": "hptvsim.sensors.sonar",
+}
+
+
+def __getattr__(name: str) -> Any:
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'hptvsim.sensors' has no attribute {name!r}")
+    return getattr(importlib.import_module(module), name)

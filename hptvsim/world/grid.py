@@ -120,6 +120,8 @@ class OccupancyGrid:
         Points outside the grid get the value of the nearest edge cell (clamped).
         """
         p = np.asarray(xy, dtype=np.float64)
+        if not np.isfinite(self.sdf[0, 0]):  # no obstacle (+inf) or all occupied (-inf): uniform;
+            return np.full(p.shape[:-1], self.sdf[0, 0])  # interpolating inf would give inf*0 = nan
         g = self.geometry
         fi = np.clip((p[..., 0] - g.origin[0]) / g.resolution, 0.0, g.shape[0] - 1.0)
         fj = np.clip((p[..., 1] - g.origin[1]) / g.resolution, 0.0, g.shape[1] - 1.0)

@@ -1,0 +1,216 @@
+"""Maps of scenarios and height maps as PNG images (north up, east right).
+
+:func:`render_scenario` draws what a scenario file describes: the seabed depth (shaded relief),
+the obstacles at the operating depth, the site boundary, the spawn regions of each vehicle
+group, the goals and the current field at ``t = 0``. :func:`render_heightmap` draws a height
+map alone (the preview ``hptvsim terrain import`` writes).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from hptvsim.world.scenario import Scenario
+    from hptvsim.world.terrain import HeightMap
+
+__all__ = ["render_heightmap", "render_scenario"]
+
+_ROLE_COLOURS = {"pursuer": "#d62728", "evader": "#ffbf00"}
+_OBSTACLE_COLOUR = "#7a5c3a"
+_LAND_COLOUR = "#d9c79a"
+
+
+def _figure(extent: tuple[float, float, float, float]) -> tuple[Any, Any]:
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    x_min, x_max, y_min, y_max = extent
+    aspect = (x_max - x_min) / max(y_max - y_min, 1e-9)
+    width = 8.0
+    fig, ax = plt.subplots(figsize=(width, max(3.0, min(12.0, width * aspect * 0.85 + 1.0))))
+    return fig, ax
+
+
+def _relief(ax: Any, fig: Any, hm: HeightMap) -> None:
+    """Shaded seabed depth; land (depth < 0) in a land colour."""
+    from matplotlib import cm, colors
+    from matplotlib.colors import LightSource
+
+    g = hm.geometry
+    x_min, x_max, y_min, y_max = g.extent
+    sea = hm.depth >= 0.0
+    lo, hi = (float(hm.depth[sea].min()), float(hm.depth[sea].max())) if sea.any() else hm.depth_range
+    if hi - lo < 1e-6:
+        lo, hi = lo - 1.0, hi + 1.0
+    norm = colors.Normalize(vmin=lo, vmax=hi)
+    cmap = matplotlib_cmap("Blues")
+    ls = LightSource(azdeg=315.0, altdeg=40.0)
+    # subtle relief whatever the slopes: exaggerate so the steep 5 % of slopes reach about 0.3
+    gx, gy = np.gradient(hm.depth, g.resolution)
+    steep = float(np.percentile(np.hypot(gx, gy), 95))
+    rgb = ls.shade(
+        -np.clip(hm.depth, lo, hi),
+        cmap=cmap.reversed(),
+        norm=colors.Normalize(vmin=-hi, vmax=-lo),
+        blend_mode="soft",
+        vert_exag=min(3.0, 0.3 / steep) if steep > 0.0 else 1.0,
+        dx=g.resolution,
+        dy=g.resolution,
+    )
+    rgb[~sea, :3] = _rgb(_LAND_COLOUR)
+    ax.imshow(rgb, origin="lower", extent=(y_min, y_max, x_min, x_max), interpolation="bilinear")
+    bar = fig.colorbar(cm.ScalarMappable(norm=norm, cmap=cmap), ax=ax, shrink=0.8, pad=0.02)
+    bar.set_label("seabed depth [m]" + ("; land: tan" if not sea.all() else ""))
+
+
+def matplotlib_cmap(name: str) -> Any:
+    """A matplotlib colormap by name."""
+    import matplotlib
+
+    return matplotlib.colormaps[name]
+
+
+def render_heightmap(hm: HeightMap, path: str | Path, *, title: str | None = None, dpi: int = 110) -> Path:
+    """Draw a height map (shaded depth) to a PNG; returns the path."""
+    import matplotlib.pyplot as plt
+
+    path = Path(path)
+    fig, ax = _figure(hm.geometry.extent)
+    _relief(ax, fig, hm)
+    ax.set_xlabel("east y [m]")
+    ax.set_ylabel("north x [m]")
+    ax.set_aspect("equal")
+    lo, hi = hm.depth_range
+    ax.set_title(title or f"height map, depth {lo:.1f} .. {hi:.1f} m", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+    return path
+
+
+def render_scenario(scenario: Scenario, path: str | Path, *, dpi: int = 110) -> Path:
+    """Draw a scenario's map to a PNG; returns the path.
+
+    Shows the shaded seabed depth, obstacles at the operating depth (brown, outlined), the site
+    boundary, spawn regions (pursuers red, evaders amber, labelled with count and type), goals
+    (star and radius) and, when there is a current, its arrows at ``t = 0``.
+    """
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Circle, Rectangle
+
+    from hptvsim.world.scenario import CircleRegion
+
+    path = Path(path)
+    world = scenario.build_world()
+    site = scenario.site
+    x_min, x_max, y_min, y_max = site.extent
+    fig, ax = _figure(site.extent)
+    _relief(ax, fig, world.heightmap)
+
+    occ = world.obstacles
+    if occ.occupied.any():
+        gx0, gx1, gy0, gy1 = occ.geometry.extent
+        overlay = np.zeros((*occ.occupied.shape, 4))
+        overlay[occ.occupied] = (*_rgb(_OBSTACLE_COLOUR), 0.85)
+        ax.imshow(overlay, origin="lower", extent=(gy0, gy1, gx0, gx1), interpolation="nearest")
+        xc, yc = occ.geometry.centres()
+        ax.contour(yc, xc, occ.occupied.astype(float), levels=[0.5], colors="black", linewidths=0.6)
+    ax.add_patch(Rectangle((y_min, x_min), y_max - y_min, x_max - x_min, fill=False, lw=1.5, ec="black"))
+
+    handles = []
+    for g in scenario.vehicles:
+        colour = _ROLE_COLOURS[g.role]
+        label = f"{g.role} x{g.count} ({g.type})"
+        patch: Circle | Rectangle
+        if isinstance(g.spawn, CircleRegion):
+            cx, cy = g.spawn.centre
+            patch = Circle(
+                (cy, cx), g.spawn.radius, fill=True, fc=colour, alpha=0.35, ec=colour, lw=2, label=label
+            )
+        else:
+            patch = Rectangle(
+                (g.spawn.y[0], g.spawn.x[0]),
+                g.spawn.y[1] - g.spawn.y[0],
+                g.spawn.x[1] - g.spawn.x[0],
+                fill=True,
+                fc=colour,
+                alpha=0.35,
+                ec=colour,
+                lw=2,
+                label=label,
+            )
+        ax.add_patch(patch)
+        handles.append(patch)
+    goals = []
+    if scenario.task.goal is not None:
+        goals.append(scenario.task.goal)
+    goals += [g.goal for g in scenario.vehicles if g.goal is not None and g.goal not in goals]
+    for k, goal in enumerate(goals):
+        gx, gy = goal.position
+        ax.add_patch(Circle((gy, gx), goal.radius, fill=False, ec="lime", lw=1.5, ls="--"))
+        (star,) = ax.plot(
+            [gy],
+            [gx],
+            marker="*",
+            ms=14,
+            color="lime",
+            mec="black",
+            ls="none",
+            label="goal" if k == 0 else None,
+        )
+        if k == 0:
+            handles.append(star)
+
+    current = world.current
+    nx_q, ny_q = 9, 12
+    qx, qy = np.meshgrid(
+        np.linspace(x_min, x_max, nx_q + 2)[1:-1], np.linspace(y_min, y_max, ny_q + 2)[1:-1], indexing="ij"
+    )
+    vc = current.sample(0.0, np.stack([qx, qy], axis=-1))
+    speed = np.hypot(vc[..., 0], vc[..., 1])
+    current_text = ""
+    if float(speed.max()) > 1e-9:
+        ax.quiver(
+            qy,
+            qx,
+            vc[..., 1],
+            vc[..., 0],
+            color="white",
+            edgecolor="black",
+            linewidth=0.4,
+            width=0.004,
+            zorder=5,
+        )
+        current_text = f"\ncurrent at t = 0 (arrows): up to {speed.max():.2f} m/s"
+
+    ax.set_xlim(y_min - 0.02 * (y_max - y_min), y_max + 0.02 * (y_max - y_min))
+    ax.set_ylim(x_min - 0.02 * (x_max - x_min), x_max + 0.02 * (x_max - x_min))
+    ax.set_aspect("equal")
+    ax.set_xlabel("east y [m]")
+    ax.set_ylabel("north x [m]")
+    n_occ = int(occ.occupied.sum())
+    ax.set_title(
+        f"{scenario.name}: {scenario.task.kind}, operating depth {site.operating_depth:g} m "
+        f"(+{site.clearance:g} m clearance), {100.0 * n_occ / occ.occupied.size:.1f}% obstacles"
+        + current_text,
+        fontsize=10,
+    )
+    if handles:
+        ax.legend(handles=handles, loc="lower left", fontsize=8, framealpha=0.85)
+    fig.tight_layout()
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+    return path
+
+
+def _rgb(hex_colour: str) -> tuple[float, float, float]:
+    from matplotlib.colors import to_rgb
+
+    r, g, b = to_rgb(hex_colour)
+    return float(r), float(g), float(b)
