@@ -22,6 +22,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "hptvsim.cosim.cli",
     "hptvsim.world.cli",
     "hptvsim.sensors.cli",
+    "hptvsim.envs.cli",
 )
 """Modules whose ``register(main, bench)`` adds commands (one line per package)."""
 

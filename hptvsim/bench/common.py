@@ -14,8 +14,9 @@ import subprocess
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from importlib import resources
 from pathlib import Path
+
+from hptvsim.native import compile_c
 
 __all__ = ["BenchResult", "Row", "best_of", "compile_floor", "machine_summary", "run_floor"]
 
@@ -110,28 +111,15 @@ def best_of(fn: Callable[[], None], *, repeats: int, units: int) -> float:
     return best / units
 
 
-def _cache_dir() -> Path:
-    base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "hptvsim"
-    base.mkdir(parents=True, exist_ok=True)
-    return base
-
-
 def compile_floor() -> Path:
     """Compile (once, cached by source content) the C floor harness ``floor.c``."""
-    import hashlib
-
     import fmpy
 
-    src = resources.files("hptvsim.bench").joinpath("floor.c").read_text()
-    digest = hashlib.sha256(src.encode()).hexdigest()[:12]
-    exe = _cache_dir() / f"floor-{digest}"
-    if not exe.exists():
-        src_path = exe.with_suffix(".c")
-        src_path.write_text(src)
-        include = Path(fmpy.__file__).parent / "c-code"
-        cmd = ["gcc", "-O2", "-std=c99", f"-I{include}", str(src_path), "-o", str(exe), "-ldl"]
-        subprocess.run(cmd, check=True, capture_output=True, text=True)
-    return exe
+    include = Path(fmpy.__file__).parent / "c-code"
+    return compile_c(
+        "hptvsim.bench", "floor.c", flags=("-O2", "-std=c99"), libs=("-ldl",),
+        include_dirs=(include,), executable=True, what="the dynamics benchmark's C floor",
+    )  # fmt: skip
 
 
 def run_floor(binary: Path, guid: str, *, steps: int, vehicles: int, dt: float) -> dict[str, float]:

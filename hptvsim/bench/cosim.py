@@ -18,17 +18,15 @@ Targets: orchestrator within 20x of the floor per vehicle-step, batched B = 1024
 
 from __future__ import annotations
 
-import hashlib
 import json
-import os
 import subprocess
-from importlib import resources
 from pathlib import Path
 from typing import Final
 
 import numpy as np
 
 from hptvsim.bench.common import BenchResult, Row, best_of
+from hptvsim.native import compile_c
 
 __all__ = ["bench_cosim"]
 
@@ -38,27 +36,15 @@ ORCH: Final = "orchestrator (FmuVehicleSystem, 4 FMUs, Jacobi)"
 BATCH_1024: Final = "batched B=1024 (4096 vehicles), 1 thread"
 
 
-def _cache_dir() -> Path:
-    base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "hptvsim"
-    base.mkdir(parents=True, exist_ok=True)
-    return base
-
-
 def _compile_floor() -> Path:
     """Compile (once, cached by source content) ``cosim_floor.c``."""
     import fmpy
 
-    src = resources.files("hptvsim.bench").joinpath("cosim_floor.c").read_text()
-    exe = _cache_dir() / f"cosim-floor-{hashlib.sha256(src.encode()).hexdigest()[:12]}"
-    if not exe.exists():
-        src_path = exe.with_suffix(".c")
-        src_path.write_text(src)
-        include = Path(fmpy.__file__).parent / "c-code"
-        tmp = exe.with_suffix(".tmp")
-        cmd = ["gcc", "-O2", "-std=c99", f"-I{include}", str(src_path), "-o", str(tmp), "-ldl"]
-        subprocess.run(cmd, check=True, capture_output=True, text=True)
-        tmp.replace(exe)
-    return exe
+    include = Path(fmpy.__file__).parent / "c-code"
+    return compile_c(
+        "hptvsim.bench", "cosim_floor.c", flags=("-O2", "-std=c99"), libs=("-ldl",),
+        include_dirs=(include,), executable=True, what="the co-simulation benchmark's C floor",
+    )  # fmt: skip
 
 
 def _run_floor(*, steps: int, dt: float, h_max: float, counts: dict[str, int]) -> dict[str, float]:

@@ -41,23 +41,19 @@ sonars use one :class:`GeometricSonar` each); every vehicle is still detected.
 from __future__ import annotations
 
 import ctypes
-import hashlib
 import math
 import os
-import shutil
-import subprocess
-import tempfile
 import threading
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
-from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 import numpy.typing as npt
 
+from hptvsim.native import compile_c
 from hptvsim.sensors.config import SonarConfig
 from hptvsim.world.grid import OccupancyGrid
 
@@ -140,49 +136,20 @@ _lib_lock = threading.Lock()
 _lib: ctypes.CDLL | None = None
 
 
-def _cache_dir() -> Path:
-    """``$XDG_CACHE_HOME/hptvsim`` (default ``~/.cache/hptvsim``), else a per-user temp folder."""
-    base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "hptvsim"
-    try:
-        base.mkdir(parents=True, exist_ok=True)
-        if os.access(base, os.W_OK):
-            return base
-    except OSError:
-        pass
-    fallback = Path(tempfile.gettempdir()) / f"hptvsim-cache-{os.getuid()}"
-    fallback.mkdir(mode=0o700, parents=True, exist_ok=True)
-    return fallback
-
-
 def compile_kernel() -> Path:
     """Compile ``sonar_kernel.c`` once into the per-user cache; return the shared library's path.
 
     Raises:
-        RuntimeError: No C compiler, or it failed (the message holds its output).
+        RuntimeError: No C compiler, or it failed (the message holds its output; without a
+            compiler, ``GeometricSonar(..., backend='numpy')`` still works, much slower).
     """
-    src = resources.files("hptvsim.sensors").joinpath("sonar_kernel.c").read_text()
-    cc = os.environ.get("CC", "gcc")
-    digest = hashlib.sha256((src + "\0" + " ".join(_CFLAGS)).encode()).hexdigest()[:16]
-    lib_path = _cache_dir() / f"sonar-{digest}.so"
-    if lib_path.exists():
-        return lib_path
-    if shutil.which(cc) is None:
-        raise RuntimeError(
-            f"the sonar's C kernel needs a C compiler, and {cc!r} was not found on PATH: install gcc "
-            "(e.g. `apt-get install gcc`) or set CC, or use GeometricSonar(..., backend='numpy') "
-            "(the numpy reference, much slower)"
-        )
-    with tempfile.TemporaryDirectory(dir=lib_path.parent) as tmp:
-        c_path = Path(tmp) / "sonar_kernel.c"
-        c_path.write_text(src)
-        out = Path(tmp) / lib_path.name
-        proc = subprocess.run(
-            [cc, *_CFLAGS, str(c_path), "-o", str(out), "-lm"], capture_output=True, text=True
-        )
-        if proc.returncode != 0:
-            raise RuntimeError(f"compiling the sonar kernel with {cc} failed:\n{proc.stderr.strip()}")
-        os.replace(out, lib_path)  # atomic: concurrent first uses never see half a library
-    return lib_path
+    return compile_c(
+        "hptvsim.sensors",
+        "sonar_kernel.c",
+        flags=_CFLAGS,
+        what="the sonar's C kernel",
+        hint=", or use GeometricSonar(..., backend='numpy') (the numpy reference, much slower)",
+    )
 
 
 class _SonarStruct(ctypes.Structure):

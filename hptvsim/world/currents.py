@@ -26,7 +26,7 @@ from __future__ import annotations
 import abc
 import math
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 import numpy.typing as npt
@@ -72,11 +72,12 @@ class CurrentField(abc.ABC):
     """A water velocity field ``v_c(t, x, y)`` in {n} [m/s]."""
 
     @abc.abstractmethod
-    def sample(self, t: float, xy: npt.ArrayLike, out: F64 | None = None) -> F64:
+    def sample(self, t: float | npt.ArrayLike, xy: npt.ArrayLike, out: F64 | None = None) -> F64:
         """Water velocity at time ``t`` [s] and positions ``xy[..., 2]`` [m].
 
         Args:
-            t: Simulation time [s].
+            t: Simulation time [s]: a number, or an array that broadcasts against the points'
+                leading shape (e.g. ``(B, 1)`` for B environments with their own clocks).
             xy: Positions, shape ``(..., 2)``: ``x`` north, ``y`` east [m].
             out: Optional float64 array of the same shape to write into.
 
@@ -122,7 +123,7 @@ class UniformCurrent(CurrentField):
         c, s = _unit(self.direction)
         return self.speed * c, self.speed * s
 
-    def sample(self, t: float, xy: npt.ArrayLike, out: F64 | None = None) -> F64:  # noqa: D102
+    def sample(self, t: float | npt.ArrayLike, xy: npt.ArrayLike, out: F64 | None = None) -> F64:  # noqa: D102
         p = _points(xy)
         result = _output(p, out)
         result[...] = self.velocity
@@ -154,7 +155,7 @@ class ShearCurrent(CurrentField):
     def is_uniform(self) -> bool:  # noqa: D102
         return self.shear_rate == 0.0
 
-    def sample(self, t: float, xy: npt.ArrayLike, out: F64 | None = None) -> F64:  # noqa: D102
+    def sample(self, t: float | npt.ArrayLike, xy: npt.ArrayLike, out: F64 | None = None) -> F64:  # noqa: D102
         p = _points(xy)
         result = _output(p, out)
         c, s = _unit(self.direction)
@@ -195,7 +196,7 @@ class VortexCurrent(CurrentField):
     def is_uniform(self) -> bool:  # noqa: D102
         return self.speed == 0.0
 
-    def sample(self, t: float, xy: npt.ArrayLike, out: F64 | None = None) -> F64:  # noqa: D102
+    def sample(self, t: float | npt.ArrayLike, xy: npt.ArrayLike, out: F64 | None = None) -> F64:  # noqa: D102
         p = _points(xy)
         result = _output(p, out)
         dx = p[..., 0] - self.centre[0]
@@ -237,16 +238,24 @@ class TidalCurrent(CurrentField):
     def is_steady(self) -> bool:  # noqa: D102
         return self.amplitude == 0.0
 
-    def speed_at(self, t: float) -> float:
-        """Signed speed along ``direction`` at time ``t`` [s] (negative: ebb)."""
-        return self.mean + self.amplitude * math.cos(2.0 * math.pi * t / self.period + self.phase)
+    def speed_at(self, t: float | npt.ArrayLike) -> Any:
+        """Signed speed along ``direction`` at time ``t`` [s] (negative: ebb); ``t`` may be an array."""
+        if isinstance(t, float | int):
+            return self.mean + self.amplitude * math.cos(2.0 * math.pi * t / self.period + self.phase)
+        return self.mean + self.amplitude * np.cos(
+            2.0 * math.pi * np.asarray(t, dtype=np.float64) / self.period + self.phase
+        )
 
-    def sample(self, t: float, xy: npt.ArrayLike, out: F64 | None = None) -> F64:  # noqa: D102
+    def sample(self, t: float | npt.ArrayLike, xy: npt.ArrayLike, out: F64 | None = None) -> F64:  # noqa: D102
         p = _points(xy)
         result = _output(p, out)
         c, s = _unit(self.direction)
         v = self.speed_at(t)
-        result[...] = (v * c, v * s)
+        if np.ndim(v) == 0:
+            result[...] = (v * c, v * s)
+        else:  # one time per environment, broadcast over the points' leading shape
+            result[..., 0] = v * c
+            result[..., 1] = v * s
         return result
 
 
@@ -264,7 +273,7 @@ class CurrentSum(CurrentField):
     def is_uniform(self) -> bool:  # noqa: D102
         return all(c.is_uniform for c in self.components)
 
-    def sample(self, t: float, xy: npt.ArrayLike, out: F64 | None = None) -> F64:  # noqa: D102
+    def sample(self, t: float | npt.ArrayLike, xy: npt.ArrayLike, out: F64 | None = None) -> F64:  # noqa: D102
         p = _points(xy)
         result = _output(p, out)
         if not self.components:

@@ -624,6 +624,19 @@ class Scenario:
         except FieldValueError as exc:  # pragma: no cover - sub-tables were validated above
             raise ctx.child(exc.field).error(str(exc)) from None
 
+    def with_overrides(self, changes: Mapping[str, Any]) -> Scenario:
+        """A validated copy with some values changed.
+
+        ``changes`` is merged into :meth:`to_dict` deeply: tables merge key by key, and an
+        array of tables given as a list of the same length (``vehicles``) merges element by
+        element (an empty table leaves that element as it is). Everything is validated again.
+
+        Raises:
+            ScenarioError: The changed scenario is invalid (named as ``<source> (overridden)``).
+        """
+        merged = _merge_with_arrays(self.to_dict(), changes)
+        return Scenario.from_dict(merged, source=f"{self.source} (overridden)", base_dir=self.base_dir)
+
     def to_dict(self) -> dict[str, Any]:
         """Return the scenario as plain tables that :meth:`from_dict` reads back to an equal one.
 
@@ -771,6 +784,24 @@ def _tagged(table: Any, kinds: Mapping[str, type[Any]], ctx: Context) -> Any:
             f"{kind!r} is not valid{did_you_mean(kind, list(kinds))}; valid kinds: {', '.join(kinds)}"
         )
     return from_table(kinds[kind], table, ctx, ignore=("kind",))
+
+
+def _merge_with_arrays(base: Mapping[str, Any], over: Mapping[str, Any]) -> dict[str, Any]:
+    out = dict(base)
+    for k, v in over.items():
+        old = out.get(k)
+        if isinstance(v, Mapping) and isinstance(old, Mapping):
+            out[k] = _merge_with_arrays(old, v)
+        elif (
+            isinstance(v, list)
+            and isinstance(old, list)
+            and len(v) == len(old)
+            and all(isinstance(x, Mapping) for x in [*v, *old])
+        ):
+            out[k] = [_merge_with_arrays(a, b) for a, b in zip(old, v, strict=True)]
+        else:
+            out[k] = v
+    return out
 
 
 def _merge(base: Mapping[str, Any], over: Mapping[str, Any]) -> dict[str, Any]:

@@ -1,0 +1,56 @@
+"""Environments: the underwater pursuit-evasion game (UPEG) for PettingZoo, Gymnasium and SB3.
+
+* :func:`parallel_env` / :class:`UPEGParallelEnv`: the PettingZoo ParallelEnv (every agent);
+* :class:`UPEGSingleAgentEnv`: one agent learns, the others follow policies; registered with
+  Gymnasium as ``hptvsim/UPEG-Pursuer-v0``, ``hptvsim/UPEG-Evader-v0`` and ``hptvsim/Goto-v0``
+  (``gymnasium.make(id, scenario="target")``; ``gymnasium.make_vec(id, num_envs=64)`` gives the
+  batched :class:`UPEGVectorEnv`);
+* :func:`make_sb3_vec_env`: the batch as a stable-baselines3 ``VecEnv``;
+* :class:`UPEGBatchEnv`: B environments x N agents as arrays, for multi-agent training;
+* :class:`GameCore`: the engine under all of them; :mod:`hptvsim.envs.policies`: scripted
+  policies.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium
+
+from hptvsim.envs.batch import UPEGBatchEnv
+from hptvsim.envs.core import GameCore
+from hptvsim.envs.parallel import UPEGParallelEnv, parallel_env
+from hptvsim.envs.single import UPEGSingleAgentEnv, UPEGVectorEnv, make_sb3_vec_env
+
+__all__ = [
+    "ENV_IDS",
+    "GameCore",
+    "UPEGBatchEnv",
+    "UPEGParallelEnv",
+    "UPEGSingleAgentEnv",
+    "UPEGVectorEnv",
+    "make_sb3_vec_env",
+    "parallel_env",
+]
+
+ENV_IDS: dict[str, dict[str, Any]] = {
+    "hptvsim/UPEG-Pursuer-v0": {"scenario": "source", "agent": "pursuer_0", "task": "pursuit"},
+    "hptvsim/UPEG-Evader-v0": {"scenario": "source", "agent": "evader_0", "task": "pursuit"},
+    "hptvsim/Goto-v0": {"scenario": "goto_tiny", "task": "goto"},
+}
+"""Registered Gymnasium ids and their default arguments."""
+
+
+def _register() -> None:
+    for env_id, kwargs in ENV_IDS.items():
+        if env_id not in gymnasium.registry:
+            gymnasium.register(
+                id=env_id,
+                entry_point="hptvsim.envs.single:UPEGSingleAgentEnv",
+                vector_entry_point="hptvsim.envs.single:UPEGVectorEnv",
+                kwargs=dict(kwargs),
+                disable_env_checker=False,
+            )
+
+
+_register()

@@ -1,0 +1,519 @@
+"""The UPEG game engine: B environments x N agents of one scenario, in the paper's three layers.
+
+The paper (section III-A) splits its RL environment into GazeboEnv (reset, pause and resume
+the simulation), RobotEnv (one vehicle's inputs and outputs) and TaskEnv (state, action,
+reward, end). Here:
+
+* **simulation layer**: :class:`~hptvsim.cosim.system.VehicleSystem` on the FMU or the batched
+  backend (``backend="fmu" | "batched"``): reset, pause, resume, snapshot and restore of all
+  vehicles, stepped in lockstep by the control step ``dt``;
+* **robot layer**: :class:`Robots` here: each vehicle's command limits (Eq. 15), the ocean
+  current at its position, its sonar (:class:`~hptvsim.sensors.Sonar`, with the Eq. 3 error
+  model) and, for pursuers, the acoustic link that reports the target's position;
+* **task layer**: :mod:`hptvsim.envs.task`: observation (Eq. 14), reward (Eqs. 17-20) and the
+  end rules.
+
+:class:`GameCore` composes them. Every public view (the PettingZoo
+:class:`~hptvsim.envs.parallel.UPEGParallelEnv`, the Gymnasium single-agent views, the vector
+environments) drives a :class:`GameCore`; the FMU backend and the batched backend give the same
+numbers for the same seed because they run the same generated C on the same inputs.
+
+**The site's fence.** By default (``fence=True``) the outermost ring of cells of the obstacle
+map is solid: the sonar sees the edge of the site like a wall, so learners can avoid it, and
+touching it is a collision. With ``fence=False`` the edge is invisible and only the
+leaving-the-site rule ends an episode there.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+import numpy.typing as npt
+
+from hptvsim.cosim.system import SystemSpec, VehicleSpec, VehicleSystem, make_system
+from hptvsim.envs.task import EndFlags, ObsLayout, RewardTerms
+from hptvsim.world.grid import OccupancyGrid
+from hptvsim.world.scenario import Scenario, Task, World, load_scenario
+
+__all__ = ["Backend", "GameCore", "Robots", "StepResult"]
+
+F64 = npt.NDArray[np.float64]
+F32 = npt.NDArray[np.float32]
+Bool = npt.NDArray[np.bool_]
+I64 = npt.NDArray[np.int64]
+
+Backend = Literal["batched", "fmu"]
+
+
+def _fenced(grid: OccupancyGrid) -> OccupancyGrid:
+    occ = grid.occupied.copy()
+    occ[0, :] = occ[-1, :] = True
+    occ[:, 0] = occ[:, -1] = True
+    return OccupancyGrid(geometry=grid.geometry, occupied=occ)
+
+
+@dataclass
+class StepResult:
+    """What one step of every environment produced (arrays over ``B`` x ``N``).
+
+    Attributes:
+        obs: ``(B, N, obs_size)`` observations after the step (Eq. 14).
+        reward: ``(B, N)`` rewards (Eq. 20); 0 for agents already done.
+        terminated: ``(B, N)`` agents whose episode ended by a task rule this step.
+        truncated: ``(B, N)`` agents whose episode hit the step limit this step.
+        terms: The reward terms (Eqs. 17-19).
+        flags: Why episodes ended.
+        done: ``(B,)`` environments whose episode is over (every agent terminated or truncated).
+    """
+
+    obs: F32
+    reward: F64
+    terminated: Bool
+    truncated: Bool
+    terms: RewardTerms
+    flags: EndFlags
+    done: Bool
+
+
+class Robots:
+    """The robot layer: per-vehicle limits, currents, sonar and the acoustic link.
+
+    Args:
+        scenario: The scenario (agents, sensors).
+        grid: The obstacle map the sonar sees (fenced or not).
+        num_envs: B.
+        rng: Generator for all sensor noise.
+    """
+
+    def __init__(
+        self, scenario: Scenario, grid: OccupancyGrid, *, num_envs: int, rng: np.random.Generator
+    ) -> None:
+        from hptvsim.sensors import AcousticLink, Sonar
+        from hptvsim.sensors.sonar import vehicle_radii
+
+        agents = scenario.agents
+        self.names = tuple(a.name for a in agents)
+        self.pursuer = np.array([a.role == "pursuer" for a in agents])
+        self.radii = np.array([a.radius for a in agents], dtype=np.float64)
+        self.limits = np.array(
+            [[a.parameters.v_min, a.parameters.v_max, a.parameters.omega_max] for a in agents],
+            dtype=np.float64,
+        )
+        # one Sonar per distinct configuration; each senses its agents and sees every vehicle
+        configs: list[Any] = []
+        members: list[list[int]] = []
+        for i, a in enumerate(agents):
+            if a.sonar in configs:
+                members[configs.index(a.sonar)].append(i)
+            else:
+                configs.append(a.sonar)
+                members.append([i])
+        n = len(agents)
+        radii = vehicle_radii([a.vehicle_type for a in agents])
+        self.sonars = [
+            Sonar(
+                cfg,
+                grid,
+                num_envs=num_envs,
+                num_agents=n,
+                radii=radii if cfg.detect_vehicles else None,
+                sensing=None if len(idx) == n else idx,
+                rng=rng,
+            )
+            for cfg, idx in zip(configs, members, strict=True)
+        ]
+        self.sonar_members = [np.array(idx, dtype=np.intp) for idx in members]
+        beams = {cfg.beams for cfg in configs}
+        ranges = {cfg.max_range for cfg in configs}
+        if len(beams) != 1 or len(ranges) != 1:
+            raise ValueError(
+                "agents with sonars of different beam counts or ranges cannot share one observation "
+                f"layout (beams {sorted(beams)}, max ranges {sorted(ranges)}); give every group the same"
+            )
+        self.beams = beams.pop()
+        self.max_range = ranges.pop()
+        self.beam_angles = self.sonars[0].geometric.angles.copy()
+        self.pursuer_index = np.flatnonzero(self.pursuer)
+        self.evader_index = np.flatnonzero(~self.pursuer)
+        link_cfg = scenario.sensors.link
+        self.links = (
+            [
+                AcousticLink(
+                    link_cfg,
+                    num_envs=num_envs,
+                    num_pursuers=self.pursuer_index.size,
+                    dt=scenario.simulation.dt,
+                    rng=rng,
+                )
+                for _ in self.evader_index
+            ]
+            if self.pursuer_index.size and self.evader_index.size
+            else []
+        )
+
+    def clip(self, actions: F64) -> F64:
+        """Clip ``(B, N, 2)`` actions to each agent's ``[v_min, v_max] x [-omega_max, omega_max]``.
+
+        Eq. 15's action box.
+        """
+        out = np.empty_like(actions)
+        np.clip(actions[..., 0], self.limits[:, 0], self.limits[:, 1], out=out[..., 0])
+        np.clip(actions[..., 1], -self.limits[:, 2], self.limits[:, 2], out=out[..., 1])
+        return out
+
+    def sense(self, poses: F64, dt: float, out: F64) -> F64:
+        """Fill ``out`` ``(B, N, K)`` with measured sonar ranges for ``poses`` ``(B, N, 3)``."""
+        if len(self.sonars) == 1 and self.sonar_members[0].size == poses.shape[1]:
+            out[...] = self.sonars[0].measure(poses, dt)
+            return out
+        for sonar, idx in zip(self.sonars, self.sonar_members, strict=True):
+            out[:, idx, :] = sonar.measure(poses, dt)
+        return out
+
+    def reset_sensors(self, envs: npt.NDArray[np.intp], positions: F64) -> None:
+        """Fresh sonar error biases and link state for the environments ``envs``."""
+        for sonar in self.sonars:
+            sonar.reset(envs)
+        for k, link in enumerate(self.links):
+            e = self.evader_index[k]
+            link.reset(positions[:, e, :], positions[:, self.pursuer_index, :], envs)
+
+    def step_link(self, positions: F64) -> None:
+        """Advance every acoustic link with the positions at the end of the step."""
+        for k, link in enumerate(self.links):
+            e = self.evader_index[k]
+            link.step(positions[:, e, :], positions[:, self.pursuer_index, :])
+
+    def reported_evaders(self, positions: F64) -> F64:
+        """``(B, N, 2)``: for each pursuer, the reported position of its nearest evader."""
+        reported = positions.copy()
+        if not self.links:
+            return reported
+        p = self.pursuer_index
+        if len(self.links) == 1:
+            known = self.links[0].position  # (B, P, 2)
+        else:
+            cand = np.stack([link.position for link in self.links], axis=2)  # (B, P, E, 2)
+            truth = positions[:, self.evader_index, :]  # (B, E, 2)
+            d = np.linalg.norm(truth[:, None, :, :] - positions[:, p, None, :], axis=-1)
+            nearest = np.argmin(d, axis=-1)
+            known = np.take_along_axis(cand, nearest[..., None, None].repeat(2, -1), axis=2)[:, :, 0]
+        # before the first report arrives, a pursuer knows nothing: it "sees" the target at itself
+        known = np.where(np.isnan(known), positions[:, p, :], known)
+        reported[:, p, :] = known
+        return reported
+
+
+@dataclass
+class _State:
+    positions: F64
+    yaw: F64
+    velocity: F64
+    ranges: F64
+    distance: F64
+    steps: I64
+    active: Bool
+    done: Bool
+    episode_return: F64
+    obs: F32
+    goals: F64 | None = field(default=None)
+
+
+class GameCore:
+    """B environments of one scenario: reset, step, observations, rewards, end rules.
+
+    Args:
+        scenario: A :class:`~hptvsim.world.scenario.Scenario`, or a shipped scenario's name
+            or a scenario file's path.
+        num_envs: B, the number of environments stepped together.
+        backend: ``"batched"`` (training speed) or ``"fmu"`` (one FMI 2.0 CS instance per
+            vehicle, through the orchestrator); both give the same numbers.
+        task: Override the scenario's task kind (``"pursuit"`` or ``"goto"``).
+        sensor_fidelity: Override the sonar fidelity (``"geometric"`` or ``"signal"``).
+        fence: Whether the site's edge is a wall the sonar sees (see the module docstring).
+        extended_obs: Append the extended values to Eq. 14 (see :mod:`hptvsim.envs.task`).
+        max_steps: Override the scenario's step limit.
+        seed: Seed of spawn positions and sensor noise (default: the scenario's).
+        threads: Threads of the batched backend (``None``: up to 2).
+    """
+
+    def __init__(
+        self,
+        scenario: Scenario | str,
+        *,
+        num_envs: int = 1,
+        backend: Backend = "batched",
+        task: Literal["pursuit", "goto"] | None = None,
+        sensor_fidelity: Literal["geometric", "signal"] | None = None,
+        fence: bool = True,
+        extended_obs: bool = False,
+        max_steps: int | None = None,
+        seed: int | None = None,
+        threads: int | None = None,
+    ) -> None:
+        sc = load_scenario(scenario) if isinstance(scenario, str) else scenario
+        if not isinstance(sc, Scenario):
+            raise TypeError(
+                f"scenario must be a Scenario, a shipped scenario's name or a path; got {scenario!r}"
+            )
+        overrides: dict[str, Any] = {}
+        if task is not None and task != sc.task.kind:
+            if task not in ("pursuit", "goto"):
+                raise ValueError(f"task = {task!r} is invalid; valid: 'pursuit', 'goto'")
+            overrides["task"] = {"kind": task}
+        if sensor_fidelity is not None and sensor_fidelity != sc.sensors.sonar.fidelity:
+            if sensor_fidelity not in ("geometric", "signal"):
+                raise ValueError(
+                    f"sensor_fidelity = {sensor_fidelity!r} is invalid; valid: 'geometric', 'signal'"
+                )
+            overrides["sensors"] = {"sonar": {"fidelity": sensor_fidelity}}
+            overrides["vehicles"] = [
+                {"sonar": {"fidelity": sensor_fidelity}} if g.sonar else {} for g in sc.vehicles
+            ]
+        if max_steps is not None:
+            if max_steps < 1:
+                raise ValueError(f"max_steps = {max_steps} is invalid; valid: an integer >= 1")
+            overrides["simulation"] = {"max_steps": int(max_steps)}
+        if overrides:
+            sc = sc.with_overrides(overrides)
+        if num_envs < 1:
+            raise ValueError(f"num_envs = {num_envs} is invalid; valid: an integer >= 1")
+        if backend not in ("batched", "fmu"):
+            raise ValueError(f"backend = {backend!r} is invalid; valid: 'batched', 'fmu'")
+        self.scenario = sc
+        self.num_envs = int(num_envs)
+        self.backend: Backend = backend
+        self.task: Task = sc.task
+        self.goto = sc.task.kind == "goto"
+        self.dt = sc.simulation.dt  # s
+        self.max_steps = sc.simulation.max_steps
+        self.seed = sc.simulation.seed if seed is None else int(seed)
+        self.rng = np.random.default_rng(self.seed)
+        self.world: World = sc.build_world()
+        self.fence = fence
+        self.grid = _fenced(self.world.obstacles) if fence else self.world.obstacles
+        agents = sc.agents
+        self.agents = tuple(a.name for a in agents)
+        self.robots = Robots(sc, self.grid, num_envs=self.num_envs, rng=self.rng)
+        self.pursuer = self.robots.pursuer
+        if not self.goto and (not self.pursuer.any() or self.pursuer.all()):
+            raise ValueError(f"{sc.source}: the pursuit task needs at least one pursuer and one evader")
+        if self.goto and any(a.goal is None for a in agents):
+            missing = [a.name for a in agents if a.goal is None]
+            raise ValueError(f"{sc.source}: the goto task needs a goal for every agent; none for {missing}")
+        site = sc.site.size
+        self.site = (float(site[0]), float(site[1]))
+        self.layout = ObsLayout(
+            beams=self.robots.beams,
+            max_range=self.robots.max_range,
+            diagonal=math.hypot(*self.site),
+            extended=extended_obs,
+        )
+        spec = SystemSpec(
+            vehicles=tuple(
+                VehicleSpec(name=a.name, type=a.vehicle_type, parameters=_overrides(a)) for a in agents
+            ),
+            step_size=self.dt,
+            h_max=sc.simulation.h_max,
+        )
+        self.system: VehicleSystem = make_system(spec, self.num_envs, backend=backend, threads=threads)
+        b, n = self.num_envs, len(agents)
+        goals = None
+        if self.goto:
+            goals = np.broadcast_to(
+                np.array([a.goal.position for a in agents if a.goal is not None], dtype=np.float64), (b, n, 2)
+            ).copy()
+            self.goal_radius = np.array([a.goal.radius for a in agents if a.goal is not None])
+        else:
+            self.goal_radius = np.full(n, sc.task.target_distance)
+        self.state = _State(
+            positions=np.zeros((b, n, 2)),
+            yaw=np.zeros((b, n)),
+            velocity=np.zeros((b, n, 3)),
+            ranges=np.zeros((b, n, self.layout.beams)),
+            distance=np.zeros((b, n)),
+            steps=np.zeros(b, dtype=np.int64),
+            active=np.zeros((b, n), dtype=bool),
+            done=np.ones(b, dtype=bool),
+            episode_return=np.zeros((b, n)),
+            obs=np.zeros((b, n, self.layout.size), dtype=np.float32),
+            goals=goals,
+        )
+        self._time = np.zeros(b)
+        from hptvsim.envs.kernel import TaskKernel
+
+        self.kernel = TaskKernel(
+            layout=self.layout,
+            task=self.task,
+            grid=self.grid,
+            num_envs=b,
+            pursuer=self.pursuer,
+            radii=self.robots.radii,
+            limits=np.ascontiguousarray(self.robots.limits[:, 1:3]),
+            goal_radius=self.goal_radius,
+            site=self.site,
+            goto=self.goto,
+            max_steps=self.max_steps,
+        )
+        self.state.obs = self.kernel.out.obs
+
+    # -- helpers --------------------------------------------------------------------------------
+
+    @property
+    def num_agents(self) -> int:
+        """N."""
+        return len(self.agents)
+
+    def _poses(self) -> F64:
+        s = self.state
+        return np.concatenate([s.positions, s.yaw[..., None]], axis=-1)
+
+    def _read_system(self, envs: npt.NDArray[np.intp] | None = None) -> None:
+        obs = self.system.observations
+        s = self.state
+        if envs is None:
+            s.positions[...] = obs[..., 0:2]
+            s.yaw[...] = obs[..., 2]
+            s.velocity[...] = obs[..., 3:6]
+        else:
+            s.positions[envs] = obs[envs, :, 0:2]
+            s.yaw[envs] = obs[envs, :, 2]
+            s.velocity[envs] = obs[envs, :, 3:6]
+
+    def _evaluate(self, previous_distance: F64) -> Any:
+        """Run the task layer (compiled; see :mod:`hptvsim.envs.kernel`) on the current state."""
+        s = self.state
+        reported = None if self.goto else self.robots.reported_evaders(s.positions)
+        out = self.kernel.evaluate(
+            positions=s.positions,
+            yaw=s.yaw,
+            velocity=s.velocity,
+            ranges=s.ranges,
+            previous_distance=previous_distance,
+            steps=s.steps,
+            goals=s.goals,
+            reported=reported,
+        )
+        s.distance[...] = out.distance
+        return out
+
+    # -- the interface ---------------------------------------------------------------------------
+
+    def reset(self, env_ids: npt.ArrayLike | None = None, *, seed: int | None = None) -> F32:
+        """Start new episodes in the chosen environments (default: all).
+
+        Spawn poses are drawn from the scenario's regions with the core's generator; passing
+        ``seed`` re-seeds that generator first (as ``gymnasium.Env.reset(seed=...)`` does).
+
+        Returns:
+            ``(B, N, obs_size)`` observations (rows of environments not reset are unchanged).
+        """
+        if seed is not None:
+            self.rng = np.random.default_rng(seed)
+            for sonar in self.robots.sonars:
+                sonar.rng = self.rng
+                sonar.errors.rng = self.rng
+            for link in self.robots.links:
+                link.rng = self.rng
+                link.errors.rng = self.rng
+        b = self.num_envs
+        envs = np.arange(b) if env_ids is None else np.arange(b)[np.asarray(env_ids)]
+        poses = (
+            np.stack([self.scenario.sample_spawn(self.rng) for _ in envs])
+            if envs.size
+            else np.zeros((0, self.num_agents, 3))
+        )
+        self.system.reset(envs, poses=poses)
+        s = self.state
+        self._read_system(envs)
+        s.steps[envs] = 0
+        self._time[envs] = 0.0  # s, each episode's clock (time-varying currents)
+        s.active[envs] = True
+        s.done[envs] = False
+        s.episode_return[envs] = 0.0
+        self.system.commands[envs] = 0.0
+        self.robots.reset_sensors(envs, s.positions)
+        # sonar for all envs (cheap), then keep only the reset rows
+        ranges = np.empty_like(s.ranges)
+        self.robots.sense(self._poses(), 0.0, ranges)
+        s.ranges[envs] = ranges[envs]
+        self._evaluate(s.distance.copy())
+        return s.obs
+
+    def step(self, actions: npt.ArrayLike) -> StepResult:
+        """Advance every environment by one control step.
+
+        Environments whose episode is over are not advanced (their vehicles hold still);
+        reset them with :meth:`reset`. Agents that already reached their goal (goto) brake.
+
+        Args:
+            actions: ``(B, N, 2)`` ``[v, omega]`` per agent [m/s, rad/s] (Eq. 16); clipped to
+                each vehicle's limits (Eq. 15).
+        """
+        a = np.asarray(actions, dtype=np.float64)
+        b, n = self.num_envs, self.num_agents
+        if a.shape != (b, n, 2):
+            raise ValueError(f"actions must have shape (B, N, 2) = ({b}, {n}, 2); got {a.shape}")
+        if not np.isfinite(a).all():
+            e, i = (int(j[0]) for j in np.nonzero(~np.isfinite(a).all(axis=-1)))
+            raise ValueError(
+                f"the action of {self.agents[i]} in environment {e} is not finite: {a[e, i].tolist()}"
+            )
+        s = self.state
+        running = ~s.done
+        cmd = self.robots.clip(a)
+        cmd[~s.active] = 0.0  # done agents (and finished environments) stop
+        self.system.commands[...] = cmd
+        self.system.currents[...] = self.world.current.sample(self._time[:, None], s.positions)
+        previous = s.distance.copy()
+        self.system.step()
+        self._time += self.dt
+        # finished environments hold their state: restore their rows from before the step
+        self._read_system()
+        if not running.all():
+            held = ~running
+            self.system.reset(
+                np.flatnonzero(held), poses=np.concatenate([s.positions, s.yaw[..., None]], -1)[held]
+            )
+            self._time[held] -= self.dt
+        s.steps[running] += 1
+        self.robots.step_link(s.positions)
+        self.robots.sense(self._poses(), self.dt, s.ranges)
+        out = self._evaluate(previous)
+        obs = s.obs
+        terms = out.terms()
+        flags = out.flags()
+        active = s.active & running[:, None]
+        reward = np.where(active, terms.total, 0.0)
+        ends_all = (flags.captured | flags.failed)[:, None]
+        terminated = active & (ends_all | flags.reached)
+        truncated = active & ~terminated & flags.truncated[:, None]
+        s.active &= ~(terminated | truncated)
+        s.episode_return += reward
+        newly_done = running & ~s.active.any(axis=1)
+        s.done |= newly_done
+        return StepResult(
+            obs=obs,
+            reward=reward,
+            terminated=terminated,
+            truncated=truncated,
+            terms=terms,
+            flags=flags,
+            done=newly_done,
+        )
+
+    def close(self) -> None:
+        """Release the simulation's native resources."""
+        self.system.close()
+
+
+def _overrides(agent: Any) -> dict[str, float]:
+    """The parameters in which an agent differs from its vehicle type's defaults."""
+    from hptvsim.dynamics import vehicle_parameters
+
+    base = vehicle_parameters(agent.vehicle_type).as_dict()
+    mine = agent.parameters.as_dict()
+    return {k: v for k, v in mine.items() if v != base[k]}
