@@ -66,7 +66,10 @@ class StepResult:
         truncated: ``(B, N)`` agents whose episode hit the step limit this step.
         terms: The reward terms (Eqs. 17-19).
         flags: Why episodes ended.
-        done: ``(B,)`` environments whose episode is over (every agent terminated or truncated).
+        done: ``(B,)`` environments whose episode ended this step (no agent left active).
+
+    The arrays are the core's buffers: valid until the next :meth:`GameCore.step` or
+    :meth:`GameCore.reset`; copy what you keep.
     """
 
     obs: F32
@@ -185,11 +188,13 @@ class Robots:
         """Advance every acoustic link with the positions at the end of the step."""
         for k, link in enumerate(self.links):
             e = self.evader_index[k]
-            link.step(positions[:, e, :], positions[:, self.pursuer_index, :])
+            link.step(positions[:, e, :], positions[:, self.pursuer_index, :], check=False)
 
-    def reported_evaders(self, positions: F64) -> F64:
+    def reported_evaders(self, positions: F64, out: F64 | None = None) -> F64:
         """``(B, N, 2)``: for each pursuer, the reported position of its nearest evader."""
-        reported = positions.copy()
+        reported = positions.copy() if out is None else out
+        if out is not None:
+            np.copyto(out, positions)
         if not self.links:
             return reported
         p = self.pursuer_index
@@ -219,6 +224,8 @@ class _State:
     done: Bool
     episode_return: F64
     obs: F32
+    prev_distance: F64
+    reported: F64
     goals: F64 | None = field(default=None)
 
 
@@ -340,6 +347,8 @@ class GameCore:
             done=np.ones(b, dtype=bool),
             episode_return=np.zeros((b, n)),
             obs=np.zeros((b, n, self.layout.size), dtype=np.float32),
+            prev_distance=np.zeros((b, n)),
+            reported=np.zeros((b, n, 2)),
             goals=goals,
         )
         self._time = np.zeros(b)
@@ -352,13 +361,36 @@ class GameCore:
             num_envs=b,
             pursuer=self.pursuer,
             radii=self.robots.radii,
-            limits=np.ascontiguousarray(self.robots.limits[:, 1:3]),
+            limits=self.robots.limits,
             goal_radius=self.goal_radius,
             site=self.site,
             goto=self.goto,
             max_steps=self.max_steps,
         )
-        self.state.obs = self.kernel.out.obs
+        st = self.state
+        st.obs = self.kernel.out.obs  # the kernel writes observations and distances in place
+        st.distance = self.kernel.out.distance
+        self._actions = np.zeros((b, n, 2))
+        self._terms = self.kernel.out.terms()
+        self._flags = self.kernel.out.flags()
+        self._terminated = self.kernel.out.terminated_agent.view(np.bool_)
+        self._truncated = self.kernel.out.truncated_agent.view(np.bool_)
+        self._newly_done = self.kernel.out.newly_done.view(np.bool_)
+        current = self.world.current
+        self._steady_uniform_current = bool(current.is_steady and current.is_uniform)
+        self.kernel.bind(
+            pos=st.positions,
+            yaw=st.yaw,
+            vel=st.velocity,
+            ranges=st.ranges,
+            prev_distance=st.prev_distance,
+            steps=st.steps,
+            goals=st.goals,
+            reported=None if self.goto else st.reported,
+            active=st.active,
+            done=st.done,
+            episode_return=st.episode_return,
+        )
 
     # -- helpers --------------------------------------------------------------------------------
 
@@ -383,22 +415,11 @@ class GameCore:
             s.yaw[envs] = obs[envs, :, 2]
             s.velocity[envs] = obs[envs, :, 3:6]
 
-    def _evaluate(self, previous_distance: F64) -> Any:
+    def _evaluate(self, *, bookkeeping: bool) -> Any:
         """Run the task layer (compiled; see :mod:`hptvsim.envs.kernel`) on the current state."""
-        s = self.state
-        reported = None if self.goto else self.robots.reported_evaders(s.positions)
-        out = self.kernel.evaluate(
-            positions=s.positions,
-            yaw=s.yaw,
-            velocity=s.velocity,
-            ranges=s.ranges,
-            previous_distance=previous_distance,
-            steps=s.steps,
-            goals=s.goals,
-            reported=reported,
-        )
-        s.distance[...] = out.distance
-        return out
+        if not self.goto:
+            self.robots.reported_evaders(self.state.positions, out=self.state.reported)
+        return self.kernel.run(bookkeeping=bookkeeping)
 
     # -- the interface ---------------------------------------------------------------------------
 
@@ -435,12 +456,15 @@ class GameCore:
         s.done[envs] = False
         s.episode_return[envs] = 0.0
         self.system.commands[envs] = 0.0
+        if self._steady_uniform_current:
+            self.system.currents[envs] = self.world.current.sample(0.0, s.positions[envs])
         self.robots.reset_sensors(envs, s.positions)
         # sonar for all envs (cheap), then keep only the reset rows
         ranges = np.empty_like(s.ranges)
         self.robots.sense(self._poses(), 0.0, ranges)
         s.ranges[envs] = ranges[envs]
-        self._evaluate(s.distance.copy())
+        np.copyto(s.prev_distance, s.distance)
+        self._evaluate(bookkeeping=False)
         return s.obs
 
     def step(self, actions: npt.ArrayLike) -> StepResult:
@@ -453,56 +477,45 @@ class GameCore:
             actions: ``(B, N, 2)`` ``[v, omega]`` per agent [m/s, rad/s] (Eq. 16); clipped to
                 each vehicle's limits (Eq. 15).
         """
-        a = np.asarray(actions, dtype=np.float64)
+        a = self._actions
         b, n = self.num_envs, self.num_agents
-        if a.shape != (b, n, 2):
-            raise ValueError(f"actions must have shape (B, N, 2) = ({b}, {n}, 2); got {a.shape}")
+        if np.shape(actions) != (b, n, 2):
+            raise ValueError(f"actions must have shape (B, N, 2) = ({b}, {n}, 2); got {np.shape(actions)}")
+        np.copyto(a, actions)
         if not np.isfinite(a).all():
             e, i = (int(j[0]) for j in np.nonzero(~np.isfinite(a).all(axis=-1)))
             raise ValueError(
                 f"the action of {self.agents[i]} in environment {e} is not finite: {a[e, i].tolist()}"
             )
         s = self.state
+        any_done = bool(s.done.any())
         running = ~s.done
-        cmd = self.robots.clip(a)
-        cmd[~s.active] = 0.0  # done agents (and finished environments) stop
-        self.system.commands[...] = cmd
-        self.system.currents[...] = self.world.current.sample(self._time[:, None], s.positions)
-        previous = s.distance.copy()
+        self.kernel.commands(a, s.active, self.system.inputs)  # clip (Eq. 15); done agents stop
+        if not self._steady_uniform_current:  # else set once per episode, in reset()
+            self.system.currents[...] = self.world.current.sample(self._time[:, None], s.positions)
+        np.copyto(s.prev_distance, s.distance)
         self.system.step()
         self._time += self.dt
-        # finished environments hold their state: restore their rows from before the step
         self._read_system()
-        if not running.all():
+        if any_done:  # finished environments hold their state: put their rows back
             held = ~running
-            self.system.reset(
-                np.flatnonzero(held), poses=np.concatenate([s.positions, s.yaw[..., None]], -1)[held]
-            )
+            poses = np.concatenate([s.positions, s.yaw[..., None]], -1)[held]
+            self.system.reset(np.flatnonzero(held), poses=poses)
             self._time[held] -= self.dt
-        s.steps[running] += 1
+            s.steps += running
+        else:
+            s.steps += 1
         self.robots.step_link(s.positions)
         self.robots.sense(self._poses(), self.dt, s.ranges)
-        out = self._evaluate(previous)
-        obs = s.obs
-        terms = out.terms()
-        flags = out.flags()
-        active = s.active & running[:, None]
-        reward = np.where(active, terms.total, 0.0)
-        ends_all = (flags.captured | flags.failed)[:, None]
-        terminated = active & (ends_all | flags.reached)
-        truncated = active & ~terminated & flags.truncated[:, None]
-        s.active &= ~(terminated | truncated)
-        s.episode_return += reward
-        newly_done = running & ~s.active.any(axis=1)
-        s.done |= newly_done
+        out = self._evaluate(bookkeeping=True)
         return StepResult(
-            obs=obs,
-            reward=reward,
-            terminated=terminated,
-            truncated=truncated,
-            terms=terms,
-            flags=flags,
-            done=newly_done,
+            obs=s.obs,
+            reward=out.reward,
+            terminated=self._terminated,
+            truncated=self._truncated,
+            terms=self._terms,
+            flags=self._flags,
+            done=self._newly_done,
         )
 
     def close(self) -> None:

@@ -189,29 +189,45 @@ class UPEGParallelEnv(ParallelEnv[str, npt.NDArray[np.float32], npt.NDArray[np.f
                 raise ValueError(f"the action of {agent} must have shape (2,) = [v, omega]; got {arr.shape}")
             act[0, self._index[agent]] = arr
         result = self.core.step(act)
+        flags = result.flags
+        s = self.core.state
+        obs_all = result.obs[0].copy()
+        rew_l = result.reward[0].tolist()
+        term_l = result.terminated[0].tolist()
+        trunc_l = result.truncated[0].tolist()
+        dist_l = s.distance[0].tolist()
+        rmin_l = s.ranges[0].min(axis=1).tolist()
+        coll_l = flags.collision[0].tolist()
+        out_l = flags.out_of_site[0].tolist()
+        reach_l = flags.reached[0].tolist()
+        rc_l = result.terms.r_C[0].tolist()
+        re1_l = result.terms.r_E1[0].tolist()
+        re2_l = result.terms.r_E2[0].tolist()
+        captured = bool(flags.captured[0])
+        step = int(s.steps[0])
         obs: dict[str, npt.NDArray[np.float32]] = {}
         rew: dict[str, float] = {}
         term: dict[str, bool] = {}
         trunc: dict[str, bool] = {}
         infos: dict[str, dict[str, Any]] = {}
-        flags = result.flags
         for agent in self.agents:
             i = self._index[agent]
-            obs[agent] = result.obs[0, i].copy()
-            rew[agent] = float(result.reward[0, i])
-            term[agent] = bool(result.terminated[0, i])
-            trunc[agent] = bool(result.truncated[0, i])
-            info = self._info(i)
-            info.update(
-                captured=bool(flags.captured[0]),
-                collision=bool(flags.collision[0, i]),
-                out_of_site=bool(flags.out_of_site[0, i]),
-                reached=bool(flags.reached[0, i]),
-                r_C=float(result.terms.r_C[0, i]),
-                r_E1=float(result.terms.r_E1[0, i]),
-                r_E2=float(result.terms.r_E2[0, i]),
-            )
-            infos[agent] = info
+            obs[agent] = obs_all[i]
+            rew[agent] = rew_l[i]
+            term[agent] = term_l[i]
+            trunc[agent] = trunc_l[i]
+            infos[agent] = {
+                "distance": dist_l[i],
+                "min_range": rmin_l[i],
+                "step": step,
+                "captured": captured,
+                "collision": coll_l[i],
+                "out_of_site": out_l[i],
+                "reached": reach_l[i],
+                "r_C": rc_l[i],
+                "r_E1": re1_l[i],
+                "r_E2": re2_l[i],
+            }
         self.agents = [a for a in self.agents if not (term[a] or trunc[a])]
         return obs, rew, term, trunc, infos
 

@@ -68,9 +68,11 @@ from hptvsim.world.scenario import Task
 
 __all__ = [
     "EXTENDED_SIZE",
+    "Bookkeeping",
     "EndFlags",
     "ObsLayout",
     "RewardTerms",
+    "bookkeeping",
     "end_flags",
     "observations",
     "reward_terms",
@@ -371,4 +373,46 @@ def end_flags(
     truncated = steps >= max_steps
     return EndFlags(
         captured=captured, reached=reached, collision=collision, out_of_site=out, truncated=truncated
+    )
+
+
+@dataclass(frozen=True)
+class Bookkeeping:
+    """What the end rules mean for each agent this step (arrays over ``B`` x ``N``)."""
+
+    reward: F64  # (B, N) the reward of agents that acted, else 0
+    terminated: Bool  # (B, N)
+    truncated: Bool  # (B, N)
+    active: Bool  # (B, N) agents still in their episode after this step
+    done: Bool  # (B,) environments whose episode is over after this step
+    newly_done: Bool  # (B,) environments whose episode ended this step
+
+
+def bookkeeping(*, total: F64, flags: EndFlags, active: Bool, done: Bool) -> Bookkeeping:
+    """Apply the end rules to the agents that were active and the environments that ran.
+
+    Capture and failures (collision, leaving the site) end the episode for every agent; a goal
+    reached ends it for that agent; the step limit truncates every agent still active. An
+    environment is done when no agent is active.
+
+    Args:
+        total: ``(B, N)`` rewards (Eq. 20) of this step.
+        flags: The end flags of this step.
+        active: ``(B, N)`` agents active before the step.
+        done: ``(B,)`` environments done before the step (they did not run).
+    """
+    acted = active & ~done[:, None]
+    reward = np.where(acted, total, 0.0)
+    ends_all = (flags.captured | flags.failed)[:, None]
+    terminated = acted & (ends_all | flags.reached)
+    truncated = acted & ~terminated & flags.truncated[:, None]
+    still = active & ~(terminated | truncated)
+    newly_done = ~done & ~np.any(still, axis=1)
+    return Bookkeeping(
+        reward=reward,
+        terminated=terminated,
+        truncated=truncated,
+        active=still,
+        done=done | newly_done,
+        newly_done=newly_done,
     )

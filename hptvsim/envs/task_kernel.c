@@ -19,6 +19,7 @@ typedef struct {
     const uint8_t *pursuer;    /* (N,) */
     const double *radii;       /* (N,) m */
     const double *limits;      /* (N, 2): v_max [m/s], omega_max [rad/s] (extended only) */
+    const double *cmd_limits;  /* (N, 3): v_min, v_max [m/s], omega_max [rad/s] (Eq. 15) */
     const double *goal_radius; /* (N,) m */
     const double *sdf;         /* (nx, ny) m, signed distance field of the obstacle map */
     int64_t nx, ny;
@@ -43,6 +44,14 @@ typedef struct {
     uint8_t *collision;          /* (B, N) out */
     uint8_t *out_of_site;        /* (B, N) out */
     uint8_t *truncated;          /* (B,) out */
+    /* bookkeeping (task.bookkeeping); skipped when active == NULL */
+    uint8_t *active;             /* (B, N) in/out: agents still in their episode */
+    uint8_t *done;               /* (B,) in/out: environments whose episode is over */
+    uint8_t *newly_done;         /* (B,) out */
+    uint8_t *terminated_agent;   /* (B, N) out */
+    uint8_t *truncated_agent;    /* (B, N) out */
+    double *reward;              /* (B, N) out: total where the agent acted, else 0 */
+    double *episode_return;      /* (B, N) in/out */
 } hptv_task_io_t;
 
 static const double PI = 3.14159265358979311600;     /* math.pi */
@@ -200,6 +209,49 @@ int hptv_task_eval(const hptv_task_t *t, const hptv_task_io_t *io, int64_t b0, i
         }
         io->captured[b] = any_capture;
         io->truncated[b] = io->steps[b] >= t->max_steps;
+        /* --- bookkeeping ----------------------------------------------------------------- */
+        if (io->active != NULL) {
+            uint8_t was_done = io->done[b], fail = 0, ends_all, any_still = 0;
+            for (i = 0; i < N; i++) fail |= io->collision[b * N + i] | io->out_of_site[b * N + i];
+            ends_all = any_capture | fail;
+            for (i = 0; i < N; i++) {
+                const int64_t k = b * N + i;
+                uint8_t acted = io->active[k] && !was_done;
+                uint8_t term = acted && (ends_all || io->reached[k]);
+                uint8_t trunc = acted && !term && io->truncated[b];
+                double r = acted ? io->total[k] : 0.0;
+                io->reward[k] = r;
+                io->terminated_agent[k] = term;
+                io->truncated_agent[k] = trunc;
+                io->active[k] = io->active[k] && !(term || trunc);
+                io->episode_return[k] += r;
+                any_still |= io->active[k];
+            }
+            io->newly_done[b] = !was_done && !any_still;
+            io->done[b] = was_done || io->newly_done[b];
+        }
     }
     return 0;
+}
+
+/* Clip actions (B, N, 2) to each agent's box (Eq. 15) and write them into the vehicle inputs
+ * (B, N, stride) columns 0-1 (v_cmd, omega_cmd); agents not active (or whole environments done)
+ * get [0, 0]. The same as np.clip per column followed by zeroing the inactive rows. */
+void hptv_task_commands(const hptv_task_t *t, const double *actions, const uint8_t *active, double *inputs,
+                        int64_t stride, int64_t b0, int64_t b1) {
+    const int64_t N = t->N;
+    int64_t b, i;
+    for (b = b0; b < b1; b++) {
+        for (i = 0; i < N; i++) {
+            const int64_t k = b * N + i;
+            double *w = inputs + k * stride;
+            if (!active[k]) {
+                w[0] = 0.0;
+                w[1] = 0.0;
+            } else {
+                w[0] = clip(actions[2 * k], t->cmd_limits[3 * i], t->cmd_limits[3 * i + 1]);
+                w[1] = clip(actions[2 * k + 1], -t->cmd_limits[3 * i + 2], t->cmd_limits[3 * i + 2]);
+            }
+        }
+    }
 }

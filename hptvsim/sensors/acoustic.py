@@ -95,6 +95,12 @@ class AcousticLink:
         self._queued_stamp: F64 = np.zeros((b, p, q))
         self._last_target: F64 = np.zeros((b, 2))
         self._last_pursuers: F64 = np.zeros((b, p, 2))
+        # earliest report due and earliest arrival over all environments [s]: a step before both
+        # has nothing to send or deliver, and skips that work
+        self._due_min = 0.0
+        self._arrival_min = math.inf
+        self._env_index = np.arange(b)[:, None]  # index grids for picking a slot per (env, pursuer)
+        self._pursuer_index = np.arange(p)[None, :]
 
     def _check(self, name: str, a: npt.ArrayLike, shape: tuple[int, ...]) -> F64:
         arr = np.asarray(a, dtype=np.float64)
@@ -140,47 +146,65 @@ class AcousticLink:
             self._send(envs, np.zeros(envs.size), target[envs], pursuers[envs])
             self._deliver()
         self.age[envs] = self.time[envs][:, None] - self.stamp[envs]
+        self._refresh_horizon()
 
-    def step(self, target_xy: npt.ArrayLike, pursuer_xy: npt.ArrayLike) -> None:
+    def _refresh_horizon(self) -> None:
+        self._due_min = float(self._next_report.min()) * self.config.report_period
+        self._arrival_min = float(self._arrival.min())
+
+    def step(self, target_xy: npt.ArrayLike, pursuer_xy: npt.ArrayLike, *, check: bool = True) -> None:
         """Advance every environment by ``dt``; positions are those at the end of the step.
 
         Args:
             target_xy: ``(B, 2)`` target positions [m].
             pursuer_xy: ``(B, P, 2)`` pursuer positions [m].
+            check: Validate shapes and finiteness (callers that built the arrays may skip it).
         """
         b, p = self.num_envs, self.num_pursuers
-        target = self._check("target_xy", target_xy, (b, 2))
-        pursuers = self._check("pursuer_xy", pursuer_xy, (b, p, 2))
+        if check:
+            target = self._check("target_xy", target_xy, (b, 2))
+            pursuers = self._check("pursuer_xy", pursuer_xy, (b, p, 2))
+        else:
+            target = np.asarray(target_xy, dtype=np.float64)
+            pursuers = np.asarray(pursuer_xy, dtype=np.float64)
         t_prev = self.time.copy()
         self._steps += 1
-        self.time = self._steps.astype(np.float64) * self.dt
+        np.multiply(self._steps, self.dt, out=self.time)
         if not self.config.enabled:
             self.position[...] = target[:, None, :]
             self.stamp[...] = self.time[:, None]
             self.age[...] = 0.0
             return
-        period = self.config.report_period
-        while True:
-            t_k: F64 = self._next_report.astype(np.float64) * period
-            due = np.flatnonzero(t_k <= self.time + _EPS_T)
-            if due.size == 0:
-                break
-            w = np.clip((t_k[due] - t_prev[due]) / self.dt, 0.0, 1.0)  # interpolation weight
-            tgt = (1.0 - w)[:, None] * self._last_target[due] + w[:, None] * target[due]
-            pur = (1.0 - w)[:, None, None] * self._last_pursuers[due] + w[:, None, None] * pursuers[due]
-            self._send(due, t_k[due], tgt, pur)
-        self._last_target[...] = target
-        self._last_pursuers[...] = pursuers
-        self._deliver()
-        self.age[...] = self.time[:, None] - self.stamp
+        t_max = float(self.time.max())
+        if t_max + _EPS_T >= self._due_min:
+            period = self.config.report_period
+            while True:
+                t_k: F64 = self._next_report.astype(np.float64) * period
+                due = np.flatnonzero(t_k <= self.time + _EPS_T)
+                if due.size == 0:
+                    break
+                w = np.clip((t_k[due] - t_prev[due]) / self.dt, 0.0, 1.0)  # interpolation weight
+                tgt = (1.0 - w)[:, None] * self._last_target[due] + w[:, None] * target[due]
+                pur = (1.0 - w)[:, None, None] * self._last_pursuers[due] + w[:, None, None] * pursuers[due]
+                self._send(due, t_k[due], tgt, pur)
+            self._refresh_horizon()
+        np.copyto(self._last_target, target)
+        np.copyto(self._last_pursuers, pursuers)
+        if t_max + _EPS_T >= self._arrival_min:
+            self._deliver()
+            self._arrival_min = float(self._arrival.min())
+        np.subtract(self.time[:, None], self.stamp, out=self.age)
 
     def _send(self, envs: I64, t_k: F64, target: F64, pursuers: F64) -> None:
         """Broadcast report ``_next_report[envs]`` sent at ``t_k`` from ``target`` positions."""
         cfg = self.config
+        every = envs.size == self.num_envs  # all environments report together (always at B = 1)
         k = self._next_report[envs]
-        if (k > 0).any():  # the bias evolves between consecutive reports (report 0 starts fresh)
+        if every and k.min() > 0:
+            self.errors.step(cfg.report_period)
+        elif (k > 0).any():  # the bias evolves between consecutive reports (report 0 starts fresh)
             self.errors.step(cfg.report_period, envs[k > 0])
-        reported = self.errors.apply(target, index=envs)
+        reported = self.errors.apply(target) if every else self.errors.apply(target, index=envs)
         if cfg.transmitter == "target":
             rel = pursuers - target[:, None, :]
             dist = np.hypot(rel[..., 0], rel[..., 1])
@@ -194,8 +218,12 @@ class AcousticLink:
         self._arrival[envs, :, slot] = arrival
         self._queued_pos[envs, :, slot] = reported[:, None, :]
         self._queued_stamp[envs, :, slot] = t_k[:, None]
-        self.sent[envs] += 1
-        self._next_report[envs] += 1
+        if every:
+            self.sent += 1
+            self._next_report += 1
+        else:
+            self.sent[envs] += 1
+            self._next_report[envs] += 1
 
     def _deliver(self) -> None:
         """Hand over every queued report that has arrived; keep the newest per pursuer."""
@@ -205,9 +233,10 @@ class AcousticLink:
         self.received += arrived.sum(axis=2)
         stamps = np.where(arrived, self._queued_stamp, -np.inf)
         best = np.argmax(stamps, axis=2)  # (B, P)
-        best_stamp = np.take_along_axis(stamps, best[..., None], axis=2)[..., 0]
+        e, q = self._env_index, self._pursuer_index
+        best_stamp = stamps[e, q, best]
         newer = best_stamp > self.stamp
-        best_pos = np.take_along_axis(self._queued_pos, best[..., None, None], axis=2)[:, :, 0, :]
+        best_pos = self._queued_pos[e, q, best]
         self.position[newer] = best_pos[newer]
         self.stamp[newer] = best_stamp[newer]
         self._arrival[arrived] = np.inf

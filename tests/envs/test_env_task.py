@@ -220,3 +220,34 @@ def test_compiled_task_layer_equals_the_numpy_reference(scenario: str, extended:
     for name in ("captured", "reached", "collision", "out_of_site", "truncated"):
         np.testing.assert_array_equal(getattr(kf, name), getattr(flags, name))
     core.close()
+
+
+@pytest.mark.parametrize("scenario", ["target", "source_goto"])
+def test_compiled_bookkeeping_equals_the_numpy_reference(scenario: str) -> None:
+    from hptvsim.envs.task import bookkeeping
+
+    core = GameCore(scenario, num_envs=16, max_steps=60, seed=2)
+    core.reset(seed=2)
+    rng = np.random.default_rng(1)
+    lim = core.robots.limits
+    for _ in range(140):
+        active, done, ret = core.state.active.copy(), core.state.done.copy(), core.state.episode_return.copy()
+        actions = np.stack(
+            [
+                rng.uniform(lim[:, 0], lim[:, 1], (16, core.num_agents)),
+                rng.uniform(-lim[:, 2], lim[:, 2], (16, core.num_agents)),
+            ],
+            axis=-1,
+        )
+        result = core.step(actions)
+        ref = bookkeeping(total=result.terms.total, flags=result.flags, active=active, done=done)
+        np.testing.assert_array_equal(result.reward, ref.reward)
+        np.testing.assert_array_equal(result.terminated, ref.terminated)
+        np.testing.assert_array_equal(result.truncated, ref.truncated)
+        np.testing.assert_array_equal(core.state.active, ref.active)
+        np.testing.assert_array_equal(core.state.done, ref.done)
+        np.testing.assert_array_equal(result.done, ref.newly_done)
+        np.testing.assert_array_equal(core.state.episode_return, ret + ref.reward)
+        if core.state.done.any():
+            core.reset(np.flatnonzero(core.state.done))
+    core.close()
