@@ -371,6 +371,7 @@ class GameCore:
         st.obs = self.kernel.out.obs  # the kernel writes observations and distances in place
         st.distance = self.kernel.out.distance
         self._actions = np.zeros((b, n, 2))
+        self._pose_buf = np.zeros((b, n, 3))
         self._terms = self.kernel.out.terms()
         self._flags = self.kernel.out.flags()
         self._terminated = self.kernel.out.terminated_agent.view(np.bool_)
@@ -400,8 +401,12 @@ class GameCore:
         return len(self.agents)
 
     def _poses(self) -> F64:
+        """``(B, N, 3)`` ``[x, y, psi]`` (a buffer refreshed from the state)."""
         s = self.state
-        return np.concatenate([s.positions, s.yaw[..., None]], axis=-1)
+        poses = self._pose_buf
+        poses[..., 0:2] = s.positions
+        poses[..., 2] = s.yaw
+        return poses
 
     def _read_system(self, envs: npt.NDArray[np.intp] | None = None) -> None:
         obs = self.system.observations
@@ -482,7 +487,7 @@ class GameCore:
         if np.shape(actions) != (b, n, 2):
             raise ValueError(f"actions must have shape (B, N, 2) = ({b}, {n}, 2); got {np.shape(actions)}")
         np.copyto(a, actions)
-        if not np.isfinite(a).all():
+        if not np.isfinite(a.sum()):  # one reduction; find the culprit only on failure
             e, i = (int(j[0]) for j in np.nonzero(~np.isfinite(a).all(axis=-1)))
             raise ValueError(
                 f"the action of {self.agents[i]} in environment {e} is not finite: {a[e, i].tolist()}"

@@ -178,16 +178,19 @@ class UPEGParallelEnv(ParallelEnv[str, npt.NDArray[np.float32], npt.NDArray[np.f
             raise RuntimeError("the episode is over; call reset() before step()")
         act = self._actions
         act[...] = 0.0
-        live = set(self.agents)
+        index = self._index
+        live = self.agents
         for agent, a in actions.items():
-            if agent not in self._index:
+            i = index.get(agent)
+            if i is None:
                 raise ValueError(f"unknown agent {agent!r}; agents: {', '.join(self.possible_agents)}")
             if agent not in live:
                 raise ValueError(f"{agent} has finished its episode and cannot act")
-            arr = np.asarray(a, dtype=np.float64)
-            if arr.shape != (2,):
-                raise ValueError(f"the action of {agent} must have shape (2,) = [v, omega]; got {arr.shape}")
-            act[0, self._index[agent]] = arr
+            if np.shape(a) != (2,):
+                raise ValueError(
+                    f"the action of {agent} must have shape (2,) = [v, omega]; got {np.shape(a)}"
+                )
+            act[0, i] = a
         result = self.core.step(act)
         flags = result.flags
         s = self.core.state

@@ -152,6 +152,29 @@ def compile_kernel() -> Path:
     )
 
 
+_errors_lib: ctypes.CDLL | None = None
+
+
+def _errors_kernel() -> ctypes.CDLL:
+    """The fused Gauss-Markov kernel (``errors_kernel.c``), compiled once."""
+    global _errors_lib
+    with _lib_lock:
+        if _errors_lib is None:
+            lib = ctypes.CDLL(
+                str(
+                    compile_c(
+                        "hptvsim.sensors", "errors_kernel.c", flags=_CFLAGS, what="the sonar error kernel"
+                    )
+                )
+            )
+            f = lib.hptv_gm_ranges
+            f.restype = None
+            pointers, doubles, flags = [ctypes.c_void_p] * 3, [ctypes.c_double] * 4, [ctypes.c_int64] * 3
+            f.argtypes = [ctypes.c_int64, *pointers, *doubles, *flags, ctypes.c_void_p]
+            _errors_lib = lib
+        return _errors_lib
+
+
 class _SonarStruct(ctypes.Structure):
     """``hptv_sonar_t`` of the kernel: what stays fixed between calls."""
 
@@ -646,6 +669,13 @@ class Sonar:
         self.shape = (self.num_envs, n_sensing, config.beams)
         self.errors = GaussMarkov(config.errors, self.shape, rng=self.rng)
         self._truth: F64 = np.empty(self.shape)
+        self._z: F64 = np.empty(0)
+        self._z_ptr = self._z.ctypes.data
+        self._truth_ptr = self._truth.ctypes.data
+        self._bias_ptr = self.errors.bias.ctypes.data  # GaussMarkov updates its bias in place
+        self._fused_dt = math.nan
+        self._fused_coef = (1.0, 0.0)
+        self._gm = _errors_kernel().hptv_gm_ranges if backend == "c" and config.errors.active else None
 
     def reset(self, index: npt.ArrayLike | None = None) -> None:
         """Draw fresh error biases for the environments in ``index`` (``None``: all)."""
@@ -666,8 +696,44 @@ class Sonar:
         ranges = truth if self.signal is None else self.signal.estimate_ranges(truth)
         if not self.config.errors.active:
             return ranges.copy() if ranges is self._truth else ranges
+        if self._gm is not None:
+            return self._measure_fused(ranges, dt)
         max_range = self.config.max_range
         noisy = self.errors.measure(ranges, dt)
         np.clip(noisy, 0.0, max_range, out=noisy)
         result: F64 = np.where(ranges < max_range, noisy, max_range)
         return result
+
+    def _measure_fused(self, ranges: F64, dt: float) -> F64:
+        """``errors.measure`` + clip + no-echo rule in one C pass (``errors_kernel.c``), same numbers.
+
+        The normals are drawn in one call, in the order the numpy path draws them (bias drive,
+        then white noise), so both paths consume the generator identically.
+        """
+        cfg = self.config.errors
+        if dt != self._fused_dt:
+            if not (dt >= 0.0 and math.isfinite(dt)):
+                raise ValueError(f"dt = {dt!r} is invalid; valid: a finite time step >= 0 s")
+            phi = math.exp(-dt / cfg.tau)
+            w_std = cfg.bias_std * math.sqrt(-math.expm1(-2.0 * dt / cfg.tau))
+            self._fused_coef = (phi, w_std)
+            self._fused_dt = dt
+        step_bias = cfg.bias_std != 0.0
+        add_noise = cfg.noise_std > 0.0
+        n = ranges.size
+        draws = (int(step_bias) + int(add_noise)) * n
+        if self._z.size != draws:
+            self._z = np.empty(draws)
+            self._z_ptr = self._z.ctypes.data
+        if draws:
+            self.rng.standard_normal(out=self._z)
+        src = ranges if ranges.flags.c_contiguous else np.ascontiguousarray(ranges)
+        src_ptr = self._truth_ptr if src is self._truth else src.ctypes.data
+        out = np.empty(self.shape)
+        phi, w_std = self._fused_coef
+        assert self._gm is not None
+        self._gm(
+            n, src_ptr, self._bias_ptr, self._z_ptr, phi, w_std, cfg.noise_std, self.config.max_range,
+            int(step_bias), int(cfg.bias_std > 0.0), int(add_noise), out.ctypes.data,
+        )  # fmt: skip
+        return out
