@@ -21,6 +21,7 @@ from hptvsim import __version__
 COMMAND_MODULES: tuple[str, ...] = (
     "hptvsim.cosim.cli",
     "hptvsim.world.cli",
+    "hptvsim.train.cli",
     "hptvsim.sensors.cli",
     "hptvsim.envs.cli",
 )

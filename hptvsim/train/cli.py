@@ -1,0 +1,341 @@
+"""Training commands: ``hptvsim train``, ``evaluate``, ``figures``, ``sweep``, ``bench train``."""
+
+from __future__ import annotations
+
+import sys
+import tomllib
+from pathlib import Path
+from typing import Any
+
+import click
+
+__all__ = ["register"]
+
+
+def parse_overrides(items: tuple[str, ...]) -> dict[str, Any]:
+    """``KEY=VALUE`` pairs; VALUE is read as TOML (``3e-4``, ``true``, ``[64, 64]``), else as a string."""
+    out: dict[str, Any] = {}
+    for item in items:
+        if "=" not in item:
+            raise click.BadParameter(f"expected KEY=VALUE, got {item!r}", param_hint="--set")
+        key, raw = item.split("=", 1)
+        try:
+            value = tomllib.loads(f"v = {raw}")["v"]
+        except tomllib.TOMLDecodeError:
+            value = raw
+        out[key.strip()] = value
+    return out
+
+
+def default_run_dir(name: str, algo: str, seed: int) -> Path:
+    """``hptvsim-out/runs/<name>-<algo>-seed<seed>``."""
+    return Path("hptvsim-out") / "runs" / f"{name}-{algo}-seed{seed}"
+
+
+def _parse_env(text: str, options: dict[str, Any]) -> Any:
+    """``KIND:SCENARIO/TASK`` (``SCENARIO`` and ``TASK`` optional) as an EnvSpec."""
+    from hptvsim.train.envs import EnvSpec
+
+    kind, _, rest = text.partition(":")
+    scenario, _, task = rest.partition("/")
+    return EnvSpec(kind=kind, scenario=scenario or "source", task=task or "pursuit", options=options)
+
+
+def register(main: click.Group, bench: click.Group) -> None:
+    """Add the training commands to ``hptvsim`` and ``hptvsim bench``."""
+
+    @main.command("train")
+    @click.argument("config", required=False)
+    @click.option(
+        "--out",
+        "out_dir",
+        type=click.Path(file_okay=False, path_type=Path),
+        default=None,
+        help="Run folder (default: hptvsim-out/runs/<name>-<algo>-seed<seed>).",
+    )
+    @click.option(
+        "--resume", is_flag=True, help="Continue the run in the run folder from its last checkpoint."
+    )
+    @click.option("--seed", type=int, default=None, help="Override the config's seed.")
+    @click.option(
+        "--algo", type=click.Choice(["maisac", "ippo"]), default=None, help="Override the algorithm."
+    )
+    @click.option(
+        "--set",
+        "overrides",
+        multiple=True,
+        metavar="KEY=VALUE",
+        help="Override a config key, e.g. --set sac.backend=batched --set stage.0.budget_steps=500.",
+    )
+    @click.option("--no-progress", is_flag=True, help="No progress bars.")
+    @click.option("--no-tensorboard", is_flag=True, help="No TensorBoard events.")
+    def train_cmd(
+        config: str | None,
+        out_dir: Path | None,
+        resume: bool,
+        seed: int | None,
+        algo: str | None,
+        overrides: tuple[str, ...],
+        no_progress: bool,
+        no_tensorboard: bool,
+    ) -> None:
+        """Train MAISAC or IPPO through a curriculum (CONFIG: a file or a shipped name: quick, paper, toy).
+
+        Writes CSV and TensorBoard logs, checkpoints every `checkpoint_every` env steps and each
+        stage's models (SB3 zip and .pth). After a kill or Ctrl-C, run the same command with
+        --resume to go on from the last checkpoint.
+        """
+        from hptvsim.train.config import ConfigError, load_config
+        from hptvsim.train.trainer import TrainingInterrupted, load_run_config, train
+
+        sets = parse_overrides(overrides)
+        if seed is not None:
+            sets["seed"] = seed
+        if algo is not None:
+            sets["algo"] = algo
+        try:
+            if config is None:
+                if not (resume and out_dir is not None):
+                    raise click.UsageError("give a CONFIG (or --resume --out RUN_DIR)")
+                cfg = load_run_config(out_dir)
+            else:
+                cfg = load_config(config, sets)
+        except ConfigError as exc:
+            raise click.ClickException(str(exc)) from None
+        run_dir = out_dir if out_dir is not None else default_run_dir(cfg.name, cfg.algo, cfg.seed)
+        if resume and config is not None and (run_dir / "config.toml").is_file():
+            saved = load_run_config(run_dir)
+            if saved != cfg:
+                click.echo(
+                    f"note: resuming with the run's own {run_dir / 'config.toml'}, not {config}", err=True
+                )
+        try:
+            result = train(
+                cfg, run_dir, resume=resume, progress=not no_progress, tensorboard=not no_tensorboard
+            )
+        except TrainingInterrupted as exc:
+            click.echo(str(exc), err=True)
+            sys.exit(130)
+        except (FileExistsError, FileNotFoundError, ValueError, RuntimeError) as exc:
+            raise click.ClickException(str(exc)) from None
+        click.echo(f"run folder: {result.run_dir.resolve()}")
+        click.echo(f"env steps: {result.global_step}")
+        for folder in result.stage_dirs:
+            click.echo(f"models: {folder}")
+
+    @main.command("evaluate")
+    @click.argument("run_dirs", nargs=-1, type=click.Path(file_okay=False, exists=True, path_type=Path))
+    @click.option(
+        "--stage", default=None, help="Evaluate this stage's models and env (default: the last stage)."
+    )
+    @click.option(
+        "--env",
+        "env_text",
+        default=None,
+        metavar="KIND:SCENARIO/TASK",
+        help="Environment (default: the runs' stage env), e.g. hptvsim:target/pursuit or toy:source/goto.",
+    )
+    @click.option(
+        "--env-option", "env_options", multiple=True, metavar="KEY=VALUE", help="Environment option."
+    )
+    @click.option(
+        "--policy",
+        default=None,
+        help="Policy of every agent without a more specific one: run:DIR[@STAGE], zip:PATH, "
+        "scripted:NAME, toy:greedy, random (default: the run's models).",
+    )
+    @click.option("--pursuers", default=None, help="Policy spec of the pursuers.")
+    @click.option("--evaders", default=None, help="Policy spec of the evaders.")
+    @click.option(
+        "--agent", "agent_specs", multiple=True, metavar="NAME=SPEC", help="Policy spec of one agent."
+    )
+    @click.option("--episodes", type=int, default=100, show_default=True, help="Episodes per policy set.")
+    @click.option(
+        "--seed", type=int, default=0, show_default=True, help="Picks the fixed list of episode seeds."
+    )
+    @click.option("--label", default=None, help="Row name in the table (default: the run or the policy).")
+    @click.option(
+        "--json",
+        "json_path",
+        type=click.Path(dir_okay=False, path_type=Path),
+        default=None,
+        help="Write episodes and summaries as JSON.",
+    )
+    @click.option(
+        "--md",
+        "md_path",
+        type=click.Path(dir_okay=False, path_type=Path),
+        default=None,
+        help="Write the Markdown table (appended to an existing file).",
+    )
+    def evaluate_cmd(
+        run_dirs: tuple[Path, ...],
+        stage: str | None,
+        env_text: str | None,
+        env_options: tuple[str, ...],
+        policy: str | None,
+        pursuers: str | None,
+        evaders: str | None,
+        agent_specs: tuple[str, ...],
+        episodes: int,
+        seed: int,
+        label: str | None,
+        json_path: Path | None,
+        md_path: Path | None,
+    ) -> None:
+        """Capture rate, time to capture, collisions, distances and returns over fixed seeds.
+
+        With RUN_DIRS (e.g. one per training seed) every run is evaluated with its own models
+        and a last row gives the mean ± std across runs. Without, give --env and the policies.
+        """
+        import json
+
+        from hptvsim.train.envs import EnvSpec, make_env_factory
+        from hptvsim.train.evaluate import across_seeds, evaluate, markdown_table, policies_from_specs
+        from hptvsim.train.trainer import load_run_config
+
+        over: dict[str, str] = {}
+        if pursuers:
+            over["pursuer"] = pursuers
+        if evaders:
+            over["evader"] = evaders
+        for item in agent_specs:
+            agent_name, sep, agent_spec = item.partition("=")
+            if not sep:
+                raise click.BadParameter(f"expected NAME=SPEC, got {item!r}", param_hint="--agent")
+            over[agent_name] = agent_spec
+        env_spec = _parse_env(env_text, parse_overrides(env_options)) if env_text else None
+        jobs: list[tuple[str, EnvSpec, str, dict[str, str]]] = []
+        for run in run_dirs:
+            cfg = load_run_config(run)
+            names = [s.name for s in cfg.stages]
+            if stage is not None and stage not in names:
+                raise click.BadParameter(f"{run} has stages {', '.join(names)}", param_hint="--stage")
+            st = cfg.stages[names.index(stage)] if stage is not None else cfg.stages[-1]
+            spec = env_spec or st.env
+            run_over = {**dict(cfg.fixed), **over}
+            default = policy or f"run:{run}@{st.name}"
+            jobs.append((label or run.name, spec, default, run_over))
+        if not run_dirs:
+            if env_spec is None or not (policy or over):
+                raise click.UsageError(
+                    "give RUN_DIRS, or --env and the policies (--policy/--pursuers/--evaders)"
+                )
+            jobs.append(
+                (
+                    label
+                    or ", ".join(f"{k}={v}" for k, v in (({"all": policy} if policy else {}) | over).items()),
+                    env_spec,
+                    policy or "random",
+                    over,
+                )
+            )
+        results = []
+        for name, spec, default, run_over in jobs:
+            try:
+                res = evaluate(
+                    make_env_factory(spec),
+                    policies_from_specs(default, run_over),
+                    episodes=episodes,
+                    seed=seed,
+                    label=name,
+                    progress=True,
+                )
+            except (FileNotFoundError, ValueError, KeyError, RuntimeError) as exc:
+                raise click.ClickException(str(exc)) from None
+            results.append(res)
+        rows = [(r.label, r.summary) for r in results]
+        if len(results) > 1:
+            rows.append((f"mean over {len(results)} runs", across_seeds(results)))
+        table = markdown_table(rows)
+        click.echo(table)
+        if json_path is not None:
+            data: dict[str, Any] = {"runs": [r.as_dict() for r in results]}
+            if len(results) > 1:
+                data["across_runs"] = across_seeds(results)
+            json_path.parent.mkdir(parents=True, exist_ok=True)
+            json_path.write_text(json.dumps(data, indent=2) + "\n")
+            click.echo(f"json: {json_path}")
+        if md_path is not None:
+            md_path.parent.mkdir(parents=True, exist_ok=True)
+            with md_path.open("a") as f:
+                f.write(table + "\n")
+            click.echo(f"markdown: {md_path}")
+
+    @main.command("figures")
+    @click.argument(
+        "paths", nargs=-1, required=True, type=click.Path(file_okay=False, exists=True, path_type=Path)
+    )
+    @click.option(
+        "--out",
+        "out_dir",
+        type=click.Path(file_okay=False, path_type=Path),
+        default=None,
+        help="Folder for the PNGs (default: figures/ in the first path).",
+    )
+    @click.option("--no-trajectories", is_flag=True, help="Skip the trajectory plots (they run episodes).")
+    def figures_cmd(paths: tuple[Path, ...], out_dir: Path | None, no_trajectories: bool) -> None:
+        """The paper's figures from training runs or sweeps (PATHS), as PNG files.
+
+        Reward curves per stage and role (MAISAC vs IPPO, or per sweep setting), the final
+        rewards' mean and variance per setting, and one episode's trajectories per stage.
+        """
+        from hptvsim.train.figures import make_figures
+
+        out = out_dir if out_dir is not None else paths[0] / "figures"
+        try:
+            written = make_figures(list(paths), out, with_trajectories=not no_trajectories)
+        except FileNotFoundError as exc:
+            raise click.ClickException(str(exc)) from None
+        for p in written:
+            click.echo(str(p))
+
+    @main.command("sweep")
+    @click.argument("sweep_file", type=click.Path(dir_okay=False, exists=True, path_type=Path))
+    @click.option(
+        "--out",
+        "out_dir",
+        type=click.Path(file_okay=False, path_type=Path),
+        default=None,
+        help="Folder of the sweep (default: hptvsim-out/sweeps/<name>).",
+    )
+    @click.option("--address", default=None, help="Ray cluster address (default: start a local Ray).")
+    @click.option("--num-cpus", type=int, default=None, help="CPUs of the local Ray (one job each).")
+    @click.option("--serial", is_flag=True, help="No Ray: run the jobs one after another here.")
+    def sweep_cmd(
+        sweep_file: Path, out_dir: Path | None, address: str | None, num_cpus: int | None, serial: bool
+    ) -> None:
+        """Run a sweep file: one training job per (setting, seed) on Ray; finished jobs are skipped."""
+        from hptvsim.train.config import ConfigError
+        from hptvsim.train.sweeps import load_sweep, run_sweep
+
+        try:
+            spec = load_sweep(sweep_file)
+        except ConfigError as exc:
+            raise click.ClickException(str(exc)) from None
+        out = out_dir if out_dir is not None else Path("hptvsim-out") / "sweeps" / spec.name
+        results = run_sweep(spec, out, address=address, num_cpus=num_cpus, serial=serial)
+        failed = [r for r in results if r.get("status") == "failed"]
+        for r in results:
+            click.echo(f"{r['status']:>12}  {r['run_dir']}" + (f"  ({r['error']})" if "error" in r else ""))
+        click.echo(f"sweep folder: {out.resolve()}  (figures: hptvsim figures {out})")
+        if failed:
+            sys.exit(1)
+
+    @bench.command("train")
+    @click.option("--quick", is_flag=True, help="Seconds instead of minutes.")
+    @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of a table.")
+    @click.option(
+        "--env",
+        "env_kind",
+        type=click.Choice(["auto", "toy", "hptvsim"]),
+        default="auto",
+        show_default=True,
+        help="Game to step: the 3-vs-1 underwater game when available, else the toy game.",
+    )
+    def bench_train_cmd(quick: bool, as_json: bool, env_kind: str) -> None:
+        """Env steps/s of MAISAC with 4 learners: plain SB3 vs the batched path, in the same run."""
+        from hptvsim.bench.train import bench_train
+        from hptvsim.cli import emit
+
+        emit(bench_train(quick=quick, env_kind=env_kind), as_json)

@@ -1,0 +1,396 @@
+"""Evaluation of trained (or scripted) agents over fixed seeds: the pursuit-evasion metrics.
+
+Per episode, from the agents' ``infos``: capture (any step with ``captured``), time to capture
+(first such step x the env's ``dt``), collision (any step with ``collision``), the pursuer-evader
+distance (the smallest ``distance`` reported by a pursuer, else by any agent; its minimum over the
+episode and its final value), goal success (``success`` or ``reached`` at an agent's last step,
+goto task only),
+every agent's return and the episode length. Summaries are mean ± std over episodes, and over
+training seeds when several runs are evaluated; they are written as JSON and a Markdown table.
+
+Policies come from specs (``policy_from_spec``):
+
+``run:RUN_DIR`` or ``run:RUN_DIR@STAGE``
+    The SB3 zips a training run saved for its last (or the named) stage.
+``zip:PATH``
+    One SB3 model file (SAC or PPO).
+``toy:greedy``
+    The obvious policy of the toy game (evaders flee).
+``random``
+    Uniform random actions.
+``scripted:NAME``
+    A scripted policy of the underwater game: ``hptvsim.envs.scripted_policy(NAME, env, agent)``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hptvsim.train.envs import EnvFactory
+
+__all__ = [
+    "EpisodeMetrics",
+    "EvalResult",
+    "Policy",
+    "evaluate",
+    "markdown_table",
+    "policies_from_specs",
+    "policy_from_spec",
+    "summarize",
+]
+
+Policy = Callable[[np.ndarray], np.ndarray]
+"""An agent's policy: observation in, env action (the agent's own units) out."""
+
+EVAL_SEED_OFFSET = 10_000_019  # evaluation seeds never coincide with training reset seeds
+
+
+@dataclass(frozen=True)
+class EpisodeMetrics:
+    """What one evaluation episode measured."""
+
+    seed: int
+    length: int
+    captured: bool
+    time_to_capture_steps: int | None
+    time_to_capture_s: float | None
+    collision: bool
+    min_distance: float | None
+    final_distance: float | None
+    success_rate: float | None
+    returns: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class EvalResult:
+    """Episodes of one policy set and their summary."""
+
+    label: str
+    episodes: tuple[EpisodeMetrics, ...]
+    summary: dict[str, dict[str, float | None]]
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-ready form."""
+        return {"label": self.label, "summary": self.summary, "episodes": [asdict(e) for e in self.episodes]}
+
+
+def _role(agent: str) -> str:
+    return agent.split("_")[0]
+
+
+def _stats(values: Sequence[float]) -> dict[str, float | None]:
+    vals = [v for v in values if v is not None and math.isfinite(v)]
+    if not vals:
+        return {"mean": None, "std": None, "n": 0}
+    arr = np.asarray(vals, dtype=float)
+    return {"mean": float(arr.mean()), "std": float(arr.std()), "n": len(vals)}
+
+
+def summarize(episodes: Sequence[EpisodeMetrics]) -> dict[str, dict[str, float | None]]:
+    """Mean ± std (and count) of every metric over episodes; time to capture over captures only."""
+    out: dict[str, dict[str, float | None]] = {
+        "capture_rate": _stats([float(e.captured) for e in episodes]),
+        "time_to_capture_s": _stats(
+            [e.time_to_capture_s for e in episodes if e.time_to_capture_s is not None]
+        ),
+        "time_to_capture_steps": _stats(
+            [float(e.time_to_capture_steps) for e in episodes if e.time_to_capture_steps is not None]
+        ),
+        "collision_rate": _stats([float(e.collision) for e in episodes]),
+        "min_distance": _stats([e.min_distance for e in episodes if e.min_distance is not None]),
+        "final_distance": _stats([e.final_distance for e in episodes if e.final_distance is not None]),
+        "success_rate": _stats([e.success_rate for e in episodes if e.success_rate is not None]),
+        "length": _stats([float(e.length) for e in episodes]),
+    }
+    roles: dict[str, list[float]] = {}
+    for e in episodes:
+        per_role: dict[str, list[float]] = {}
+        for agent, r in e.returns.items():
+            per_role.setdefault(_role(agent), []).append(r)
+        for role, rs in per_role.items():
+            roles.setdefault(role, []).append(float(np.mean(rs)))
+    for role, rs in sorted(roles.items()):
+        out[f"return_{role}"] = _stats(rs)
+    return out
+
+
+def _is_goto(env: Any) -> bool:
+    """Whether the env plays the goto task (the toy game's ``task``, the underwater game's ``core.goto``)."""
+    if getattr(env, "task", None) == "goto":
+        return True
+    return bool(getattr(getattr(env, "core", None), "goto", False))
+
+
+def run_episode(env: Any, policies: Mapping[str, Policy], seed: int) -> EpisodeMetrics:
+    """Play one episode with ``policies`` and measure it."""
+    obs, _ = env.reset(seed=seed)
+    reset_policies(policies)
+    missing = sorted(set(env.possible_agents) - set(policies))
+    if missing:
+        raise KeyError(f"no policy for agent(s) {', '.join(missing)}")
+    returns: dict[str, float] = dict.fromkeys(env.agents, 0.0)
+    goto = _is_goto(env)
+    captured_at: int | None = None
+    collision = False
+    distances: list[float] = []
+    success: dict[str, bool] = {}
+    t = 0
+    while env.agents:
+        actions = {a: policies[a](obs[a]) for a in env.agents}
+        obs, rewards, terms, truncs, infos = env.step(actions)
+        t += 1
+        for a, r in rewards.items():
+            returns[a] = returns.get(a, 0.0) + float(r)
+        if captured_at is None and any(bool(i.get("captured", False)) for i in infos.values()):
+            captured_at = t
+        collision = collision or any(bool(i.get("collision", False)) for i in infos.values())
+        d = [float(i["distance"]) for a, i in infos.items() if "distance" in i and _role(a) == "pursuer"]
+        if not d:
+            d = [float(i["distance"]) for i in infos.values() if "distance" in i]
+        if d:
+            distances.append(min(d))
+        for a in actions:
+            info = infos.get(a, {})
+            if terms.get(a, False) or truncs.get(a, False):
+                goal = info.get("success", info.get("reached"))
+                if goal is not None and goto:
+                    success[a] = bool(goal)
+    dt = getattr(env, "dt", None) or getattr(getattr(env, "core", None), "dt", None)
+    return EpisodeMetrics(
+        seed=seed,
+        length=t,
+        captured=captured_at is not None,
+        time_to_capture_steps=captured_at,
+        time_to_capture_s=captured_at * float(dt) if captured_at is not None and dt is not None else None,
+        collision=collision,
+        min_distance=min(distances) if distances else None,
+        final_distance=distances[-1] if distances else None,
+        success_rate=float(np.mean(list(success.values()))) if success else None,
+        returns=returns,
+    )
+
+
+def evaluate(
+    env_factory: EnvFactory,
+    policies: Mapping[str, Policy] | Callable[[Any], Mapping[str, Policy]],
+    *,
+    episodes: int = 100,
+    seed: int = 0,
+    label: str = "",
+    progress: bool = False,
+) -> EvalResult:
+    """Evaluate a policy set over ``episodes`` fixed seeds (``seed`` picks the seed list).
+
+    Args:
+        env_factory: Builds the environment.
+        policies: ``agent -> policy``, or a callable building that mapping from the env.
+        episodes: Number of episodes.
+        seed: Episode ``k`` is reset with seed ``EVAL_SEED_OFFSET + 1000 * seed + k``.
+        label: Name of the policy set in tables.
+        progress: Show a progress bar.
+    """
+    env = env_factory()
+    try:
+        pols = policies(env) if callable(policies) else policies
+        it: Any = range(episodes)
+        if progress:
+            from tqdm.auto import tqdm
+
+            it = tqdm(it, desc=f"evaluate {label}".strip(), unit="ep")
+        eps = tuple(run_episode(env, pols, EVAL_SEED_OFFSET + 1000 * seed + k) for k in it)
+    finally:
+        env.close()
+    return EvalResult(label, eps, summarize(eps))
+
+
+# --- policies ---------------------------------------------------------------------------------
+
+
+def _load_sb3(path: Path) -> Any:
+    from stable_baselines3 import PPO, SAC
+
+    errors = []
+    for cls in (SAC, PPO):
+        try:
+            return cls.load(path, device="cpu")
+        except Exception as exc:  # the other algorithm's file
+            errors.append(f"{cls.__name__}: {exc}")
+    raise ValueError(f"{path} is not an SB3 SAC or PPO file ({'; '.join(errors)})")
+
+
+def sb3_policy(model: Any) -> Policy:
+    """A deterministic policy from an SB3 model (actions clipped to its action space)."""
+    low, high = model.action_space.low, model.action_space.high
+
+    def act(obs: np.ndarray) -> np.ndarray:
+        action, _ = model.predict(obs, deterministic=True)
+        return np.clip(np.asarray(action, np.float32), low, high)
+
+    return act
+
+
+def run_stage_dir(run_dir: Path, stage: str | None = None) -> Path:
+    """The model folder of a run's named stage, or of its last finished stage."""
+    root = run_dir / "stages"
+    if stage is not None:
+        folder = root / stage
+        if not folder.is_dir():
+            have = sorted(p.name for p in root.iterdir()) if root.is_dir() else []
+            raise FileNotFoundError(
+                f"{run_dir} has no stage {stage!r}; finished stages: {', '.join(have) or 'none'}"
+            )
+        return folder
+    summary = run_dir / "summary.json"
+    order: list[str] = []
+    if summary.is_file():
+        order = [s["stage"] for s in json.loads(summary.read_text()).get("stages", [])]
+    if not order and (run_dir / "config.toml").is_file():
+        from hptvsim.train.trainer import load_run_config
+
+        order = [s.name for s in load_run_config(run_dir).stages if (root / s.name / "stage.json").is_file()]
+    if not order:
+        raise FileNotFoundError(f"{run_dir} has no finished stage (train it first)")
+    return root / order[-1]
+
+
+class _ActAdapter:
+    """A policy object with ``act(obs, episode_start)`` (hptvsim.envs' scripted policies) as a Policy."""
+
+    def __init__(self, policy: Any) -> None:
+        self.policy = policy
+        self.start = True
+
+    def reset(self) -> None:
+        """The next call starts an episode."""
+        self.start = True
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        action = self.policy.act(np.asarray(obs)[None], episode_start=np.array([self.start]))
+        self.start = False
+        return np.asarray(action, dtype=np.float32).reshape(-1)
+
+
+def reset_policies(policies: Mapping[str, Any]) -> None:
+    """Tell stateful policies (those with ``reset()``) that an episode starts."""
+    for p in policies.values():
+        reset = getattr(p, "reset", None)
+        if callable(reset):
+            reset()
+
+
+def policy_from_spec(spec: str, env: Any, agent: str) -> Policy:
+    """Build one agent's policy from a spec string (see the module docstring).
+
+    Raises:
+        ValueError: Unknown spec kind (the message lists the valid ones).
+        FileNotFoundError: A run or file without this agent's model.
+    """
+    kind, _, rest = spec.partition(":")
+    space = env.action_space(agent)
+    if kind == "random":
+        import zlib
+
+        rng = np.random.default_rng(zlib.crc32(agent.encode()))
+        return lambda obs: rng.uniform(space.low, space.high).astype(np.float32)
+    if kind == "toy" and rest == "greedy":
+        from hptvsim.train.toy import greedy_action
+
+        flee = _role(agent) == "evader"
+        return lambda obs: greedy_action(obs, space, flee=flee)
+    if kind == "run":
+        path, _, stage = rest.partition("@")
+        folder = run_stage_dir(Path(path), stage or None)
+        file = folder / f"{agent}.zip"
+        if not file.is_file():
+            raise FileNotFoundError(f"{folder} has no model for {agent!r}")
+        return sb3_policy(_load_sb3(file))
+    if kind == "zip":
+        return sb3_policy(_load_sb3(Path(rest)))
+    if kind == "scripted":
+        import importlib
+
+        envs = importlib.import_module("hptvsim.envs")
+        make = getattr(envs, "scripted_policy", None)
+        if make is not None:
+            scripted = make(rest, env, agent)
+        elif hasattr(env, "core"):  # the underwater game: its own builder of scripted policies
+            from hptvsim.envs.single import build_policies
+
+            scripted = build_policies(env.core, [agent], {agent: rest})[agent]
+        else:
+            raise ValueError(f"scripted policies need the underwater game (hptvsim.envs); {env!r} is not")
+        return _ActAdapter(scripted) if hasattr(scripted, "act") else scripted
+    raise ValueError(
+        f"unknown policy spec {spec!r}; "
+        "valid: run:RUN_DIR[@STAGE], zip:PATH, toy:greedy, random, scripted:NAME"
+    )
+
+
+def policies_from_specs(
+    default: str, overrides: Mapping[str, str] | None = None
+) -> Callable[[Any], dict[str, Policy]]:
+    """A builder of ``agent -> policy``: ``overrides`` by agent or role (``pursuer``), else ``default``."""
+    over = dict(overrides or {})
+
+    def build(env: Any) -> dict[str, Policy]:
+        out = {}
+        for agent in env.possible_agents:
+            spec = over.get(agent) or over.get(_role(agent)) or default
+            out[agent] = policy_from_spec(spec, env, agent)
+        return out
+
+    return build
+
+
+# --- tables -----------------------------------------------------------------------------------
+
+_COLUMNS = (
+    ("capture_rate", "capture rate", 2),
+    ("time_to_capture_s", "time to capture (s)", 1),
+    ("collision_rate", "collision rate", 2),
+    ("min_distance", "min distance (m)", 1),
+    ("final_distance", "final distance (m)", 1),
+    ("success_rate", "goal success", 2),
+)
+
+
+def _fmt(stat: Mapping[str, float | None] | None, digits: int) -> str:
+    if not stat or stat.get("mean") is None:
+        return "–"
+    mean, std = stat["mean"], stat.get("std") or 0.0
+    assert mean is not None
+    return f"{mean:.{digits}f} ± {std:.{digits}f}"
+
+
+def across_seeds(results: Sequence[EvalResult]) -> dict[str, dict[str, float | None]]:
+    """Mean ± std over runs (training seeds) of each run's mean."""
+    keys = sorted({k for r in results for k in r.summary})
+    out = {}
+    for k in keys:
+        means = [r.summary[k]["mean"] for r in results if k in r.summary]
+        out[k] = _stats([m for m in means if m is not None])
+    return out
+
+
+def markdown_table(rows: Sequence[tuple[str, Mapping[str, Mapping[str, float | None]]]]) -> str:
+    """A Markdown table, one row per (label, summary)."""
+    roles = sorted({k[len("return_") :] for _, s in rows for k in s if k.startswith("return_")})
+    head = ["policies", *(c[1] for c in _COLUMNS), *(f"return {r}" for r in roles), "episodes"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
+    for label, s in rows:
+        n = s.get("capture_rate", {}).get("n")
+        cells = [
+            label,
+            *(_fmt(s.get(k), d) for k, _, d in _COLUMNS),
+            *(_fmt(s.get(f"return_{r}"), 1) for r in roles),
+        ]
+        cells.append(str(int(n)) if n is not None else "–")
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"

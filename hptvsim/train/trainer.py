@@ -1,0 +1,433 @@
+"""The joint training loop: all agents' learners in one shared ParallelEnv, stage after stage.
+
+:func:`train` runs a :class:`~hptvsim.train.config.TrainConfig` into a run folder::
+
+    RUN_DIR/
+      config.toml          the resolved config (a resumed run reads this one)
+      run.json             command, versions, start and resume times
+      episodes.csv         one row per agent per finished episode
+      updates.csv          losses and entropy coefficients every ``log_every`` env steps
+      tb/                  TensorBoard events
+      checkpoint/          the latest resumable state (see :mod:`hptvsim.train.checkpoint`)
+      stages/<stage>/      each stage's final models: <agent>.zip and <agent>.pth
+      summary.json         per stage: steps, episodes, final mean returns; written at the end
+
+Every episode is reset with a seed that depends only on (run seed, stage, episode index), so a
+run is reproducible and a resumed run sees the same episodes.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from collections import defaultdict, deque
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hptvsim.train.checkpoint import LoopState, has_checkpoint, load_checkpoint, save_checkpoint
+from hptvsim.train.common import Transition, agent_spaces, episode_seed, set_rng_state, write_json
+from hptvsim.train.config import (
+    TrainConfig,
+    config_from_dict,
+    config_to_dict,
+    dump_toml,
+)
+from hptvsim.train.curriculum import build_learner, finish_stage, stage_dir
+from hptvsim.train.envs import EnvFactory, make_env_factory
+from hptvsim.train.logs import RunLogger
+
+__all__ = ["RunResult", "TrainingInterrupted", "load_run_config", "train"]
+
+
+class TrainingInterrupted(KeyboardInterrupt):
+    """Training stopped by Ctrl-C after writing a checkpoint; ``--resume`` goes on from it."""
+
+
+@dataclass(frozen=True)
+class RunResult:
+    """What :func:`train` did.
+
+    Attributes:
+        run_dir: The run's folder.
+        global_step: Env steps done over all stages.
+        finished: Every stage ran to its budget (false when stopped by ``stop_after``).
+        stage_dirs: Folders of the finished stages' models, in order.
+    """
+
+    run_dir: Path
+    global_step: int
+    finished: bool
+    stage_dirs: tuple[Path, ...]
+
+
+def load_run_config(run_dir: Path) -> TrainConfig:
+    """The config a run was started with (``RUN_DIR/config.toml``)."""
+    import tomllib
+
+    path = run_dir / "config.toml"
+    with path.open("rb") as f:
+        return config_from_dict(tomllib.load(f), str(path))
+
+
+def _env_versions() -> dict[str, str]:
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = {}
+    for pkg in ("hptvsim", "stable-baselines3", "torch", "pettingzoo", "gymnasium"):
+        try:
+            out[pkg] = version(pkg)
+        except PackageNotFoundError:
+            out[pkg] = "missing"
+    return out
+
+
+def _start_run(cfg: TrainConfig, run_dir: Path, resume: bool, label: str | None) -> TrainConfig:
+    if resume:
+        if not has_checkpoint(run_dir):
+            raise FileNotFoundError(f"--resume: {run_dir} has no checkpoint (start it without --resume)")
+        saved = load_run_config(run_dir)
+        info = json.loads((run_dir / "run.json").read_text()) if (run_dir / "run.json").is_file() else {}
+        info.setdefault("resumed_at", []).append(time.strftime("%Y-%m-%dT%H:%M:%S"))
+        write_json(run_dir / "run.json", info)
+        return saved
+    if has_checkpoint(run_dir) or (run_dir / "episodes.csv").exists():
+        raise FileExistsError(
+            f"{run_dir} already holds a run; continue it with --resume or choose another --out"
+        )
+    run_dir.mkdir(parents=True, exist_ok=True)
+    (run_dir / "config.toml").write_text(dump_toml(config_to_dict(cfg)))
+    write_json(
+        run_dir / "run.json",
+        {
+            "name": cfg.name,
+            "algo": cfg.algo,
+            "seed": cfg.seed,
+            "label": label,
+            "command": sys.argv,
+            "started_at": time.strftime("%Y-%m-%dT%H:%M:%S"),
+            "versions": _env_versions(),
+        },
+    )
+    return cfg
+
+
+def _progress(total: int, initial: int, desc: str, unit: str, enabled: bool) -> Any:
+    if not enabled:
+        return None
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, initial=initial, desc=desc, unit=unit, dynamic_ncols=True, leave=True)
+
+
+def train(
+    cfg: TrainConfig,
+    run_dir: Path,
+    *,
+    resume: bool = False,
+    progress: bool = True,
+    tensorboard: bool = True,
+    env_factories: Mapping[str, EnvFactory] | None = None,
+    stop_after: int | None = None,
+    on_stage_end: Callable[[int, Path], None] | None = None,
+    label: str | None = None,
+) -> RunResult:
+    """Train a run to the end of its curriculum (or continue a killed one with ``resume``).
+
+    Args:
+        cfg: The config (ignored on resume: the run folder's own ``config.toml`` is used).
+        run_dir: The run's folder.
+        resume: Continue from ``run_dir``'s last checkpoint.
+        progress: Show a progress bar per stage.
+        tensorboard: Write TensorBoard events.
+        env_factories: ``stage name -> factory`` replacing the stages' env specs.
+        stop_after: Stop (with a checkpoint) once this many env steps are done in total.
+        on_stage_end: Called with (stage index, stage model folder) after each stage.
+        label: Name of the run's group in figures (a sweep's setting), kept in ``run.json``.
+
+    Raises:
+        FileExistsError: ``run_dir`` holds a run and ``resume`` is false.
+        FileNotFoundError: ``resume`` without a checkpoint.
+        TrainingInterrupted: Ctrl-C; a checkpoint was written first.
+    """
+    import torch
+    from stable_baselines3.common.utils import set_random_seed
+
+    run_dir = Path(run_dir)
+    cfg = _start_run(cfg, run_dir, resume, label)
+    torch.set_num_threads(1)
+    rng_state: dict[str, Any] | None = None
+    if resume:
+        state, ckpt_models, rng_state = load_checkpoint(run_dir)
+    else:
+        set_random_seed(cfg.seed)
+        state, ckpt_models = LoopState(), None
+    logger = RunLogger(
+        run_dir,
+        offsets=state.log_offsets if resume else None,
+        purge_step=state.global_step if resume else None,
+        tensorboard=tensorboard,
+    )
+    factories = dict(env_factories or {})
+    stage_dirs: list[Path] = [stage_dir(run_dir, s.name) for s in cfg.stages[: state.stage_index]]
+    try:
+        while state.stage_index < len(cfg.stages):
+            idx = state.stage_index
+            stage = cfg.stages[idx]
+            factory = factories.get(stage.name) or make_env_factory(stage.env)
+            env = factory()
+            try:
+                fixed = _fixed_policies(cfg, env)
+                spaces = {a: s for a, s in agent_spaces(env).items() if a not in fixed}
+                if not spaces:
+                    raise ValueError(
+                        f"stage {stage.name!r}: every agent is fixed by 'fixed'; nothing would learn"
+                    )
+                learner = build_learner(
+                    cfg, idx, run_dir, spaces, resume_from=ckpt_models if state.stage_started else None
+                )
+                if state.stage_started and ckpt_models is not None:
+                    learner.load_state(ckpt_models)
+                if rng_state is not None:  # after building models, which draws from torch's RNG
+                    set_rng_state(rng_state)
+                    rng_state = None
+                state.stage_started = True
+                ckpt_models = None
+                stopped = _run_stage(
+                    cfg, idx, env, learner, fixed, state, logger, run_dir, progress, stop_after
+                )
+            finally:
+                env.close()
+            if stopped:
+                return RunResult(run_dir, state.global_step, False, tuple(stage_dirs))
+            folder = finish_stage(cfg, idx, run_dir, learner)
+            stage_dirs.append(folder)
+            _write_stage_summary(run_dir, cfg, idx, state, learner)
+            state.stage_index += 1
+            state.stage_step = 0
+            state.stage_episode = 0
+            state.stage_started = False
+            state.at_boundary = True
+            state.finished = state.stage_index >= len(cfg.stages)
+            state.log_offsets = logger.offsets()
+            state.last_checkpoint_step = state.global_step
+            save_checkpoint(run_dir, state, None)
+            if on_stage_end is not None:
+                on_stage_end(idx, folder)
+            if stop_after is not None and state.global_step >= stop_after and not state.finished:
+                return RunResult(run_dir, state.global_step, False, tuple(stage_dirs))
+    finally:
+        logger.close()
+    _write_summary(run_dir, cfg, state)
+    return RunResult(run_dir, state.global_step, True, tuple(stage_dirs))
+
+
+def _fixed_policies(cfg: TrainConfig, env: Any) -> dict[str, Any]:
+    """Policies of the agents that do not learn (``cfg.fixed``, by agent name or role)."""
+    if not cfg.fixed:
+        return {}
+    from hptvsim.train.evaluate import policy_from_spec
+
+    out = {}
+    for agent in env.possible_agents:
+        spec = cfg.fixed.get(agent) or cfg.fixed.get(agent.split("_")[0])
+        if spec is not None:
+            out[agent] = policy_from_spec(spec, env, agent)
+    return out
+
+
+def _stage_done(stage: Any, state: LoopState) -> bool:
+    if stage.budget_steps is not None:
+        return bool(state.stage_step >= stage.budget_steps)
+    return bool(state.stage_episode >= stage.budget_episodes)
+
+
+def _run_stage(
+    cfg: TrainConfig,
+    idx: int,
+    env: Any,
+    learner: Any,
+    fixed: Mapping[str, Any],
+    state: LoopState,
+    logger: RunLogger,
+    run_dir: Path,
+    progress: bool,
+    stop_after: int | None,
+) -> bool:
+    """Train one stage to its budget; returns True when stopped early by ``stop_after``."""
+    stage = cfg.stages[idx]
+    by_steps = stage.budget_steps is not None
+    total = stage.budget_steps if by_steps else stage.budget_episodes
+    assert total is not None
+    bar = _progress(
+        total,
+        state.stage_step if by_steps else state.stage_episode,
+        f"{cfg.algo} {stage.name} [{idx + 1}/{len(cfg.stages)}]",
+        "step" if by_steps else "ep",
+        progress,
+    )
+    recent: dict[str, deque[float]] = defaultdict(lambda: deque(maxlen=20))
+    last_stats = state.last_stats
+    last_log = state.global_step
+
+    episode_log_start = logger.offsets()["episodes"]
+
+    def checkpoint(at_boundary: bool) -> None:
+        state.at_boundary = at_boundary
+        state.log_offsets = logger.offsets()
+        if not at_boundary:  # the running episode is replayed on resume: drop its rows then
+            state.log_offsets["episodes"] = episode_log_start
+        state.last_checkpoint_step = state.global_step
+        save_checkpoint(run_dir, state, learner)
+
+    def log_updates() -> None:
+        stats = learner.pop_stats()
+        for agent, s in stats.items():
+            if not s:
+                continue
+            last_stats.setdefault(agent, {}).update(s)
+            logger.update(
+                {
+                    "stage_index": idx,
+                    "stage": stage.name,
+                    "env_step": state.global_step,
+                    "agent": agent,
+                    "n_updates": int(learner.models[agent]._n_updates),
+                    **s,
+                }
+            )
+
+    try:
+        while not _stage_done(stage, state):
+            obs, _ = env.reset(seed=episode_seed(cfg.seed, idx, state.stage_episode))
+            episode_log_start = logger.offsets()["episodes"]
+            if fixed:
+                from hptvsim.train.evaluate import reset_policies
+
+                reset_policies(fixed)
+            if not env.agents:
+                raise RuntimeError(f"stage {stage.name!r}: the environment has no agents after reset")
+            ep_return: dict[str, float] = defaultdict(float)
+            ep_len: dict[str, int] = defaultdict(int)
+            while env.agents and not (by_steps and state.stage_step >= total):
+                live = {a: obs[a] for a in env.agents if a in obs and a not in fixed}
+                actions = learner.act(live, explore=True) if live else {}
+                others = {a: fixed[a](obs[a]) for a in env.agents if a in fixed}
+                next_obs, rewards, terms, truncs, infos = env.step({**actions, **others})
+                if live:
+                    learner.observe(Transition(live, actions, rewards, next_obs, terms, truncs, infos))
+                learner.update()
+                state.stage_step += 1
+                state.global_step += 1
+                if bar is not None and by_steps:
+                    bar.update(1)
+                acted = [*actions, *others]
+                for a in acted:
+                    ep_return[a] += float(rewards.get(a, 0.0))
+                    ep_len[a] += 1
+                episode_over = not env.agents
+                if episode_over:
+                    log_updates()
+                    last_log = state.global_step
+                for a in acted:
+                    if terms.get(a, False) or truncs.get(a, False):
+                        recent[a].append(ep_return[a])
+                        logger.episode(
+                            {
+                                "stage_index": idx,
+                                "stage": stage.name,
+                                "episode": state.stage_episode,
+                                "agent": a,
+                                "env_step": state.global_step,
+                                "return": ep_return[a],
+                                "length": ep_len[a],
+                                "terminated": int(bool(terms.get(a, False))),
+                                "truncated": int(bool(truncs.get(a, False))),
+                                **last_stats.get(a, {}),
+                            },
+                            infos.get(a),
+                        )
+                obs = next_obs
+                if episode_over:
+                    state.stage_episode += 1
+                    if bar is not None:
+                        if not by_steps:
+                            bar.update(1)
+                        bar.set_postfix_str(
+                            " ".join(f"{a}={np.mean(r):.1f}" for a, r in sorted(recent.items())),
+                            refresh=False,
+                        )
+                if state.global_step - last_log >= cfg.log_every:
+                    log_updates()
+                    last_log = state.global_step
+                due = state.global_step - state.last_checkpoint_step >= cfg.checkpoint_every
+                stop = stop_after is not None and state.global_step >= stop_after
+                if (due or stop) and not _stage_done(stage, state):
+                    checkpoint(at_boundary=episode_over)
+                if stop and not _stage_done(stage, state):
+                    return True
+    except KeyboardInterrupt:
+        checkpoint(at_boundary=False)
+        raise TrainingInterrupted(
+            f"interrupted at env step {state.global_step}; checkpoint written, continue with --resume"
+        ) from None
+    finally:
+        if bar is not None:
+            bar.close()
+    log_updates()
+    return False
+
+
+def _read_returns(run_dir: Path, stage_index: int) -> dict[str, list[float]]:
+    import csv
+
+    out: dict[str, list[float]] = defaultdict(list)
+    path = run_dir / "episodes.csv"
+    if not path.is_file():
+        return out
+    with path.open(newline="") as f:
+        for row in csv.DictReader(f):
+            if int(row["stage_index"]) == stage_index:
+                out[row["agent"]].append(float(row["return"]))
+    return out
+
+
+def _write_stage_summary(run_dir: Path, cfg: TrainConfig, idx: int, state: LoopState, learner: Any) -> None:
+    stage = cfg.stages[idx]
+    returns = _read_returns(run_dir, idx)
+    write_json(
+        stage_dir(run_dir, stage.name) / "stage.json",
+        {
+            "stage": stage.name,
+            "index": idx,
+            "env": {"kind": stage.env.kind, "scenario": stage.env.scenario, "task": stage.env.task},
+            "env_steps": state.stage_step,
+            "episodes": state.stage_episode,
+            "gradient_steps_total": learner.total_updates(),
+            "final_mean_return": {a: float(np.mean(r[-10:])) for a, r in returns.items() if r},
+            "algo": cfg.algo,
+            "seed": cfg.seed,
+        },
+    )
+
+
+def _write_summary(run_dir: Path, cfg: TrainConfig, state: LoopState) -> None:
+    stages = []
+    for s in cfg.stages:
+        path = stage_dir(run_dir, s.name) / "stage.json"
+        if path.is_file():
+            stages.append(json.loads(path.read_text()))
+    write_json(
+        run_dir / "summary.json",
+        {
+            "name": cfg.name,
+            "algo": cfg.algo,
+            "seed": cfg.seed,
+            "global_step": state.global_step,
+            "stages": stages,
+        },
+    )

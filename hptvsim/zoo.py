@@ -1,0 +1,185 @@
+"""The policy zoo: every policy by name, whatever made it (scripted, SB3, Decision Transformer).
+
+A policy is anything with ``act(obs, episode_start=None) -> (..., 2)`` actions ``[v, omega]``
+in SI units (:class:`hptvsim.envs.policies.Policy`). The zoo names them so the environments'
+single-agent views, ``hptvsim evaluate``, the service and the dashboard can all use the same
+ones:
+
+* ``scripted:<name>``: :data:`hptvsim.envs.policies.POLICY_NAMES` (always available);
+* shipped trained policies listed in ``policies/index.toml`` (the repository's ``policies/``
+  folder, or the copy in an installed wheel): each entry names its kind (``sb3`` or ``dt``),
+  file, roles and the command, config and seed that made it;
+* a path to a checkpoint: ``sb3:path/to/model.zip`` or ``dt:path/to/model.pt``.
+
+Loaders per kind are registered by the layers that know them (:func:`register_loader`); this
+module imports them lazily (downward: training and offline RL sit below it) the first time a
+kind is needed.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+import tomllib
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from hptvsim.envs.core import GameCore
+from hptvsim.envs.policies import POLICY_NAMES, Limits, Policy, make_policy
+
+__all__ = [
+    "PolicyInfo",
+    "PolicyLoader",
+    "list_policies",
+    "load_policy",
+    "policy_dir",
+    "register_loader",
+]
+
+PolicyLoader = Callable[[Path, GameCore, str], Policy]
+"""Builds a policy for agent ``agent`` of ``core`` from a checkpoint file."""
+
+_LOADERS: dict[str, PolicyLoader] = {}
+_LOADER_MODULES: dict[str, str] = {
+    # kind -> module whose import registers its loader
+    "sb3": "hptvsim.train.policy",
+    "dt": "hptvsim.offline.policy",
+}
+
+
+@dataclass(frozen=True, kw_only=True)
+class PolicyInfo:
+    """A named policy.
+
+    Attributes:
+        name: What users type (``scripted:pure_pursuit``, ``maisac-pursuer-target``, ...).
+        kind: ``scripted``, ``sb3`` or ``dt``.
+        roles: Roles it can drive (``pursuer``, ``evader``).
+        path: Checkpoint file (None for scripted policies).
+        description: One line.
+        provenance: How it was made (command, config, seed, versions), for trained ones.
+    """
+
+    name: str
+    kind: str
+    roles: tuple[str, ...]
+    path: Path | None = None
+    description: str = ""
+    provenance: dict[str, Any] = field(default_factory=dict)
+
+
+def register_loader(kind: str, loader: PolicyLoader) -> None:
+    """Register how checkpoints of ``kind`` become policies."""
+    _LOADERS[kind] = loader
+
+
+def _loader(kind: str) -> PolicyLoader:
+    if kind not in _LOADERS and kind in _LOADER_MODULES:
+        importlib.import_module(_LOADER_MODULES[kind])
+    if kind not in _LOADERS:
+        raise ValueError(
+            f"no loader for policies of kind {kind!r}; known kinds: scripted, {', '.join(_LOADER_MODULES)}"
+        )
+    return _LOADERS[kind]
+
+
+def policy_dir() -> Path:
+    """The folder of shipped trained policies (``$HPTVSIM_POLICY_DIR``, the checkout's, or the wheel's)."""
+    env = os.environ.get("HPTVSIM_POLICY_DIR")
+    if env:
+        return Path(env)
+    checkout = Path(__file__).resolve().parents[1] / "policies"
+    if checkout.is_dir():
+        return checkout
+    return Path(str(resources.files("hptvsim").joinpath("_data", "policies")))
+
+
+_SCRIPTED_ROLES = {
+    "pure_pursuit": ("pursuer", "evader"),
+    "proportional_navigation": ("pursuer",),
+    "potential_field": ("evader",),
+    "stationary": ("pursuer", "evader"),
+    "random": ("pursuer", "evader"),
+}
+
+
+def list_policies(folder: Path | None = None) -> list[PolicyInfo]:
+    """Every named policy: the scripted ones, then the shipped trained ones."""
+    out = [
+        PolicyInfo(
+            name=f"scripted:{n}", kind="scripted", roles=_SCRIPTED_ROLES[n], description=f"scripted {n}"
+        )
+        for n in POLICY_NAMES
+    ]
+    root = folder if folder is not None else policy_dir()
+    index = root / "index.toml"
+    if index.is_file():
+        data = tomllib.loads(index.read_text())
+        for name, entry in sorted(data.get("policies", {}).items()):
+            out.append(
+                PolicyInfo(
+                    name=name,
+                    kind=str(entry["kind"]),
+                    roles=tuple(entry.get("roles", ("pursuer", "evader"))),
+                    path=root / str(entry["file"]),
+                    description=str(entry.get("description", "")),
+                    provenance=dict(entry.get("provenance", {})),
+                )
+            )
+    return out
+
+
+def _role(core: GameCore, agent: str) -> str:
+    return "pursuer" if core.pursuer[core.agents.index(agent)] else "evader"
+
+
+def load_policy(spec: str, core: GameCore, agent: str, *, seed: int | None = None) -> Policy:
+    """Build the policy ``spec`` for ``agent`` of the game ``core``.
+
+    Args:
+        spec: A zoo name (:func:`list_policies`), ``scripted:<name>`` (or just ``<name>`` of a
+            scripted policy), or ``<kind>:<path>`` for a checkpoint file.
+        core: The game the policy will play (observation layout, limits, beams).
+        agent: The agent it drives.
+        seed: Seed of stochastic policies (``random``).
+
+    Raises:
+        ValueError: Unknown name or kind, or a policy made for another role (the message lists
+            the valid names).
+    """
+    if agent not in core.agents:
+        raise ValueError(f"unknown agent {agent!r}; agents: {', '.join(core.agents)}")
+    name = spec.removeprefix("scripted:")
+    if name in POLICY_NAMES:
+        i = core.agents.index(agent)
+        v_min, v_max, om = core.robots.limits[i]
+        return make_policy(
+            name,
+            layout=core.layout,
+            limits=Limits(v_min=v_min, v_max=v_max, omega_max=om),
+            beam_angles=core.robots.beam_angles,
+            dt=core.dt,
+            seed=seed,
+        )
+    known = {p.name: p for p in list_policies()}
+    if spec in known:
+        info = known[spec]
+        role = _role(core, agent)
+        if role not in info.roles:
+            raise ValueError(f"policy {spec!r} drives {', '.join(info.roles)}; {agent} is a {role}")
+        assert info.path is not None
+        return _loader(info.kind)(info.path, core, agent)
+    kind, sep, path = spec.partition(":")
+    if sep and kind in _LOADER_MODULES:
+        p = Path(path)
+        if not p.is_file():
+            raise ValueError(f"policy file not found: {p}")
+        return _loader(kind)(p, core, agent)
+    valid: Sequence[str] = [p.name for p in known.values()]
+    raise ValueError(
+        f"unknown policy {spec!r}; valid: {', '.join(valid)}, or <kind>:<checkpoint> with kind in "
+        f"{', '.join(_LOADER_MODULES)}"
+    )

@@ -1,0 +1,150 @@
+"""Evaluation, figures and sweeps over real (tiny) training runs."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+from train_helpers import toy_config
+
+from hptvsim.cli import main
+from hptvsim.train.envs import EnvSpec, make_env_factory
+from hptvsim.train.evaluate import evaluate, policies_from_specs, policy_from_spec
+from hptvsim.train.sweeps import load_sweep, plan_jobs, run_sweep
+from hptvsim.train.trainer import train
+
+PURSUIT = EnvSpec(kind="toy", task="pursuit", options={"n_pursuers": 2, "max_steps": 120})
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("runs") / "maisac"
+    train(toy_config(), out, progress=False, tensorboard=False)
+    return out
+
+
+def test_metrics_come_from_infos_over_fixed_seeds() -> None:
+    greedy = evaluate(make_env_factory(PURSUIT), policies_from_specs("toy:greedy"), episodes=10)
+    again = evaluate(make_env_factory(PURSUIT), policies_from_specs("toy:greedy"), episodes=10)
+    assert greedy.summary == again.summary  # fixed seeds: the same numbers
+    s = greedy.summary
+    assert s["capture_rate"]["mean"] == 1.0  # faster pursuers heading straight at the evader
+    assert s["time_to_capture_s"]["mean"] is not None and 0 < s["time_to_capture_s"]["mean"] < 30.0
+    assert s["min_distance"]["mean"] is not None and s["min_distance"]["mean"] < 3.0  # the capture radius
+    assert s["success_rate"]["mean"] is None  # no goals in pursuit
+    still = evaluate(
+        make_env_factory(PURSUIT), policies_from_specs("toy:greedy", {"pursuer": "random"}), episodes=10
+    )
+    assert (still.summary["capture_rate"]["mean"] or 0.0) < 0.5
+
+
+def test_policy_specs_are_checked(run_dir: Path) -> None:
+    env = make_env_factory(PURSUIT)()
+    with pytest.raises(ValueError, match="valid: run:RUN_DIR"):
+        policy_from_spec("magic:x", env, "pursuer_0")
+    with pytest.raises(FileNotFoundError, match="finished stages: source, target"):
+        policy_from_spec(f"run:{run_dir}@middle", env, "pursuer_0")
+    act = policy_from_spec(f"run:{run_dir}@source", env, "pursuer_0")
+    assert act(env.reset(seed=0)[0]["pursuer_0"]).shape == (2,)
+
+
+def test_evaluate_command_writes_json_and_markdown(run_dir: Path, tmp_path: Path) -> None:
+    res = CliRunner().invoke(
+        main,
+        [
+            "evaluate",
+            str(run_dir),
+            str(run_dir),
+            "--episodes",
+            "5",
+            "--json",
+            str(tmp_path / "e.json"),
+            "--md",
+            str(tmp_path / "e.md"),
+        ],
+    )
+    assert res.exit_code == 0, res.output
+    data = json.loads((tmp_path / "e.json").read_text())
+    assert len(data["runs"]) == 2 and len(data["runs"][0]["episodes"]) == 5
+    assert data["across_runs"]["capture_rate"]["std"] == 0.0  # the same run twice
+    table = (tmp_path / "e.md").read_text()
+    assert "| maisac |" in table and "mean over 2 runs" in table and "capture rate" in table
+    res = CliRunner().invoke(
+        main, ["evaluate", "--env", "toy:source/pursuit", "--policy", "toy:greedy", "--episodes", "3"]
+    )
+    assert res.exit_code == 0 and "all=toy:greedy" in res.output
+
+
+def test_figures_for_runs_with_two_algorithms(run_dir: Path, tmp_path: Path) -> None:
+    ippo = tmp_path / "ippo"
+    train(toy_config(algo="ippo"), ippo, progress=False, tensorboard=False)
+    res = CliRunner().invoke(main, ["figures", str(run_dir), str(ippo), "--out", str(tmp_path / "fig")])
+    assert res.exit_code == 0, res.output
+    names = sorted(p.name for p in (tmp_path / "fig").glob("*.png"))
+    assert names == [
+        "final_reward_mean_variance.png",
+        "reward_evader.png",
+        "reward_pursuer.png",
+        "trajectories_source.png",
+        "trajectories_target.png",
+    ]
+    assert all((tmp_path / "fig" / n).stat().st_size > 10_000 for n in names)
+
+
+SWEEP = """
+name = "tiny"
+config = "base.toml"
+seeds = [0, 1]
+[set]
+"stage.0.budget_steps" = 60
+"stage.1.budget_episodes" = 2
+[grid]
+"sac.ent_coef" = ["auto_0.1", "auto_0.4"]
+"""
+
+
+def _sweep_file(tmp_path: Path) -> Path:
+    from hptvsim.train.config import config_to_dict, dump_toml
+
+    (tmp_path / "base.toml").write_text(dump_toml(config_to_dict(toy_config())))
+    path = tmp_path / "sweep.toml"
+    path.write_text(SWEEP)
+    return path
+
+
+def test_sweep_plans_one_job_per_setting_and_seed(tmp_path: Path) -> None:
+    spec = load_sweep(_sweep_file(tmp_path))
+    jobs = plan_jobs(spec)
+    assert [(j.label, j.seed) for j in jobs] == [
+        ("ent_coef=auto_0.1", 0),
+        ("ent_coef=auto_0.1", 1),
+        ("ent_coef=auto_0.4", 0),
+        ("ent_coef=auto_0.4", 1),
+    ]
+    bad = tmp_path / "bad.toml"
+    bad.write_text(SWEEP.replace('"sac.ent_coef"', '"sac.entropy"'))
+    with pytest.raises(ValueError, match="'entropy'"):
+        load_sweep(bad)
+
+
+def test_sweep_runs_serially_and_skips_finished_jobs(tmp_path: Path) -> None:
+    spec = load_sweep(_sweep_file(tmp_path))
+    results = run_sweep(spec, tmp_path / "out", serial=True, progress=False)
+    assert [r["status"] for r in results] == ["finished"] * 4
+    labels = {
+        json.loads((tmp_path / "out" / j.run_dir / "run.json").read_text())["label"] for j in plan_jobs(spec)
+    }
+    assert labels == {"ent_coef=auto_0.1", "ent_coef=auto_0.4"}
+    again = run_sweep(spec, tmp_path / "out", serial=True, progress=False)
+    assert [r["status"] for r in again] == ["done before"] * 4
+
+
+@pytest.mark.slow
+def test_sweep_on_a_local_ray(tmp_path: Path) -> None:
+    spec = load_sweep(_sweep_file(tmp_path))
+    results = run_sweep(spec, tmp_path / "out", num_cpus=2, progress=False)
+    assert [r["status"] for r in results] == ["finished"] * 4
+    res = CliRunner().invoke(main, ["figures", str(tmp_path / "out"), "--no-trajectories"])
+    assert res.exit_code == 0, res.output
