@@ -214,15 +214,9 @@ def evaluate(
 
 
 def _load_sb3(path: Path) -> Any:
-    from stable_baselines3 import PPO, SAC
+    from hptvsim.train.policy import load_sb3_model
 
-    errors = []
-    for cls in (SAC, PPO):
-        try:
-            return cls.load(path, device="cpu")
-        except Exception as exc:  # the other algorithm's file
-            errors.append(f"{cls.__name__}: {exc}")
-    raise ValueError(f"{path} is not an SB3 SAC or PPO file ({'; '.join(errors)})")
+    return load_sb3_model(path)
 
 
 def sb3_policy(model: Any) -> Policy:
@@ -327,9 +321,19 @@ def policy_from_spec(spec: str, env: Any, agent: str) -> Policy:
         else:
             raise ValueError(f"scripted policies need the underwater game (hptvsim.envs); {env!r} is not")
         return _ActAdapter(scripted) if hasattr(scripted, "act") else scripted
+    if hasattr(env, "core"):  # the underwater game: anything the policy zoo knows
+        from hptvsim.zoo import load_policy
+
+        try:
+            return _ActAdapter(load_policy(spec, env.core, agent))
+        except ValueError as exc:
+            raise ValueError(
+                f"unknown policy spec {spec!r}: {exc}; also valid: run:RUN_DIR[@STAGE], zip:PATH, random"
+            ) from None
     raise ValueError(
         f"unknown policy spec {spec!r}; "
-        "valid: run:RUN_DIR[@STAGE], zip:PATH, toy:greedy, random, scripted:NAME"
+        "valid: run:RUN_DIR[@STAGE], zip:PATH, toy:greedy, random, scripted:NAME, and for the "
+        "underwater game any policy of hptvsim.zoo (sb3:PATH, dt:PATH, shipped names)"
     )
 
 
