@@ -22,12 +22,20 @@ ENV = {"kind": "hptvsim", "scenario": "goto_tiny", "task": "goto", "options": {"
 
 def test_maisac_learns_the_tiny_goto_scenario(tmp_path: Path) -> None:
     cfg = toy_config(
-        sac={"net_arch": [64, 64], "batch_size": 64, "buffer_size": 20_000, "learning_starts": 500, "backend": "batched"},
+        sac={
+            "net_arch": [64, 64],
+            "batch_size": 64,
+            "buffer_size": 20_000,
+            "learning_starts": 500,
+            "backend": "batched",
+        },
         checkpoint_every=100_000,
         stage=[{"name": "goto", "budget_steps": 8000, "env": ENV}],
     )
     train(cfg, tmp_path / "run", progress=False, tensorboard=False)
-    factory = make_env_factory(EnvSpec(kind="hptvsim", scenario="goto_tiny", task="goto", options={"extended_obs": True}))
+    factory = make_env_factory(
+        EnvSpec(kind="hptvsim", scenario="goto_tiny", task="goto", options={"extended_obs": True})
+    )
     trained = evaluate(factory, policies_from_specs(f"run:{tmp_path / 'run'}"), episodes=20)
     untrained = evaluate(factory, policies_from_specs("random"), episodes=20)
     assert trained.summary["success_rate"]["mean"] is not None
