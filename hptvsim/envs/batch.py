@@ -10,6 +10,7 @@ transitions are real.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any, Literal
 
 import gymnasium
@@ -46,6 +47,7 @@ class UPEGBatchEnv:
         extended_obs: bool = False,
         max_steps: int | None = None,
         seed: int | None = None,
+        vehicle_parameters: Mapping[str, Mapping[str, float]] | None = None,
         threads: int | None = None,
     ) -> None:
         self.core = GameCore(
@@ -54,6 +56,7 @@ class UPEGBatchEnv:
             backend="batched",
             task=task,
             sensor_fidelity=sensor_fidelity,
+            vehicle_parameters=vehicle_parameters,
             fence=fence,
             extended_obs=extended_obs,
             max_steps=max_steps,

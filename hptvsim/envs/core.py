@@ -27,6 +27,7 @@ leaving-the-site rule ends an episode there.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -245,6 +246,9 @@ class GameCore:
         max_steps: Override the scenario's step limit.
         seed: Seed of spawn positions and sensor noise (default: the scenario's).
         threads: Threads of the batched backend (``None``: up to 2).
+        vehicle_parameters: Per role (``"pursuer"``, ``"evader"``), vehicle parameters that
+            override the scenario's (e.g. ``{"pursuer": {"v_max": 3.5}}``, the paper's ablations
+            of Figs. 9-10); validated like the scenario's own.
     """
 
     def __init__(
@@ -260,6 +264,7 @@ class GameCore:
         max_steps: int | None = None,
         seed: int | None = None,
         threads: int | None = None,
+        vehicle_parameters: Mapping[str, Mapping[str, float]] | None = None,
     ) -> None:
         sc = load_scenario(scenario) if isinstance(scenario, str) else scenario
         if not isinstance(sc, Scenario):
@@ -284,6 +289,19 @@ class GameCore:
             if max_steps < 1:
                 raise ValueError(f"max_steps = {max_steps} is invalid; valid: an integer >= 1")
             overrides["simulation"] = {"max_steps": int(max_steps)}
+        if vehicle_parameters:
+            roles = {"pursuer", "evader"}
+            unknown = sorted(set(vehicle_parameters) - roles)
+            if unknown:
+                raise ValueError(f"vehicle_parameters keys must be roles (pursuer, evader); got {unknown}")
+            groups = overrides.setdefault("vehicles", [{} for _ in sc.vehicles])
+            for g, (group, entry) in enumerate(zip(sc.vehicles, groups, strict=True)):
+                extra = vehicle_parameters.get(group.role)
+                if extra:
+                    entry["parameters"] = {
+                        **dict(sc.vehicles[g].parameters),
+                        **{k: float(v) for k, v in extra.items()},
+                    }
         if overrides:
             sc = sc.with_overrides(overrides)
         if num_envs < 1:

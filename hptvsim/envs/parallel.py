@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+from collections.abc import Mapping
 from typing import Any, ClassVar, Literal
 
 import gymnasium
@@ -81,6 +82,7 @@ class UPEGParallelEnv(ParallelEnv[str, npt.NDArray[np.float32], npt.NDArray[np.f
         extended_obs: bool = False,
         max_steps: int | None = None,
         seed: int | None = None,
+        vehicle_parameters: Mapping[str, Mapping[str, float]] | None = None,
         render_mode: str | None = None,
     ) -> None:
         if render_mode not in (None, "rgb_array"):
@@ -91,6 +93,7 @@ class UPEGParallelEnv(ParallelEnv[str, npt.NDArray[np.float32], npt.NDArray[np.f
             backend=backend,
             task=task,
             sensor_fidelity=sensor_fidelity,
+            vehicle_parameters=vehicle_parameters,
             fence=fence,
             extended_obs=extended_obs,
             max_steps=max_steps,

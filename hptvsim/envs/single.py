@@ -136,6 +136,7 @@ class UPEGSingleAgentEnv(gymnasium.Env[F32, F32]):
         extended_obs: bool = False,
         max_steps: int | None = None,
         seed: int | None = None,
+        vehicle_parameters: Mapping[str, Mapping[str, float]] | None = None,
         render_mode: str | None = None,
     ) -> None:
         if render_mode not in (None, "rgb_array"):
@@ -146,6 +147,7 @@ class UPEGSingleAgentEnv(gymnasium.Env[F32, F32]):
             backend=backend,
             task=task,
             sensor_fidelity=sensor_fidelity,
+            vehicle_parameters=vehicle_parameters,
             fence=fence,
             extended_obs=extended_obs,
             max_steps=max_steps,
@@ -261,6 +263,7 @@ class UPEGVectorEnv(gymnasium.vector.VectorEnv[F32, F32, F32]):
         extended_obs: bool = False,
         max_steps: int | None = None,
         seed: int | None = None,
+        vehicle_parameters: Mapping[str, Mapping[str, float]] | None = None,
         threads: int | None = None,
     ) -> None:
         self.core = GameCore(
@@ -269,6 +272,7 @@ class UPEGVectorEnv(gymnasium.vector.VectorEnv[F32, F32, F32]):
             backend="batched",
             task=task,
             sensor_fidelity=sensor_fidelity,
+            vehicle_parameters=vehicle_parameters,
             fence=fence,
             extended_obs=extended_obs,
             max_steps=max_steps,

@@ -445,34 +445,41 @@ def _build(data: Mapping[str, Any], where: str) -> TrainConfig:
 def apply_overrides(data: dict[str, Any], overrides: Mapping[str, Any]) -> dict[str, Any]:
     """Set dotted keys in a raw config mapping (``"sac.learning_rate"``, ``"stage.0.env.task"``).
 
+    A ``*`` in place of a list index sets the key in every item (``"stage.*.env.options.x"``:
+    every stage), which is how one sweep setting reaches all stages of a curriculum.
+
     Raises:
         ConfigError: A path through a missing stage index or a non-table.
     """
     out: dict[str, Any] = _deep_copy(data)
     for key, value in overrides.items():
-        parts = key.split(".")
-        node: Any = out
-        for i, part in enumerate(parts[:-1]):
-            if isinstance(node, list):
-                try:
-                    node = node[int(part)]
-                except (ValueError, IndexError):
-                    raise ConfigError(
-                        f"override {key!r}: no item {part!r} in a list of {len(node)}"
-                    ) from None
-                continue
-            if not isinstance(node, dict):
-                raise ConfigError(f"override {key!r}: {'.'.join(parts[:i])} is not a table")
-            if part == "stage" and part in node and parts[i + 1] == "*":
-                raise ConfigError(f"override {key!r}: use a stage index, e.g. stage.0")
-            node = node.setdefault(part, {})
-        last = parts[-1]
-        if isinstance(node, list):
-            raise ConfigError(f"override {key!r}: cannot replace a whole list item")
-        if not isinstance(node, dict):
-            raise ConfigError(f"override {key!r}: {'.'.join(parts[:-1])} is not a table")
-        node[last] = value
+        _set_path(out, key.split("."), key, value)
     return out
+
+
+def _set_path(node: Any, parts: list[str], key: str, value: Any) -> None:
+    """Set ``parts`` below ``node`` (see :func:`apply_overrides`)."""
+    part = parts[0]
+    last = len(parts) == 1
+    if isinstance(node, list):
+        if last:
+            raise ConfigError(f"override {key!r}: cannot replace a whole list item")
+        if part == "*":
+            for item in node:
+                _set_path(item, parts[1:], key, value)
+            return
+        try:
+            item = node[int(part)]
+        except (ValueError, IndexError):
+            raise ConfigError(f"override {key!r}: no item {part!r} in a list of {len(node)}") from None
+        _set_path(item, parts[1:], key, value)
+        return
+    if not isinstance(node, dict):
+        raise ConfigError(f"override {key!r}: {part!r} is below something that is not a table")
+    if last:
+        node[part] = value
+        return
+    _set_path(node.setdefault(part, {}), parts[1:], key, value)
 
 
 def _deep_copy(value: Any) -> Any:

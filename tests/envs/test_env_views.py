@@ -89,3 +89,19 @@ def test_rgb_array_shows_the_vehicles() -> None:
     red = (frame[..., 0] > 180) & (frame[..., 1] < 80) & (frame[..., 2] < 80)
     blue = (frame[..., 2] > 150) & (frame[..., 0] < 60)
     assert red.sum() > 20 and blue.sum() > 5  # three pursuers, one evader
+
+
+def test_vehicle_parameters_per_role_change_limits_and_are_validated() -> None:
+    from hptvsim.world.scenario import ScenarioError
+
+    env = parallel_env("source", vehicle_parameters={"pursuer": {"v_max": 3.5}, "evader": {"omega_max": 4.0}})
+    assert float(env.action_space("pursuer_0").high[0]) == 3.5
+    assert float(env.action_space("evader_0").high[1]) == 4.0
+    env.reset(seed=0)
+    env.step({a: np.array([9.0, 9.0]) for a in env.agents})
+    np.testing.assert_array_equal(env.core.system.commands[0, :, 0], [3.5, 3.5, 3.5, 2.0])
+    np.testing.assert_array_equal(env.core.system.commands[0, :, 1], [1.5, 1.5, 1.5, 4.0])
+    with pytest.raises(ValueError, match="must be roles"):
+        parallel_env("source", vehicle_parameters={"uuv": {"v_max": 1.0}})
+    with pytest.raises(ScenarioError, match="v_max"):
+        parallel_env("source", vehicle_parameters={"pursuer": {"v_max": -1.0}})

@@ -101,3 +101,15 @@ def test_shipped_sweeps_make_valid_configs(path: Path) -> None:
 
     spec = load_sweep(path)  # builds every job's config: a bad grid key fails here
     assert len(plan_jobs(spec)) == len(spec.seeds) * int(np.prod([len(v) for v in spec.grid.values()]))
+
+
+def test_override_wildcard_sets_every_stage() -> None:
+    from hptvsim.train.config import apply_overrides
+
+    data = {"stage": [{"env": {"options": {"a": 1}}}, {"env": {}}]}
+    out = apply_overrides(data, {"stage.*.env.options.vehicle_parameters.pursuer.v_max": 3.25})
+    assert [s["env"]["options"]["vehicle_parameters"] for s in out["stage"]] == [
+        {"pursuer": {"v_max": 3.25}}
+    ] * 2
+    assert out["stage"][0]["env"]["options"]["a"] == 1
+    assert data == {"stage": [{"env": {"options": {"a": 1}}}, {"env": {}}]}  # the input is not changed
