@@ -20,12 +20,16 @@ $(STAMP): pyproject.toml
 
 setup: $(STAMP)
 
-# System packages the tests need (a clean CI machine has none of them).
+# System packages the tests need (a clean CI machine has none of them): Debian's Chromium for
+# the browser tests (never a browser downloaded by a test tool), gcc for the FMU and C kernels.
+SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 system-deps:
-	@true
+	@command -v chromium >/dev/null 2>&1 && command -v gcc >/dev/null 2>&1 || { \
+		$(SUDO) apt-get update -qq && \
+		DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq --no-install-recommends chromium gcc; }
 
 run: setup
-	$(BIN)/hptvsim demo
+	$(BIN)/python -m services
 
 lint: setup
 	$(BIN)/ruff check hptvsim services tests
@@ -42,13 +46,13 @@ test: lint typecheck unit
 test-slow: setup system-deps
 	$(BIN)/pytest -n $(WORKERS) -m slow
 
+BENCHES := dynamics cosim sensors world env train episode
+
 bench: setup
-	$(BIN)/hptvsim bench dynamics
-	$(BIN)/hptvsim bench sensors
+	@for b in $(BENCHES); do echo; $(BIN)/hptvsim bench $$b || exit 1; done
 
 bench-quick: setup
-	$(BIN)/hptvsim bench dynamics --quick
-	$(BIN)/hptvsim bench sensors --quick
+	@for b in $(BENCHES); do echo; $(BIN)/hptvsim bench $$b --quick || exit 1; done
 
 fmus: setup
 	$(BIN)/hptvsim fmu build

@@ -24,6 +24,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "hptvsim.train.cli",
     "hptvsim.sensors.cli",
     "hptvsim.envs.cli",
+    "hptvsim.viz.cli",
 )
 """Modules whose ``register(main, bench)`` adds commands (one line per package)."""
 

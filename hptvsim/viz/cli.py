@@ -1,0 +1,190 @@
+"""Commands of the visualisation layer.
+
+``hptvsim episode``, ``replay``, ``view``, ``viz schema``,
+``bench episode``.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import click
+
+__all__ = ["register"]
+
+
+def _repo_web() -> Path:
+    return Path(__file__).resolve().parents[2] / "web"
+
+
+def _policy_options(policy: tuple[str, ...]) -> dict[str, str]:
+    out: dict[str, str] = {}
+    for item in policy:
+        agent, sep, spec = item.partition("=")
+        if not sep or not agent or not spec:
+            raise click.BadParameter(f"{item!r} is not AGENT=SPEC (e.g. pursuer_0=scripted:pure_pursuit)")
+        out[agent] = spec
+    return out
+
+
+def register(main: click.Group, bench: click.Group) -> None:
+    """Add the visualisation commands to ``main`` and the episode benchmark to ``bench``."""
+
+    @main.group("viz")
+    def viz() -> None:
+        """The frame schema shared by recordings, the API, viser and the dashboard."""
+
+    @viz.command("schema")
+    @click.option(
+        "--out",
+        "out_dir",
+        type=click.Path(file_okay=False, path_type=Path),
+        default=None,
+        help="The web folder to write into (default: the checkout's web/).",
+    )
+    @click.option(
+        "--check", is_flag=True, help="Fail if the written files differ from what would be generated."
+    )
+    def viz_schema(out_dir: Path | None, check: bool) -> None:
+        """Write web/schema/frames.schema.json and web/js/frames.gen.js from hptvsim/viz/frames.py."""
+        from hptvsim.viz.frames import json_schema, schema_js
+
+        web = out_dir if out_dir is not None else _repo_web()
+        schema = json_schema()
+        files = {
+            web / "schema" / "frames.schema.json": json.dumps(schema, indent=2) + "\n",
+            web / "js" / "frames.gen.js": schema_js(schema),
+        }
+        stale = []
+        for path, text in files.items():
+            if check:
+                if not path.is_file() or path.read_text() != text:
+                    stale.append(str(path))
+                continue
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_text(text)
+            click.echo(f"wrote {path}")
+        if stale:
+            click.echo(f"out of date: {', '.join(stale)} (run `hptvsim viz schema`)", err=True)
+            sys.exit(1)
+
+    @main.command("episode")
+    @click.option(
+        "--scenario", default="target", show_default=True, help="Shipped scenario name or TOML path."
+    )
+    @click.option(
+        "--policy",
+        multiple=True,
+        metavar="AGENT=SPEC",
+        help="A zoo policy for an agent (repeatable); others follow their role's scripted default.",
+    )
+    @click.option("--seed", type=int, default=None, help="Episode seed (default: the scenario's).")
+    @click.option("--max-steps", type=int, default=None, help="Step limit (default: the scenario's).")
+    @click.option("--sensor-fidelity", type=click.Choice(["geometric", "signal"]), default=None)
+    @click.option("--backend", type=click.Choice(["batched", "fmu"]), default="batched", show_default=True)
+    @click.option(
+        "--record",
+        "record",
+        type=click.Path(dir_okay=False, path_type=Path),
+        default=None,
+        help="Write the rerun recording here (.rrd).",
+    )
+    @click.option(
+        "--json",
+        "json_out",
+        type=click.Path(dir_okay=False, path_type=Path),
+        default=None,
+        help="Write the summary, static part and trajectories here as JSON.",
+    )
+    def episode_cmd(
+        scenario: str,
+        policy: tuple[str, ...],
+        seed: int | None,
+        max_steps: int | None,
+        sensor_fidelity: str | None,
+        backend: str,
+        record: Path | None,
+        json_out: Path | None,
+    ) -> None:
+        """Run one episode, print its outcome and metrics, optionally record it."""
+        from hptvsim.viz.episode import run_episode
+
+        result = run_episode(
+            scenario,
+            _policy_options(policy),
+            seed=seed,
+            max_steps=max_steps,
+            sensor_fidelity=sensor_fidelity,  # type: ignore[arg-type]  # click.Choice checked it
+            backend=backend,  # type: ignore[arg-type]  # click.Choice checked it
+            recording_path=record,
+            progress=True,
+            allow_paths=True,
+        )
+        s = result.summary
+        click.echo(
+            f"{result.static.scenario}: {s.outcome} after {s.steps} steps ({s.sim_time:.1f} s simulated, "
+            f"{s.wall_time:.2f} s wall)"
+        )
+        click.echo(json.dumps(s.to_dict()["metrics"], indent=2))
+        if record is not None:
+            click.echo(f"recording: {record.resolve()}  (open it with `hptvsim replay {record}`)")
+        if json_out is not None:
+            json_out.parent.mkdir(parents=True, exist_ok=True)
+            json_out.write_text(json.dumps(result.to_dict()))
+            click.echo(f"episode JSON: {json_out.resolve()}")
+
+    @main.command("replay")
+    @click.argument("file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+    @click.option("--web", is_flag=True, help="Serve the rerun web viewer (offline, from the pip install).")
+    @click.option("--port", type=int, default=9090, show_default=True, help="Web viewer port (--web).")
+    @click.option("--grpc-port", type=int, default=9876, show_default=True, help="Data port (--web).")
+    @click.option("--no-browser", is_flag=True, help="Do not open a browser (--web).")
+    def replay(file: Path, web: bool, port: int, grpc_port: int, no_browser: bool) -> None:
+        """Open a recording (.rrd) in the rerun viewer (the native one, or --web)."""
+        from hptvsim.viz.replay import replay_native, replay_web
+
+        if web:
+            replay_web(file, web_port=port, grpc_port=grpc_port, open_browser=not no_browser)
+        else:
+            replay_native(file)
+
+    @main.command("view")
+    @click.option("--scenario", default="target", show_default=True, help="Shipped scenario name.")
+    @click.option(
+        "--policy", multiple=True, metavar="AGENT=SPEC", help="A zoo policy for an agent (repeatable)."
+    )
+    @click.option("--seed", type=int, default=0, show_default=True)
+    @click.option("--host", default="127.0.0.1", show_default=True)
+    @click.option("--port", type=int, default=8080, show_default=True)
+    @click.option("--speed", type=float, default=4.0, show_default=True, help="x real time.")
+    def view(scenario: str, policy: tuple[str, ...], seed: int, host: str, port: int, speed: float) -> None:
+        """Live 3D view (viser) of episodes, with play/pause, speed, reset and pickers."""
+        import time
+
+        from hptvsim.viz.viser_view import LiveView
+
+        live = LiveView(
+            host=host, port=port, scenario=scenario, policies=_policy_options(policy), seed=seed, speed=speed
+        )
+        live.start()
+        click.echo(f"viser view: http://{host}:{live.port}  (Ctrl-C to stop)")
+        try:
+            while True:
+                time.sleep(1.0)
+        except KeyboardInterrupt:
+            pass
+        finally:
+            live.stop()
+
+    @bench.command("episode")
+    @click.option("--quick", is_flag=True, help="Seconds instead of a minute.")
+    @click.option("--scenario", default="target", show_default=True)
+    @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of a table.")
+    def bench_episode(quick: bool, scenario: str, as_json: bool) -> None:
+        """µs per episode step: bare GameCore, + frames, + rerun recording (ratios to the bare core)."""
+        from hptvsim.cli import emit
+        from hptvsim.viz.bench import bench_episode as run
+
+        emit(run(quick=quick, scenario=scenario), as_json)

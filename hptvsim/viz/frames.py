@@ -1,0 +1,945 @@
+"""The frame schema: the ONE description of an episode that every view of it shares.
+
+The rerun recording (:mod:`hptvsim.viz.recording`), the live viser view
+(:mod:`hptvsim.viz.viser_view`), the service's frames, streams and trajectories and the browser
+dashboard (``web/``) all read and write these types:
+
+* :class:`EpisodeStatic`: what does not change during an episode (scenario, site, terrain mesh,
+  obstacle map summary, agents and their sonars), sent once before the frames;
+* :class:`Frame`: one control step (time, every agent's pose, velocity, action, reward,
+  distance, sonar and end flags);
+* :class:`EpisodeSummary`: how the episode ended, with its metrics
+  (:class:`hptvsim.train.evaluate.EpisodeMetrics`, the evaluation's definitions);
+* :class:`Trajectories`: every step of every agent as columns (for JSON, CSV and Parquet).
+
+**Conventions.** Positions are North-East-Down (NED): ``x`` north [m], ``y`` east [m], ``z``
+down [m] (terrain vertices carry the seabed depth as ``z``; vehicles move in the plane
+``z = operating_depth``). Yaw ``psi`` [rad] is measured clockwise from north seen from above,
+wrapped to ``[-pi, pi)``; ``u, v`` [m/s] are surge and sway speed in the body frame and ``r``
+[rad/s] the yaw rate (Fossen's notation). Sonar beam ``k`` points along
+``(cos(psi + beam_angles[k]), sin(psi + beam_angles[k]))``. Times in seconds.
+
+**JSON.** Every type has ``to_dict()`` / ``from_dict()`` (plain JSON-ready data) and
+``to_json()`` / ``from_json()`` (text). Reading is strict: an unknown or missing key, or a value
+of the wrong type, raises :class:`FrameSchemaError` naming the path to it. The JSON Schema
+(draft 2020-12) of all types is generated from these dataclasses by :func:`json_schema`;
+``hptvsim viz schema`` writes it to ``web/schema/frames.schema.json`` and the dashboard's module
+``web/js/frames.gen.js``, and a test keeps both in sync with this file.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import re
+import sys
+import types
+import typing
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, ClassVar, Final, Literal, Self, TypeVar, get_args, get_origin, get_type_hints
+
+import numpy as np
+import numpy.typing as npt
+
+from hptvsim.train.evaluate import EpisodeMetrics
+
+__all__ = [
+    "SCHEMA_VERSION",
+    "AgentInfo",
+    "AgentState",
+    "AgentTrajectory",
+    "EpisodeMetrics",
+    "EpisodeStatic",
+    "EpisodeSummary",
+    "Frame",
+    "FrameOptions",
+    "FrameSchemaError",
+    "ObstacleSummary",
+    "SchemaObject",
+    "SiteInfo",
+    "TerrainMesh",
+    "Trajectories",
+    "agent_color",
+    "from_dict",
+    "json_schema",
+    "obstacle_summary",
+    "terrain_mesh",
+    "to_dict",
+]
+
+F64 = npt.NDArray[np.float64]
+
+SCHEMA_VERSION: Final = "hptvsim-frames/1"
+"""Version tag carried by :class:`EpisodeStatic`; bumped when a type changes incompatibly."""
+
+Outcome = Literal["captured", "collision", "out_of_site", "reached", "truncated", "cancelled", "running"]
+"""Why an episode ended (``running`` while it has not)."""
+
+
+class FrameSchemaError(ValueError):
+    """Data that does not follow the frame schema (the message names the path to the value)."""
+
+
+class SchemaObject:
+    """Base of the schema's dataclasses: strict JSON reading and writing."""
+
+    __slots__ = ()
+
+    def to_dict(self) -> dict[str, Any]:
+        """This object as plain JSON-ready data."""
+        out: dict[str, Any] = _encode(self)
+        return out
+
+    def to_json(self, *, indent: int | None = None) -> str:
+        """This object as JSON text (compact unless ``indent``)."""
+        seps = (",", ":") if indent is None else (",", ": ")
+        return json.dumps(_encode(self), indent=indent, allow_nan=False, separators=seps)
+
+    @classmethod
+    def from_dict(cls, data: Any) -> Self:
+        """Read an object of this type from plain data (strict; see the module docstring).
+
+        Raises:
+            FrameSchemaError: An unknown or missing key or a wrong type (the path is named).
+        """
+        return _decode_dataclass(cls, data, cls.__name__)
+
+    @classmethod
+    def from_json(cls, text: str | bytes) -> Self:
+        """Read an object of this type from JSON text (strict).
+
+        Raises:
+            FrameSchemaError: Not JSON, or not this type (the path is named).
+        """
+        try:
+            data = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise FrameSchemaError(f"{cls.__name__}: not valid JSON: {exc}") from None
+        return _decode_dataclass(cls, data, cls.__name__)
+
+
+# --- options ----------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, kw_only=True)
+class FrameOptions(SchemaObject):
+    """What frames carry beyond poses and scalars.
+
+    Attributes:
+        sonar_every: Steps between frames that carry sonar ranges and hit points (1: every
+            frame; 0: none). Other frames carry ``None`` there (the minimum range always).
+        hits: Whether sonar frames carry hit points (beams that returned an echo) besides ranges.
+        obs: Whether frames carry each agent's observation vector (Eq. 14; for remote stepping).
+        terrain_cells: Most terrain mesh cells along the site's longer side.
+        obstacle_cells: Most cells along the longer side of the obstacle map summary.
+    """
+
+    sonar_every: int = 1
+    hits: bool = True
+    obs: bool = False
+    terrain_cells: int = 96
+    obstacle_cells: int = 120
+
+    def __post_init__(self) -> None:
+        if self.sonar_every < 0:
+            raise ValueError(f"sonar_every = {self.sonar_every} is invalid; valid: an integer >= 0")
+        if self.terrain_cells < 1:
+            raise ValueError(f"terrain_cells = {self.terrain_cells} is invalid; valid: an integer >= 1")
+        if self.obstacle_cells < 1:
+            raise ValueError(f"obstacle_cells = {self.obstacle_cells} is invalid; valid: an integer >= 1")
+
+    def sonar_at(self, step: int) -> bool:
+        """Whether the frame of ``step`` carries sonar ranges."""
+        return self.sonar_every > 0 and step % self.sonar_every == 0
+
+
+# --- the static part --------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, kw_only=True)
+class SiteInfo(SchemaObject):
+    """The site.
+
+    Attributes:
+        size: ``(L_x, L_y)`` extent north x east [m].
+        origin: South-west corner ``(x, y)`` [m].
+        operating_depth: Depth of the plane the vehicles move in [m], positive down.
+    """
+
+    size: tuple[float, float]
+    origin: tuple[float, float]
+    operating_depth: float
+
+
+@dataclass(frozen=True, kw_only=True)
+class TerrainMesh(SchemaObject):
+    """The seabed as a triangle mesh on a regular vertex grid (decimated from the height map).
+
+    Attributes:
+        shape: ``(mx, my)`` vertices along north and east; vertex ``(i, j)`` has index ``i * my + j``.
+        vertices: ``(x, y, z)`` per vertex [m], NED: ``z`` is the seabed depth (positive down).
+        triangles: Vertex indices of each triangle (two per grid cell).
+        depth_range: Smallest and largest depth [m].
+    """
+
+    shape: tuple[int, int]
+    vertices: tuple[tuple[float, float, float], ...]
+    triangles: tuple[tuple[int, int, int], ...]
+    depth_range: tuple[float, float]
+
+    def arrays(self) -> tuple[F64, npt.NDArray[np.int64]]:
+        """``(V, 3)`` vertices and ``(T, 3)`` triangle indices as arrays."""
+        return np.asarray(self.vertices, dtype=np.float64).reshape(-1, 3), np.asarray(
+            self.triangles, dtype=np.int64
+        ).reshape(-1, 3)
+
+
+@dataclass(frozen=True, kw_only=True)
+class ObstacleSummary(SchemaObject):
+    """The obstacle map at the operating depth, coarsened for drawing.
+
+    Attributes:
+        resolution: Cell size of the simulation's obstacle map [m].
+        shape: ``(nx, ny)`` cells of the simulation's obstacle map.
+        occupied_fraction: Fraction of its cells that are solid.
+        fence: Whether the site's edge is a wall the sonar sees (not drawn in ``rows``).
+        extent: ``(x_min, x_max, y_min, y_max)`` [m] that ``rows`` cover.
+        coarse_resolution: Cell size of ``rows`` [m].
+        rows: One string per coarse row, south (small ``x``) first; character ``j`` (east) is
+            ``#`` where any fine cell in the coarse cell is solid, else ``.``.
+    """
+
+    resolution: float
+    shape: tuple[int, int]
+    occupied_fraction: float
+    fence: bool
+    extent: tuple[float, float, float, float]
+    coarse_resolution: float
+    rows: tuple[str, ...]
+
+
+@dataclass(frozen=True, kw_only=True)
+class AgentInfo(SchemaObject):
+    """One agent.
+
+    Attributes:
+        name: Agent name (``pursuer_0``, ``evader_0``, ...).
+        role: ``pursuer`` or ``evader``.
+        vehicle_type: ``work_class`` or ``spherical``.
+        policy: The policy that drives it (a zoo spec, or ``external`` when actions come from outside).
+        color: Display colour ``#rrggbb`` (the same in every view).
+        radius: Collision radius [m].
+        v_min: Smallest commanded surge speed [m/s] (Eq. 15).
+        v_max: Largest commanded surge speed [m/s] (Eq. 15).
+        omega_max: Largest commanded yaw rate [rad/s] (Eq. 15).
+        beam_angles: Sonar beam angles relative to the bow [rad], clockwise positive.
+        max_range: Sonar maximum range [m].
+        goal: Goto task: the goal point ``(x, y)`` [m], else None.
+        goal_radius: Goto task: distance within which the goal counts as reached [m], else None.
+    """
+
+    name: str
+    role: Literal["pursuer", "evader"]
+    vehicle_type: str
+    policy: str
+    color: str
+    radius: float
+    v_min: float
+    v_max: float
+    omega_max: float
+    beam_angles: tuple[float, ...]
+    max_range: float
+    goal: tuple[float, float] | None = None
+    goal_radius: float | None = None
+
+
+@dataclass(frozen=True, kw_only=True)
+class EpisodeStatic(SchemaObject):
+    """What does not change during an episode; sent once, before its frames.
+
+    Attributes:
+        schema: Schema version (:data:`SCHEMA_VERSION`).
+        scenario: Scenario name.
+        description: Scenario description.
+        task: ``pursuit`` or ``goto``.
+        seed: Seed of spawn poses, sensor noise and stochastic policies.
+        dt: Control step [s].
+        max_steps: Step limit of the episode.
+        backend: Simulation backend (``batched`` or ``fmu``).
+        sensor_fidelity: Sonar fidelity (``geometric`` or ``signal``).
+        capture_distance: Pursuit: a pursuer this close to an evader captures it [m].
+        safe_distance: Sonar returns closer than this are penalised (Eq. 17) [m].
+        site: The site.
+        terrain: The seabed mesh.
+        obstacles: The obstacle map summary.
+        agents: The agents, in the order of every frame's ``agents``.
+        options: What the frames carry.
+    """
+
+    schema: str = SCHEMA_VERSION
+    scenario: str
+    description: str
+    task: Literal["pursuit", "goto"]
+    seed: int
+    dt: float
+    max_steps: int
+    backend: str
+    sensor_fidelity: str
+    capture_distance: float
+    safe_distance: float
+    site: SiteInfo
+    terrain: TerrainMesh
+    obstacles: ObstacleSummary
+    agents: tuple[AgentInfo, ...]
+    options: FrameOptions
+
+    @property
+    def agent_names(self) -> tuple[str, ...]:
+        """Agent names in frame order."""
+        return tuple(a.name for a in self.agents)
+
+
+# --- per step ---------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, kw_only=True)
+class AgentState(SchemaObject):
+    """One agent after a step.
+
+    Attributes:
+        name: Agent name.
+        x: North position [m].
+        y: East position [m].
+        psi: Yaw [rad], clockwise from north, in ``[-pi, pi)``.
+        u: Surge speed [m/s].
+        v: Sway speed [m/s].
+        r: Yaw rate [rad/s].
+        action: The command applied during the step ``[v, omega]`` [m/s, rad/s] (Eq. 16,
+            clipped to Eq. 15's box; zero once the agent is done and in the reset frame).
+        reward: Reward of the step (Eq. 20).
+        episode_return: Sum of rewards so far.
+        distance: Distance to the target [m] (pursuer: the evader; evader: the nearest pursuer;
+            goto: the goal).
+        min_range: Smallest sonar range [m].
+        ranges: Sonar ranges per beam [m] (None in frames without sonar, see ``FrameOptions``).
+        hits: Points ``(x, y)`` [m] where beams returned an echo (None without sonar or hits).
+        obs: The observation vector (Eq. 14; None unless ``FrameOptions.obs``).
+        active: Whether the agent is still in the episode after this step.
+        terminated: The agent's episode ended by a task rule at this step.
+        truncated: The agent's episode hit the step limit at this step.
+        collision: The agent touches terrain or another vehicle.
+        out_of_site: The agent's centre left the site.
+        reached: Goto: the agent is within its goal's radius.
+    """
+
+    name: str
+    x: float
+    y: float
+    psi: float
+    u: float
+    v: float
+    r: float
+    action: tuple[float, float]
+    reward: float
+    episode_return: float
+    distance: float
+    min_range: float
+    ranges: tuple[float, ...] | None = None
+    hits: tuple[tuple[float, float], ...] | None = None
+    obs: tuple[float, ...] | None = None
+    active: bool = True
+    terminated: bool = False
+    truncated: bool = False
+    collision: bool = False
+    out_of_site: bool = False
+    reached: bool = False
+
+
+@dataclass(frozen=True, kw_only=True)
+class Frame(SchemaObject):
+    """The state of an episode after one control step (step 0: after reset).
+
+    Attributes:
+        step: Steps taken.
+        time: Simulated time [s] (``step * dt``).
+        agents: Every agent, in :attr:`EpisodeStatic.agents` order.
+        captured: Pursuit: a pursuer is within the capture distance of an evader.
+        truncated: The step limit was reached.
+        done: The episode is over after this step.
+        outcome: Why it ended (``running`` until it does).
+    """
+
+    step: int
+    time: float
+    agents: tuple[AgentState, ...]
+    captured: bool = False
+    truncated: bool = False
+    done: bool = False
+    outcome: Outcome = "running"
+
+    def agent(self, name: str) -> AgentState:
+        """The state of agent ``name``.
+
+        Raises:
+            KeyError: No such agent (the message lists the agents).
+        """
+        for a in self.agents:
+            if a.name == name:
+                return a
+        raise KeyError(f"no agent {name!r} in the frame; agents: {', '.join(a.name for a in self.agents)}")
+
+
+@dataclass(frozen=True, kw_only=True)
+class EpisodeSummary(SchemaObject):
+    """How an episode ended.
+
+    Attributes:
+        status: ``finished`` (ended by a task rule or the step limit) or ``cancelled``.
+        outcome: Why it ended.
+        steps: Steps taken.
+        sim_time: Simulated time [s].
+        wall_time: Wall-clock time the episode took [s].
+        metrics: The evaluation metrics of the episode.
+        recording: Path of its rerun recording, or None.
+    """
+
+    status: Literal["finished", "cancelled"]
+    outcome: Outcome
+    steps: int
+    sim_time: float
+    wall_time: float
+    metrics: EpisodeMetrics
+    recording: str | None = None
+
+
+# --- trajectories -----------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, kw_only=True)
+class AgentTrajectory(SchemaObject):
+    """One agent's values at every recorded step (same length as :attr:`Trajectories.step`).
+
+    Attributes:
+        name: Agent name.
+        x: North position [m].
+        y: East position [m].
+        psi: Yaw [rad].
+        u: Surge speed [m/s].
+        v: Sway speed [m/s].
+        r: Yaw rate [rad/s].
+        v_cmd: Commanded surge speed [m/s].
+        omega_cmd: Commanded yaw rate [rad/s].
+        reward: Reward of the step.
+        distance: Distance to the target [m].
+        min_range: Smallest sonar range [m].
+    """
+
+    name: str
+    x: tuple[float, ...]
+    y: tuple[float, ...]
+    psi: tuple[float, ...]
+    u: tuple[float, ...]
+    v: tuple[float, ...]
+    r: tuple[float, ...]
+    v_cmd: tuple[float, ...]
+    omega_cmd: tuple[float, ...]
+    reward: tuple[float, ...]
+    distance: tuple[float, ...]
+    min_range: tuple[float, ...]
+
+    COLUMNS: ClassVar[tuple[str, ...]] = (
+        "x",
+        "y",
+        "psi",
+        "u",
+        "v",
+        "r",
+        "v_cmd",
+        "omega_cmd",
+        "reward",
+        "distance",
+        "min_range",
+    )
+
+
+@dataclass(frozen=True, kw_only=True)
+class Trajectories(SchemaObject):
+    """Every agent's trajectory as columns.
+
+    Attributes:
+        step: Step of each row (0: after reset).
+        time: Simulated time of each row [s].
+        agents: One trajectory per agent, in :attr:`EpisodeStatic.agents` order.
+    """
+
+    step: tuple[int, ...]
+    time: tuple[float, ...]
+    agents: tuple[AgentTrajectory, ...]
+
+    @classmethod
+    def from_frames(cls, frames: Sequence[Frame]) -> Trajectories:
+        """Collect the trajectories of a sequence of frames."""
+        if not frames:
+            return cls(step=(), time=(), agents=())
+        names = [a.name for a in frames[0].agents]
+        cols: dict[str, dict[str, list[float]]] = {n: {c: [] for c in AgentTrajectory.COLUMNS} for n in names}
+        for f in frames:
+            for a in f.agents:
+                c = cols[a.name]
+                c["x"].append(a.x)
+                c["y"].append(a.y)
+                c["psi"].append(a.psi)
+                c["u"].append(a.u)
+                c["v"].append(a.v)
+                c["r"].append(a.r)
+                c["v_cmd"].append(a.action[0])
+                c["omega_cmd"].append(a.action[1])
+                c["reward"].append(a.reward)
+                c["distance"].append(a.distance)
+                c["min_range"].append(a.min_range)
+        return cls(
+            step=tuple(f.step for f in frames),
+            time=tuple(f.time for f in frames),
+            agents=tuple(AgentTrajectory(name=n, **{k: tuple(v) for k, v in cols[n].items()}) for n in names),
+        )
+
+    def agent(self, name: str) -> AgentTrajectory:
+        """The trajectory of agent ``name``.
+
+        Raises:
+            KeyError: No such agent (the message lists the agents).
+        """
+        for a in self.agents:
+            if a.name == name:
+                return a
+        raise KeyError(f"no agent {name!r}; agents: {', '.join(a.name for a in self.agents)}")
+
+    def columns(self) -> dict[str, npt.NDArray[Any]]:
+        """Long table (one row per step and agent) as columns: ``step, time, agent, x, y, ...``.
+
+        What the service writes as CSV or Parquet.
+        """
+        n_rows = len(self.step) * len(self.agents)
+        out: dict[str, npt.NDArray[Any]] = {
+            "step": np.tile(np.asarray(self.step, dtype=np.int64), len(self.agents)),
+            "time": np.tile(np.asarray(self.time, dtype=np.float64), len(self.agents)),
+            "agent": np.repeat(np.asarray([a.name for a in self.agents], dtype=object), len(self.step)),
+        }
+        for c in AgentTrajectory.COLUMNS:
+            out[c] = (
+                np.concatenate([np.asarray(getattr(a, c), dtype=np.float64) for a in self.agents])
+                if self.agents
+                else np.zeros(0)
+            )
+        assert all(v.shape == (n_rows,) for v in out.values())
+        return out
+
+
+# --- building the static part -----------------------------------------------------------------
+
+_PURSUER_COLORS: Final = ("#d62728", "#ff7f0e", "#e377c2", "#8c564b", "#bcbd22", "#9467bd")
+_EVADER_COLORS: Final = ("#1f77b4", "#17becf", "#2ca02c", "#7f7f7f")
+
+
+def agent_color(role: str, index: int) -> str:
+    """Display colour of the ``index``-th agent of ``role`` (reds for pursuers, blues for evaders)."""
+    palette = _PURSUER_COLORS if role == "pursuer" else _EVADER_COLORS
+    return palette[index % len(palette)]
+
+
+def terrain_mesh(
+    depth: npt.ArrayLike, extent: tuple[float, float, float, float], *, max_cells: int = 96
+) -> TerrainMesh:
+    """Decimate a depth grid to a regular triangle mesh of at most ``max_cells`` cells per side.
+
+    Args:
+        depth: ``(nx, ny)`` seabed depth [m] at cell centres, ``i`` north, ``j`` east.
+        extent: ``(x_min, x_max, y_min, y_max)`` [m] the grid's cells cover.
+        max_cells: Most mesh cells along the longer side.
+
+    Vertices sit on a regular grid spanning ``extent``; each takes the depth of the nearest
+    grid cell, rounded to centimetres.
+    """
+    d = np.asarray(depth, dtype=np.float64)
+    if d.ndim != 2 or min(d.shape) < 1:
+        raise ValueError(f"depth must be a 2-D grid, got shape {d.shape}")
+    x_min, x_max, y_min, y_max = (float(v) for v in extent)
+    lx, ly = x_max - x_min, y_max - y_min
+    step = max(lx, ly) / max_cells
+    mx = max(2, min(d.shape[0] + 1, math.ceil(lx / step - 1e-9) + 1))
+    my = max(2, min(d.shape[1] + 1, math.ceil(ly / step - 1e-9) + 1))
+    xs = np.linspace(x_min, x_max, mx)
+    ys = np.linspace(y_min, y_max, my)
+    ci = np.clip(((xs - x_min) / lx * d.shape[0]).astype(np.intp), 0, d.shape[0] - 1)
+    cj = np.clip(((ys - y_min) / ly * d.shape[1]).astype(np.intp), 0, d.shape[1] - 1)
+    z = np.round(d[np.ix_(ci, cj)], 2)
+    gx, gy = np.meshgrid(np.round(xs, 3), np.round(ys, 3), indexing="ij")
+    verts = np.stack([gx.ravel(), gy.ravel(), z.ravel()], axis=1)
+    i, j = np.meshgrid(np.arange(mx - 1), np.arange(my - 1), indexing="ij")
+    v00 = (i * my + j).ravel()
+    v01, v10 = v00 + 1, v00 + my
+    v11 = v10 + 1
+    tris = np.concatenate([np.stack([v00, v10, v11], 1), np.stack([v00, v11, v01], 1)], axis=0)
+    return TerrainMesh(
+        shape=(mx, my),
+        vertices=tuple(map(tuple, verts.tolist())),
+        triangles=tuple(map(tuple, tris.tolist())),
+        depth_range=(float(z.min()), float(z.max())),
+    )
+
+
+def obstacle_summary(
+    occupied: npt.ArrayLike,
+    *,
+    resolution: float,
+    extent: tuple[float, float, float, float],
+    fence: bool,
+    max_cells: int = 120,
+) -> ObstacleSummary:
+    """Coarsen an obstacle map to at most ``max_cells`` cells along its longer side.
+
+    A coarse cell is solid when any of its fine cells is.
+    """
+    occ = np.asarray(occupied, dtype=bool)
+    nx, ny = occ.shape
+    f = max(1, math.ceil(max(nx, ny) / max_cells))
+    cx, cy = math.ceil(nx / f), math.ceil(ny / f)
+    padded = np.zeros((cx * f, cy * f), dtype=bool)
+    padded[:nx, :ny] = occ
+    coarse = np.asarray(padded.reshape(cx, f, cy, f).any(axis=(1, 3)), dtype=bool)
+    rows = tuple("".join("#" if c else "." for c in row) for row in coarse.tolist())
+    x_min, _, y_min, _ = extent
+    return ObstacleSummary(
+        resolution=float(resolution),
+        shape=(int(nx), int(ny)),
+        occupied_fraction=float(occ.mean()),
+        fence=bool(fence),
+        extent=(
+            float(x_min),
+            float(x_min + cx * f * resolution),
+            float(y_min),
+            float(y_min + cy * f * resolution),
+        ),
+        coarse_resolution=float(f * resolution),
+        rows=rows,
+    )
+
+
+# --- the codec --------------------------------------------------------------------------------
+
+T = TypeVar("T")
+
+SCHEMA_TYPES: Final[tuple[type[Any], ...]] = (
+    EpisodeStatic,
+    Frame,
+    EpisodeSummary,
+    Trajectories,
+)
+"""The top-level types of the schema (everything else is reachable from them)."""
+
+
+def _hints(cls: type[Any]) -> dict[str, Any]:
+    cache = _HINTS.get(cls)
+    if cache is None:
+        module = sys.modules[cls.__module__]
+        cache = get_type_hints(cls, vars(module))
+        _HINTS[cls] = cache
+    return cache
+
+
+_HINTS: dict[type[Any], dict[str, Any]] = {}
+
+
+def _fields(cls: type[Any]) -> tuple[dataclasses.Field[Any], ...]:
+    return tuple(f for f in dataclasses.fields(cls) if f.init)
+
+
+_NUMBER: Final = (float, int)
+
+
+def _encode(value: Any) -> Any:
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {f.name: _encode(getattr(value, f.name)) for f in _fields(type(value))}
+    if isinstance(value, (tuple, list)):
+        if value and type(value[0]) in _NUMBER and all(type(v) in _NUMBER for v in value):
+            # fast path: arrays of numbers (ranges, vertices, columns)
+            if not all(math.isfinite(v) for v in value):
+                raise FrameSchemaError(f"non-finite number in {list(value)[:8]}... cannot be written as JSON")
+            return list(value)
+        return [_encode(v) for v in value]
+    if isinstance(value, dict):
+        return {str(k): _encode(v) for k, v in value.items()}
+    if isinstance(value, float) and not math.isfinite(value):
+        raise FrameSchemaError(f"non-finite number {value} cannot be written as JSON")
+    if isinstance(value, np.generic):
+        return _encode(value.item())
+    return value
+
+
+def to_dict(obj: Any) -> Any:
+    """Plain JSON-ready data (dicts, lists, numbers, strings) of a schema object."""
+    return _encode(obj)
+
+
+def _is_union(tp: Any) -> bool:
+    return get_origin(tp) in (typing.Union, types.UnionType)
+
+
+def _decode(tp: Any, data: Any, path: str) -> Any:
+    origin = get_origin(tp)
+    if tp is Any:
+        return data
+    if _is_union(tp):
+        args = get_args(tp)
+        if data is None and type(None) in args:
+            return None
+        errors = []
+        for arg in args:
+            if arg is type(None):
+                continue
+            try:
+                return _decode(arg, data, path)
+            except FrameSchemaError as exc:
+                errors.append(str(exc))
+        raise FrameSchemaError(errors[0] if len(errors) == 1 else f"{path}: no variant matches ({errors})")
+    if origin is Literal:
+        allowed = get_args(tp)
+        if data not in allowed:
+            raise FrameSchemaError(f"{path}: {data!r} is invalid; valid: {', '.join(map(repr, allowed))}")
+        return data
+    if tp is bool:
+        if not isinstance(data, bool):
+            raise FrameSchemaError(f"{path}: expected true or false, got {data!r}")
+        return data
+    if tp is int:
+        if isinstance(data, bool) or not isinstance(data, int):
+            raise FrameSchemaError(f"{path}: expected an integer, got {data!r}")
+        return data
+    if tp is float:
+        if isinstance(data, bool) or not isinstance(data, (int, float)):
+            raise FrameSchemaError(f"{path}: expected a number, got {data!r}")
+        return float(data)
+    if tp is str:
+        if not isinstance(data, str):
+            raise FrameSchemaError(f"{path}: expected a string, got {data!r}")
+        return data
+    if origin is tuple:
+        if not isinstance(data, (list, tuple)):
+            raise FrameSchemaError(f"{path}: expected an array, got {type(data).__name__}")
+        args = get_args(tp)
+        if len(args) == 2 and args[1] is Ellipsis:
+            item = args[0]
+            if item is float and all(type(v) is float or type(v) is int for v in data):
+                return tuple(float(v) for v in data)  # fast path for long number arrays
+            return tuple(_decode(item, v, f"{path}[{k}]") for k, v in enumerate(data))
+        if len(data) != len(args):
+            raise FrameSchemaError(f"{path}: expected {len(args)} items, got {len(data)}")
+        return tuple(_decode(a, v, f"{path}[{k}]") for k, (a, v) in enumerate(zip(args, data, strict=True)))
+    if origin is dict:
+        key_t, val_t = get_args(tp)
+        if not isinstance(data, Mapping):
+            raise FrameSchemaError(f"{path}: expected an object, got {type(data).__name__}")
+        return {_decode(key_t, k, path): _decode(val_t, v, f"{path}.{k}") for k, v in data.items()}
+    if isinstance(tp, type) and dataclasses.is_dataclass(tp):
+        return _decode_dataclass(tp, data, path)
+    raise TypeError(f"{path}: the frame codec has no rule for {tp!r}")  # pragma: no cover - schema bug
+
+
+def _decode_dataclass(cls: type[T], data: Any, path: str) -> T:
+    if not isinstance(data, Mapping):
+        raise FrameSchemaError(f"{path}: expected an object ({cls.__name__}), got {type(data).__name__}")
+    hints = _hints(cls)
+    fields = _fields(cls)
+    names = {f.name for f in fields}
+    unknown = [k for k in data if k not in names]
+    if unknown:
+        raise FrameSchemaError(
+            f"{path}.{unknown[0]}: unknown key in {cls.__name__}; valid: {', '.join(sorted(names))}"
+        )
+    kwargs: dict[str, Any] = {}
+    for f in fields:
+        if f.name not in data:
+            if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
+                raise FrameSchemaError(f"{path}.{f.name}: missing ({cls.__name__} needs it)")
+            continue
+        kwargs[f.name] = _decode(hints[f.name], data[f.name], f"{path}.{f.name}")
+    try:
+        return cls(**kwargs)
+    except (TypeError, ValueError) as exc:
+        raise FrameSchemaError(f"{path}: {exc}") from None
+
+
+def from_dict(cls: type[T], data: Any) -> T:
+    """Read a schema object of type ``cls`` from plain data (strict; see the module docstring)."""
+    return _decode_dataclass(cls, data, cls.__name__)
+
+
+def _schema_classes() -> list[type[Any]]:
+    """Every dataclass reachable from :data:`SCHEMA_TYPES` (in a stable order)."""
+    seen: list[type[Any]] = []
+
+    def visit(tp: Any) -> None:
+        if isinstance(tp, type) and dataclasses.is_dataclass(tp):
+            if tp in seen:
+                return
+            seen.append(tp)
+            for f in _fields(tp):
+                visit(_hints(tp)[f.name])
+            return
+        for arg in get_args(tp):
+            visit(arg)
+
+    for t in SCHEMA_TYPES:
+        visit(t)
+    return seen
+
+
+# --- JSON Schema ------------------------------------------------------------------------------
+
+
+def _attribute_docs(cls: type[Any]) -> dict[str, str]:
+    """Descriptions of fields from the ``Attributes:`` section of a Google-style docstring."""
+    doc = cls.__doc__ or ""
+    out: dict[str, str] = {}
+    m = re.search(r"^\s*Attributes:\s*$", doc, flags=re.M)
+    if not m:
+        return out
+    current: str | None = None
+    for line in doc[m.end() :].splitlines():
+        if not line.strip():
+            continue
+        indent = len(line) - len(line.lstrip())
+        hit = re.match(r"\s*(\w+):\s*(.*)", line)
+        if hit and indent <= 8 and hit.group(1) in {f.name for f in _fields(cls)}:
+            current = hit.group(1)
+            out[current] = hit.group(2).strip()
+        elif current is not None and indent > 8:
+            out[current] += " " + line.strip()
+        elif indent <= 4:
+            break
+    return {k: re.sub(r":\w+:`~?([^`]+)`", r"`\1`", v).replace("``", "`") for k, v in out.items()}
+
+
+def _type_schema(tp: Any) -> dict[str, Any]:
+    origin = get_origin(tp)
+    if _is_union(tp):
+        parts = [_type_schema(a) for a in get_args(tp)]
+        return {"anyOf": parts}
+    if tp is type(None):
+        return {"type": "null"}
+    if origin is Literal:
+        return {"enum": list(get_args(tp))}
+    if tp is bool:
+        return {"type": "boolean"}
+    if tp is int:
+        return {"type": "integer"}
+    if tp is float:
+        return {"type": "number"}
+    if tp is str:
+        return {"type": "string"}
+    if origin is tuple:
+        args = get_args(tp)
+        if len(args) == 2 and args[1] is Ellipsis:
+            return {"type": "array", "items": _type_schema(args[0])}
+        return {
+            "type": "array",
+            "prefixItems": [_type_schema(a) for a in args],
+            "minItems": len(args),
+            "maxItems": len(args),
+        }
+    if origin is dict:
+        return {"type": "object", "additionalProperties": _type_schema(get_args(tp)[1])}
+    if isinstance(tp, type) and dataclasses.is_dataclass(tp):
+        return {"$ref": f"#/$defs/{tp.__name__}"}
+    raise TypeError(f"no JSON Schema rule for {tp!r}")  # pragma: no cover - schema bug
+
+
+def _class_schema(cls: type[Any]) -> dict[str, Any]:
+    docs = _attribute_docs(cls)
+    props: dict[str, Any] = {}
+    required: list[str] = []
+    hints = _hints(cls)
+    for f in _fields(cls):
+        s = _type_schema(hints[f.name])
+        if f.name in docs:
+            s = {"description": docs[f.name], **s}
+        if f.default is not dataclasses.MISSING:
+            s["default"] = _encode(f.default)
+        else:
+            required.append(f.name)
+        props[f.name] = s
+    summary = (cls.__doc__ or cls.__name__).strip().splitlines()[0]
+    return {
+        "type": "object",
+        "description": summary,
+        "properties": props,
+        "required": required,
+        "additionalProperties": False,
+    }
+
+
+def json_schema() -> dict[str, Any]:
+    """The JSON Schema (draft 2020-12) of every frame-schema type, generated from the dataclasses.
+
+    The top level accepts any of :data:`SCHEMA_TYPES`; each type is in ``$defs`` by its class name.
+    """
+    defs = {cls.__name__: _class_schema(cls) for cls in (*_schema_classes(), FrameOptions)}
+    return {
+        "$schema": "https://json-schema.org/draft/2020-12/schema",
+        "$id": "https://hptvsim.dev/schema/frames.schema.json",
+        "title": "hptvsim frames",
+        "description": (
+            f"{SCHEMA_VERSION}: the episode frame schema shared by recordings, the API, viser and the "
+            "dashboard. Generated from hptvsim/viz/frames.py by `hptvsim viz schema`; do not edit."
+        ),
+        "version": SCHEMA_VERSION,
+        "anyOf": [{"$ref": f"#/$defs/{t.__name__}"} for t in SCHEMA_TYPES],
+        "$defs": defs,
+    }
+
+
+def schema_js(schema: Mapping[str, Any] | None = None) -> str:
+    """The dashboard's generated ES module: the schema object and JSDoc typedefs of every type."""
+    s = dict(schema if schema is not None else json_schema())
+    lines = [
+        "// Generated from hptvsim/viz/frames.py by `hptvsim viz schema`; do not edit.",
+        "// A test (tests/viz/test_frames.py) fails when this file is out of date.",
+        "",
+    ]
+
+    def js_type(p: Mapping[str, Any]) -> str:
+        if "$ref" in p:
+            return str(p["$ref"]).rsplit("/", 1)[-1]
+        if "anyOf" in p:
+            return "(" + " | ".join(js_type(x) for x in p["anyOf"]) + ")"
+        if "enum" in p:
+            return "(" + " | ".join(json.dumps(v) for v in p["enum"]) + ")"
+        t = p.get("type")
+        if t == "array":
+            if "prefixItems" in p:
+                return "[" + ", ".join(js_type(x) for x in p["prefixItems"]) + "]"
+            return f"Array<{js_type(p['items'])}>"
+        if t == "object":
+            return f"Object<string, {js_type(p['additionalProperties'])}>"
+        return {"integer": "number", "number": "number", "string": "string", "boolean": "boolean"}.get(
+            str(t), "null"
+        )
+
+    for name, d in s["$defs"].items():
+        lines.append("/**")
+        lines.append(f" * {d['description']}")
+        lines.append(f" * @typedef {{Object}} {name}")
+        for prop, p in d["properties"].items():
+            opt = prop not in d["required"]
+            label = f"[{prop}]" if opt else prop
+            desc = str(p.get("description", "")).replace("*/", "* /")
+            lines.append(f" * @property {{{js_type(p)}}} {label} {desc}".rstrip())
+        lines.append(" */")
+        lines.append("")
+    lines.append(f"export const SCHEMA_VERSION = {json.dumps(s['version'])};")
+    lines.append("")
+    lines.append(f"export const FRAME_SCHEMA = {json.dumps(s, indent=2)};")
+    lines.append("")
+    return "\n".join(lines)

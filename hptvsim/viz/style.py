@@ -1,0 +1,36 @@
+"""Colours shared by the views (rerun, viser; the dashboard's JavaScript mirrors ``depth_color``)."""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+__all__ = ["DEPTH_STOPS", "depth_colors", "hex_rgb"]
+
+DEPTH_STOPS: tuple[tuple[float, tuple[int, int, int]], ...] = (
+    (0.0, (222, 196, 140)),  # shallow: sand
+    (0.35, (120, 170, 150)),
+    (0.7, (50, 110, 150)),
+    (1.0, (20, 40, 90)),  # deep: dark blue
+)
+"""Colour ramp of seabed depth, from the shallowest (0) to the deepest (1) depth of a scene."""
+
+
+def depth_colors(depth: npt.ArrayLike, depth_range: tuple[float, float]) -> npt.NDArray[np.uint8]:
+    """RGB colours ``(..., 3)`` of seabed depths [m] on :data:`DEPTH_STOPS`."""
+    d = np.asarray(depth, dtype=np.float64)
+    lo, hi = depth_range
+    t = np.clip((d - lo) / (hi - lo), 0.0, 1.0) if hi > lo else np.full(d.shape, 0.5)
+    xs = np.array([s[0] for s in DEPTH_STOPS])
+    cols = np.array([s[1] for s in DEPTH_STOPS], dtype=np.float64)
+    out = np.stack([np.interp(t, xs, cols[:, c]) for c in range(3)], axis=-1)
+    result: npt.NDArray[np.uint8] = np.round(out).astype(np.uint8)
+    return result
+
+
+def hex_rgb(color: str) -> tuple[int, int, int]:
+    """``"#rrggbb"`` as an ``(r, g, b)`` tuple of 0-255 integers."""
+    c = color.lstrip("#")
+    if len(c) != 6:
+        raise ValueError(f"colour {color!r} is not of the form #rrggbb")
+    return int(c[0:2], 16), int(c[2:4], 16), int(c[4:6], 16)

@@ -1,0 +1,720 @@
+"""The live 3D view (viser): terrain, vehicles, trails, sonar fans and hits, with GUI controls.
+
+:class:`SceneRenderer` draws the frame schema into a viser scene: :meth:`~SceneRenderer.set_static`
+builds the terrain mesh (banded by depth), the site's edge, goals and the vehicles; and
+:meth:`~SceneRenderer.show` moves them to a :class:`~hptvsim.viz.frames.Frame`.
+
+:class:`LiveView` is the viser server with a simulation thread: it runs episodes with an
+:class:`~hptvsim.viz.episode.EpisodeStepper` and offers play/pause, speed, reset, scenario,
+policy and seed pickers, sonar and trail switches, progress and a distance plot. Viser runs its
+own HTTP and WebSocket server on a background thread (it cannot be mounted in FastAPI): a
+service starts a :class:`LiveView` on its own port in its lifespan, and may show a service
+episode's frames in it with :meth:`LiveView.follow` and :meth:`LiveView.push` (which pause the
+view's own simulation until :meth:`LiveView.unfollow`).
+
+**Frames.** The scene is NED as everywhere in hptvsim (``x`` north, ``y`` east, ``z`` down);
+viser's up direction is set to ``-z``. Vehicles move in the plane ``z = operating_depth``; the
+camera's far plane is raised so a 400 m site is not clipped.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections import deque
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from hptvsim.viz.frames import EpisodeStatic, Frame
+from hptvsim.viz.style import depth_colors, hex_rgb
+
+__all__ = ["LiveView", "SceneRenderer", "start_live_view"]
+
+F64 = npt.NDArray[np.float64]
+
+CAMERA_FAR = 20_000.0  # m, far plane (viser's default of 1000 clips a 400 m site seen from afar)
+DEPTH_BANDS = 8  # terrain meshes, one colour each (viser's simple meshes have one colour)
+MIN_DISPLAY_RADIUS = 2.5  # m, vehicles drawn at least this large (the evader's radius is 0.2 m)
+
+
+def _quat_wxyz(psi: float) -> tuple[float, float, float, float]:
+    """Rotation by ``psi`` about ``z`` (down), as viser's ``wxyz``."""
+    return (math.cos(0.5 * psi), 0.0, 0.0, math.sin(0.5 * psi))
+
+
+class SceneRenderer:
+    """Draws episodes of the frame schema into a viser scene.
+
+    Args:
+        server: The viser server.
+        trail_steps: Positions kept per vehicle trail.
+    """
+
+    def __init__(self, server: Any, *, trail_steps: int = 400) -> None:
+        self.server = server
+        self.trail_steps = trail_steps
+        self.static: EpisodeStatic | None = None
+        self.show_sonar = True
+        self.show_trails = True
+        self._handles: list[Any] = []
+        self._agents: dict[str, dict[str, Any]] = {}
+        self._trails: dict[str, deque[tuple[float, float]]] = {}
+        self._sonar: Any = None
+        self._hits: Any = None
+        self._colors: dict[str, tuple[int, int, int]] = {}
+
+    def clear(self) -> None:
+        """Remove everything drawn."""
+        for h in self._handles:
+            h.remove()
+        self._handles = []
+        self._agents = {}
+        self._trails = {}
+        self._sonar = None
+        self._hits = None
+
+    def set_static(self, static: EpisodeStatic) -> None:
+        """Draw a new episode's static part (terrain, site, goals, vehicles) and aim the camera."""
+        scene = self.server.scene
+        self.clear()
+        self.static = static
+        scene.set_up_direction("-z")
+        z = static.site.operating_depth
+        verts, tris = static.terrain.arrays()
+        lo, hi = static.terrain.depth_range
+        tri_depth = verts[tris, 2].mean(axis=1)
+        edges = np.linspace(lo, hi, DEPTH_BANDS + 1) if hi > lo else np.array([lo - 1.0, hi + 1.0])
+        band = np.clip(np.searchsorted(edges, tri_depth, side="right") - 1, 0, len(edges) - 2)
+        for k in range(len(edges) - 1):
+            sel = tris[band == k]
+            if not len(sel):
+                continue
+            mid = 0.5 * (edges[k] + edges[k + 1])
+            color = tuple(int(c) for c in depth_colors(np.array([mid]), (lo, hi))[0])
+            self._handles.append(
+                scene.add_mesh_simple(
+                    f"/terrain/band_{k}",
+                    verts.astype(np.float32),
+                    sel.astype(np.uint32),
+                    color=color,
+                    flat_shading=False,
+                    side="double",
+                )
+            )
+        x0, y0 = static.site.origin
+        lx, ly = static.site.size
+        corners = np.array([(x0, y0), (x0 + lx, y0), (x0 + lx, y0 + ly), (x0, y0 + ly)], dtype=np.float64)
+        seg = np.stack([corners, np.roll(corners, -1, axis=0)], axis=1)
+        seg3 = np.concatenate([seg, np.full((4, 2, 1), z)], axis=2)
+        self._handles.append(
+            scene.add_line_segments("/site", seg3.astype(np.float32), (230, 230, 230), thickness=0.6)
+        )
+        for a in static.agents:
+            rgb = hex_rgb(a.color)
+            self._colors[a.name] = rgb
+            frame = scene.add_frame(f"/agents/{a.name}", show_axes=False, position=(0.0, 0.0, z))
+            r = max(a.radius, MIN_DISPLAY_RADIUS)
+            scene.add_icosphere(f"/agents/{a.name}/body", radius=r, color=rgb, subdivisions=2)
+            scene.add_line_segments(
+                f"/agents/{a.name}/heading",
+                np.array([[[0.0, 0.0, 0.0], [3.0 * r, 0.0, 0.0]]], dtype=np.float32),
+                rgb,
+                thickness=0.8,
+            )
+            scene.add_label(f"/agents/{a.name}/label", a.name, position=(0.0, 0.0, -2.0 * r))
+            trail = scene.add_line_segments(
+                f"/trails/{a.name}", np.zeros((1, 2, 3), dtype=np.float32), rgb, thickness=0.5
+            )
+            self._agents[a.name] = {"frame": frame, "trail": trail}
+            self._handles += [frame, trail]  # removing a frame removes its children
+            self._trails[a.name] = deque(maxlen=self.trail_steps)
+            if a.goal is not None:
+                self._handles.append(
+                    scene.add_icosphere(
+                        f"/goals/{a.name}",
+                        radius=float(a.goal_radius or 1.0),
+                        color=rgb,
+                        opacity=0.35,
+                        position=(a.goal[0], a.goal[1], z),
+                    )
+                )
+        self._sonar = scene.add_line_segments(
+            "/sonar/rays", np.zeros((1, 2, 3), dtype=np.float32), (255, 255, 120), thickness=0.15
+        )
+        self._hits = scene.add_point_cloud(
+            "/sonar/hits",
+            np.zeros((1, 3), dtype=np.float32),
+            (255, 60, 60),
+            point_size=1.5,
+            point_shape="circle",
+        )
+        self._handles += [self._sonar, self._hits]
+        cx, cy = x0 + 0.5 * lx, y0 + 0.5 * ly
+        span = max(lx, ly)
+        cam = self.server.initial_camera
+        cam.far = CAMERA_FAR
+        cam.near = 0.5
+        cam.look_at = (cx, cy, z)
+        cam.position = (cx - 0.75 * span, cy - 0.15 * span, z - 0.8 * span)
+        cam.up = (0.0, 0.0, -1.0)
+        for client in self.server.get_clients().values():
+            self.aim(client)
+
+    def aim(self, client: Any) -> None:
+        """Point a client's camera at the site (as the initial camera)."""
+        cam = self.server.initial_camera
+        with client.atomic():
+            client.camera.far = CAMERA_FAR
+            client.camera.near = 0.5
+            client.camera.up_direction = (0.0, 0.0, -1.0)
+            client.camera.position = tuple(cam.position)
+            client.camera.look_at = tuple(cam.look_at)
+
+    def show(self, frame: Frame) -> None:
+        """Move the scene to ``frame`` (vehicles, trails, sonar rays and hits)."""
+        st = self.static
+        if st is None:
+            raise RuntimeError("set_static() first: the renderer has no episode")
+        z = st.site.operating_depth
+        rays: list[F64] = []
+        ray_cols: list[F64] = []
+        hits: list[F64] = []
+        if frame.step == 0:
+            for t in self._trails.values():
+                t.clear()
+        with self.server.atomic():
+            for a, info in zip(frame.agents, st.agents, strict=True):
+                h = self._agents[a.name]
+                h["frame"].position = (a.x, a.y, z)
+                h["frame"].wxyz = _quat_wxyz(a.psi)
+                trail = self._trails[a.name]
+                trail.append((a.x, a.y))
+                if self.show_trails and len(trail) >= 2:
+                    p = np.asarray(trail, dtype=np.float32)
+                    seg = np.stack([p[:-1], p[1:]], axis=1)
+                    h["trail"].points = np.concatenate(
+                        [seg, np.full((len(seg), 2, 1), z, np.float32)], axis=2
+                    )
+                    h["trail"].visible = True
+                else:
+                    h["trail"].visible = False
+                if a.ranges is not None:
+                    ang = a.psi + np.asarray(info.beam_angles)
+                    rng = np.asarray(a.ranges)
+                    ends = np.stack(
+                        [a.x + rng * np.cos(ang), a.y + rng * np.sin(ang), np.full_like(rng, z)], 1
+                    )
+                    start = np.broadcast_to(np.array([a.x, a.y, z]), ends.shape)
+                    rays.append(np.stack([start, ends], axis=1))
+                    ray_cols.append(
+                        np.broadcast_to(np.array(self._colors[a.name], dtype=np.float64), (len(rng), 2, 3))
+                    )
+                if a.hits:
+                    hp = np.asarray(a.hits, dtype=np.float64).reshape(-1, 2)
+                    hits.append(np.column_stack([hp, np.full(len(hp), z)]))
+            if self._sonar is not None and rays:
+                self._sonar.points = np.concatenate(rays).astype(np.float32)
+                self._sonar.colors = np.concatenate(ray_cols).astype(np.uint8)
+            if self._sonar is not None:
+                self._sonar.visible = self.show_sonar and bool(rays)
+            if self._hits is not None:
+                if hits:
+                    pts = np.concatenate(hits).astype(np.float32)
+                    self._hits.points = pts
+                    self._hits.colors = np.broadcast_to(np.array([255, 60, 60], np.uint8), pts.shape).copy()
+                self._hits.visible = self.show_sonar and bool(hits)
+
+
+@dataclass
+class _Request:
+    kind: str
+    value: Any = None
+
+
+class LiveView:
+    """A viser server that runs and shows episodes live, with GUI controls.
+
+    Args:
+        host: Address to listen on.
+        port: Port (0: a free one; see :attr:`port`).
+        scenario: Shipped scenario to start with.
+        policies: ``{agent: zoo spec}`` to start with (others: their role's scripted default).
+        seed: Seed of the first episode (each automatic restart adds 1).
+        speed: Simulated seconds per wall-clock second.
+        max_steps: Step limit (default: the scenario's).
+        autoplay: Start playing at once.
+        loop: Start a new episode (next seed) a moment after one ends.
+        render_hz: Most scene updates per second.
+        run_without_clients: Simulate while no browser is connected (off: an idle view costs
+            nothing, which matters inside a service process).
+        unfollow_delay: Seconds a followed episode's last frame stays before the view goes back
+            to its own episodes.
+
+    Thread safety: GUI callbacks and the public methods only post requests; the simulation
+    thread applies them between steps.
+    """
+
+    def __init__(
+        self,
+        *,
+        host: str = "127.0.0.1",
+        port: int = 8080,
+        scenario: str = "target",
+        policies: Mapping[str, str] | None = None,
+        seed: int = 0,
+        speed: float = 4.0,
+        max_steps: int | None = None,
+        autoplay: bool = True,
+        loop: bool = True,
+        render_hz: float = 20.0,
+        run_without_clients: bool = False,
+        unfollow_delay: float = 3.0,
+    ) -> None:
+        if speed <= 0 or not math.isfinite(speed):
+            raise ValueError(f"speed = {speed} is invalid; valid: a positive number (x real time)")
+        self.host = host
+        self._port = port
+        self.scenario = scenario
+        self.policies = dict(policies or {})
+        self.seed = seed
+        self.speed = float(speed)
+        self.max_steps = max_steps
+        self.playing = autoplay
+        self.loop = loop
+        self.render_hz = render_hz
+        self.run_without_clients = run_without_clients
+        self.unfollow_delay = unfollow_delay
+        self.server: Any = None
+        self.renderer: SceneRenderer | None = None
+        self.stepper: Any = None
+        self.following: str | None = None
+        self.episodes = 0
+        self.last_frame: Frame | None = None
+        self._requests: deque[_Request] = deque()
+        self._stop = threading.Event()
+        self._wake = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._lock = threading.Lock()
+        self._gui: dict[str, Any] = {}
+        self._distance: deque[tuple[float, float]] = deque(maxlen=2000)
+        self.follow_service = True
+        self.error: str | None = None
+        self._service_episode: str | None = None
+        self._unfollow_at: float | None = None
+
+    # -- life cycle ------------------------------------------------------------------------------
+
+    @property
+    def port(self) -> int:
+        """The port the viser server listens on."""
+        return int(self.server.get_port()) if self.server is not None else self._port
+
+    @property
+    def url(self) -> str:
+        """The view's address."""
+        host = "127.0.0.1" if self.host in ("0.0.0.0", "") else self.host
+        return f"http://{host}:{self.port}"
+
+    def start(self) -> LiveView:
+        """Start the viser server, the first episode and the simulation thread."""
+        import viser
+
+        from hptvsim.viz.episode import EpisodeStepper
+
+        self.server = viser.ViserServer(
+            host=self.host, port=self._port, label="hptvsim live view", verbose=False
+        )
+        self.server.gui.configure_theme(dark_mode=True, control_width="medium", show_logo=False)
+        self.renderer = SceneRenderer(self.server)
+        self.stepper = EpisodeStepper(self.scenario, self.policies, seed=self.seed, max_steps=self.max_steps)
+        self.renderer.set_static(self.stepper.static)
+        self.renderer.show(self.stepper.frame)
+        self.last_frame = self.stepper.frame
+        self._build_gui()
+
+        self.server.on_client_connect(self._on_connect)
+
+        self._thread = threading.Thread(target=self._run, name="hptvsim-live-view", daemon=True)
+        self._thread.start()
+        return self
+
+    def _on_connect(self, client: Any) -> None:
+        if self.renderer is not None and self.renderer.static is not None:
+            self.renderer.aim(client)
+
+    def stop(self) -> None:
+        """Stop the simulation thread and the server."""
+        self._stop.set()
+        self._wake.set()
+        if self._thread is not None:
+            self._thread.join(timeout=10.0)
+        if self.stepper is not None:
+            self.stepper.close()
+            self.stepper = None
+        if self.server is not None:
+            self.server.stop()
+            self.server = None
+
+    def __enter__(self) -> LiveView:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    # -- requests (thread-safe) ------------------------------------------------------------------
+
+    def _post(self, kind: str, value: Any = None) -> None:
+        self._requests.append(_Request(kind, value))
+        self._wake.set()
+
+    def play(self) -> None:
+        """Resume the simulation."""
+        self._post("play")
+
+    def pause(self) -> None:
+        """Pause the simulation."""
+        self._post("pause")
+
+    def reset(
+        self,
+        *,
+        scenario: str | None = None,
+        policies: Mapping[str, str] | None = None,
+        seed: int | None = None,
+    ) -> None:
+        """Start a new episode (optionally of another scenario, policies or seed)."""
+        self._post("reset", {"scenario": scenario, "policies": policies, "seed": seed})
+
+    def set_speed(self, speed: float) -> None:
+        """Simulated seconds per wall-clock second."""
+        if speed <= 0 or not math.isfinite(speed):
+            raise ValueError(f"speed = {speed} is invalid; valid: a positive number")
+        self._post("speed", float(speed))
+
+    def follow(self, label: str, static: EpisodeStatic | Mapping[str, Any]) -> None:
+        """Show frames pushed from elsewhere (e.g. a service episode) instead of the view's own.
+
+        Args:
+            label: Names the followed episode (its id).
+            static: Its static part (or the static part's plain data).
+        """
+        self._post("follow", (label, static))
+
+    def on_event(self, event: Mapping[str, Any]) -> None:
+        """Follow a service's episode events ``{"type", "episode", "data"}`` (frame schema data).
+
+        The view follows the first episode whose ``static`` event arrives while it follows
+        none, shows its ``frame`` events, and goes back to its own episodes a moment after the
+        followed one's final ``status``. Cheap: decoding happens on the view's thread.
+        """
+        if not self.follow_service:
+            return
+        kind, episode, data = event.get("type"), event.get("episode"), event.get("data")
+        if kind == "static" and isinstance(data, Mapping) and self._service_episode is None:
+            self._service_episode = str(episode)
+            self.follow(str(episode), data)
+        elif kind == "frame" and episode == self._service_episode and isinstance(data, Mapping):
+            self.push(data, label=str(episode))
+        elif (
+            kind == "status"
+            and episode == self._service_episode
+            and isinstance(data, Mapping)
+            and data.get("final")
+        ):
+            self._service_episode = None
+            self._post("unfollow_later")
+
+    def push(self, frame: Frame | Mapping[str, Any], label: str | None = None) -> None:
+        """Show a frame (or its plain data) of the followed episode ``label`` (call from any thread)."""
+        # only the newest pending frame matters: drop older ones still queued
+        self._requests.append(_Request("frame", (label, frame)))
+        self._wake.set()
+
+    def unfollow(self) -> None:
+        """Go back to the view's own episodes."""
+        self._post("unfollow")
+
+    def wait_for(self, predicate: Any, timeout: float = 30.0) -> bool:
+        """Wait until ``predicate(self)`` holds (for tests and scripts)."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            if predicate(self):
+                return True
+            time.sleep(0.02)
+        return False
+
+    # -- the simulation thread -------------------------------------------------------------------
+
+    def _apply(self, req: _Request) -> None:
+        from hptvsim.viz.episode import EpisodeStepper
+
+        assert self.renderer is not None
+        if req.kind == "play":
+            self.playing = True
+        elif req.kind == "pause":
+            self.playing = False
+        elif req.kind == "speed":
+            self.speed = req.value
+        elif req.kind == "reset":
+            v = req.value
+            scenario = v["scenario"] or self.scenario
+            policies = dict(v["policies"]) if v["policies"] is not None else self.policies
+            seed = v["seed"] if v["seed"] is not None else self.seed
+            try:
+                new = EpisodeStepper(scenario, policies, seed=seed, max_steps=self.max_steps)
+            except (ValueError, KeyError) as exc:
+                self.error = f"cannot start: {exc}"
+                self._status(f"**{self.error}**")
+                return
+            self.error = None
+            old, self.stepper = self.stepper, new
+            if old is not None:
+                old.close()
+            self.scenario, self.policies, self.seed = scenario, policies, seed
+            self.following = None
+            self._distance.clear()
+            self.renderer.set_static(new.static)
+            self._show(new.frame)
+        elif req.kind == "follow":
+            label, static = req.value
+            if isinstance(static, Mapping):
+                static = EpisodeStatic.from_dict(static)
+            self.following = label
+            self._distance.clear()
+            self.renderer.set_static(static)
+        elif req.kind == "frame":
+            label, frame = req.value
+            if self.following is not None and label in (None, self.following):
+                if isinstance(frame, Mapping):
+                    frame = Frame.from_dict(frame)
+                self._show(frame)
+        elif req.kind == "unfollow_later":
+            self._unfollow_at = time.monotonic() + self.unfollow_delay
+        elif req.kind == "unfollow" and self.following is not None:
+            if self.stepper is not None:
+                self._distance.clear()
+                self.renderer.set_static(self.stepper.static)
+            self.following = None  # after the scene is back: readers see both or neither
+            if self.stepper is not None:
+                self._show(self.stepper.frame)
+
+    def _drain(self) -> None:
+        """Apply pending requests; of consecutive pushed frames only the newest is drawn."""
+        pending: _Request | None = None
+        while self._requests:
+            req = self._requests.popleft()
+            if req.kind == "frame":
+                pending = req
+                continue
+            if pending is not None:
+                self._apply(pending)
+                pending = None
+            self._apply(req)
+        if pending is not None:
+            self._apply(pending)
+
+    def _show(self, frame: Frame) -> None:
+        assert self.renderer is not None
+        self.renderer.show(frame)
+        self.last_frame = frame
+        static = self.renderer.static
+        pursuers = (
+            [a.distance for a, i in zip(frame.agents, static.agents, strict=True) if i.role == "pursuer"]
+            if static is not None
+            else []
+        )
+        if pursuers:
+            self._distance.append((frame.time, min(pursuers)))
+        self._update_gui(frame)
+
+    def _run(self) -> None:
+        last_render = 0.0
+        done_at: float | None = None
+        next_step = time.perf_counter()
+        while not self._stop.is_set():
+            self._drain()
+            if self._unfollow_at is not None and time.monotonic() >= self._unfollow_at:
+                self._unfollow_at = None
+                if self._service_episode is None:
+                    self._apply(_Request("unfollow"))
+            st = self.stepper
+            idle = not self.run_without_clients and not self.server.get_clients()
+            if self.following is not None or st is None or not self.playing or idle:
+                self._wake.wait(0.1)
+                self._wake.clear()
+                continue
+            now = time.perf_counter()
+            if st.done:
+                if done_at is None:
+                    done_at = now
+                    self._show(st.frame)
+                if self.loop and now - done_at > 2.0:
+                    done_at = None
+                    self.seed += 1
+                    self.episodes += 1
+                    self._post("reset", {"scenario": None, "policies": None, "seed": self.seed})
+                self._wake.wait(0.1)
+                self._wake.clear()
+                continue
+            if now < next_step:
+                self._wake.wait(min(0.05, next_step - now))
+                self._wake.clear()
+                continue
+            frame = st.step()
+            next_step = max(next_step + st.static.dt / self.speed, now - 0.5)
+            if frame.done or now - last_render >= 1.0 / self.render_hz:
+                last_render = now
+                self._show(frame)
+            else:
+                self.last_frame = frame
+
+    # -- GUI -------------------------------------------------------------------------------------
+
+    def _build_gui(self) -> None:
+        from hptvsim.world.scenario import list_scenarios
+        from hptvsim.zoo import list_policies
+
+        gui = self.server.gui
+        g = self._gui
+        with gui.add_folder("Episode"):
+            g["status"] = gui.add_markdown("starting ...")
+            g["progress"] = gui.add_progress_bar(0.0)
+            g["play"] = gui.add_button("Pause" if self.playing else "Play", icon=None)
+            g["speed"] = gui.add_slider(
+                "Speed (x real time)", min=0.5, max=64.0, step=0.5, initial_value=self.speed
+            )
+            g["reset"] = gui.add_button("Reset")
+        with gui.add_folder("Setup"):
+            g["scenario"] = gui.add_dropdown("Scenario", list_scenarios(), initial_value=self.scenario)
+            pols = list_policies()
+            pursuer = [p.name for p in pols if "pursuer" in p.roles]
+            evader = [p.name for p in pols if "evader" in p.roles]
+            g["pursuer_policy"] = gui.add_dropdown(
+                "Pursuers' policy",
+                pursuer,
+                initial_value=self.policies.get("pursuer_0", "scripted:pure_pursuit"),
+            )
+            g["evader_policy"] = gui.add_dropdown(
+                "Evaders' policy",
+                evader,
+                initial_value=self.policies.get("evader_0", "scripted:potential_field"),
+            )
+            g["seed"] = gui.add_number("Seed", initial_value=self.seed, min=0, step=1)
+            g["apply"] = gui.add_button("Start episode")
+        with gui.add_folder("Display"):
+            g["follow"] = gui.add_checkbox("Follow the service's episodes", self.follow_service)
+            g["sonar"] = gui.add_checkbox("Sonar rays and hits", True)
+            g["trails"] = gui.add_checkbox("Trails", True)
+            g["loop"] = gui.add_checkbox("Next episode when one ends", self.loop)
+        with gui.add_folder("Distance"):
+            g["plot"] = None
+            try:
+                import viser.uplot as uplot
+
+                g["plot"] = gui.add_uplot(
+                    data=(np.zeros(1), np.zeros(1)),
+                    series=(
+                        uplot.Series(label="time [s]"),
+                        uplot.Series(label="pursuer-evader [m]", stroke="#ff7f0e", width=2),
+                    ),
+                    aspect=2.0,
+                )
+            except Exception:  # pragma: no cover - a viser without uplot still shows everything else
+                g["plot"] = None
+
+        g["play"].on_click(self._on_play)
+        g["speed"].on_update(lambda _: self.set_speed(float(g["speed"].value)))
+        g["reset"].on_click(lambda _: self.reset())
+        g["apply"].on_click(self._on_apply)
+        g["sonar"].on_update(lambda _: self._display(sonar=bool(g["sonar"].value)))
+        g["trails"].on_update(lambda _: self._display(trails=bool(g["trails"].value)))
+        g["follow"].on_update(self._on_follow)
+        g["loop"].on_update(lambda _: setattr(self, "loop", bool(g["loop"].value)))
+
+    def _on_play(self, _: Any) -> None:
+        if self.playing:
+            self.pause()
+            self._gui["play"].label = "Play"
+        else:
+            self.play()
+            self._gui["play"].label = "Pause"
+
+    def _on_apply(self, _: Any) -> None:
+        g = self._gui
+        self.reset(
+            scenario=str(g["scenario"].value), policies=self._gui_policies(), seed=int(g["seed"].value)
+        )
+
+    def _on_follow(self, _: Any) -> None:
+        self.follow_service = bool(self._gui["follow"].value)
+        if not self.follow_service:
+            self._service_episode = None
+            self.unfollow()
+
+    def _display(self, *, sonar: bool | None = None, trails: bool | None = None) -> None:
+        if self.renderer is not None:
+            if sonar is not None:
+                self.renderer.show_sonar = sonar
+            if trails is not None:
+                self.renderer.show_trails = trails
+
+    def _gui_policies(self) -> dict[str, str]:
+        from hptvsim.world.scenario import load_scenario
+
+        names = load_scenario(str(self._gui["scenario"].value)).agent_names
+        pp, ep = str(self._gui["pursuer_policy"].value), str(self._gui["evader_policy"].value)
+        return {n: pp if n.startswith("pursuer") else ep for n in names}
+
+    def _status(self, text: str) -> None:
+        if "status" in self._gui:
+            self._gui["status"].content = text
+
+    def _update_gui(self, frame: Frame) -> None:
+        st = self.renderer.static if self.renderer is not None else None
+        if st is None or not self._gui:
+            return
+        source = f"following **{self.following}**" if self.following else f"seed {st.seed}"
+        dist = [a.distance for a, i in zip(frame.agents, st.agents, strict=True) if i.role == "pursuer"]
+        lines = [
+            f"**{st.scenario}** ({st.task}), {source}",
+            f"step {frame.step} / {st.max_steps}, t = {frame.time:.1f} s",
+        ]
+        if dist:
+            lines.append(f"closest pursuer: {min(dist):.1f} m (capture at {st.capture_distance:g} m)")
+        if frame.done:
+            lines.append(f"**ended: {frame.outcome}**")
+        if self.error:
+            lines.append(f"**{self.error}**")
+        self._status("  \n".join(lines))
+        self._gui["progress"].value = 100.0 * frame.step / max(1, st.max_steps)
+        plot = self._gui.get("plot")
+        if plot is not None and len(self._distance) >= 2:
+            arr = np.asarray(self._distance, dtype=np.float64)
+            plot.data = (arr[:, 0], arr[:, 1])
+
+
+def start_live_view(
+    *, host: str = "127.0.0.1", port: int = 8080, service: Any = None, **kwargs: Any
+) -> LiveView:
+    """Start a :class:`LiveView` (what a service calls in its lifespan).
+
+    Args:
+        host: Address to listen on.
+        port: Port (0: a free one).
+        service: Optional object with ``hub.listeners`` (a list of callables receiving episode
+            events ``{"type", "episode", "data"}``); the view then follows the service's episodes.
+        **kwargs: Passed to :class:`LiveView` (scenario, policies, seed, speed, ...).
+
+    Returns:
+        The started view (``.url``, ``.port``, ``.stop()``).
+    """
+    view = LiveView(host=host, port=port, **kwargs).start()
+    listeners = getattr(getattr(service, "hub", None), "listeners", None)
+    if isinstance(listeners, list):
+        listeners.append(view.on_event)
+    return view

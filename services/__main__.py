@@ -1,0 +1,192 @@
+"""``python -m services``: start the digital-twin service (API, dashboard, live view) and print its URLs.
+
+Settings come from the environment (:mod:`services.settings`); the options here override them.
+With nothing configured it runs on localhost with SQLite in ``hptvsim-out/service``, the shipped
+scenarios and policies, and local worker processes.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import socket
+import sys
+from pathlib import Path
+
+import click
+from fastapi import FastAPI
+
+from services.settings import Settings, SettingsError
+
+
+def _port_free(host: str, port: int) -> bool:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            sock.bind((host, port))
+        except OSError:
+            return False
+    return True
+
+
+@click.group(invoke_without_command=True, context_settings={"help_option_names": ["-h", "--help"]})
+@click.option("--host", default=None, help="Interface to bind (HPTVSIM_HOST; default 127.0.0.1).")
+@click.option(
+    "--port", type=int, default=None, help="API port (HPTVSIM_PORT; default 8000; 0 picks a free one)."
+)
+@click.option(
+    "--viser-port", type=int, default=None, help="Live view port (HPTVSIM_VISER_PORT; default 8080)."
+)
+@click.option("--no-viser", is_flag=True, help="Do not start the viser live view.")
+@click.option("--workers", type=int, default=None, help="Worker processes (HPTVSIM_WORKERS).")
+@click.option(
+    "--data-dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="Recordings, trajectories and the SQLite file (HPTVSIM_DATA_DIR).",
+)
+@click.option("--log-level", default="info", type=click.Choice(["debug", "info", "warning", "error"]))
+@click.pass_context
+def main(
+    ctx: click.Context,
+    host: str | None,
+    port: int | None,
+    viser_port: int | None,
+    no_viser: bool,
+    workers: int | None,
+    data_dir: Path | None,
+    log_level: str,
+) -> None:
+    """Start the hptvsim service: REST API, dashboard and viser live view (and print their URLs).
+
+    ``python -m services viser --api URL`` runs the live view alone, following a service's episodes.
+    """
+    if ctx.invoked_subcommand is not None:
+        return
+    import uvicorn
+
+    os.environ.setdefault("OMP_NUM_THREADS", "1")  # worker processes inherit it
+    try:
+        settings = Settings.from_env()
+        changes: dict[str, object] = {}
+        if host is not None:
+            changes["host"] = host
+        if port is not None:
+            changes["port"] = port
+        if viser_port is not None:
+            changes["viser_port"] = viser_port
+        if no_viser:
+            changes["viser"] = False
+        if workers is not None:
+            changes["workers"] = workers
+        if data_dir is not None:
+            changes["data_dir"] = data_dir
+        if settings.port == 0 or changes.get("port") == 0:
+            with socket.socket() as sock:
+                sock.bind((str(changes.get("host", settings.host)), 0))
+                changes["port"] = sock.getsockname()[1]
+        settings = settings.replace(**changes)
+    except SettingsError as exc:
+        raise click.ClickException(str(exc)) from None
+    if not _port_free(settings.host, settings.port):
+        raise click.ClickException(
+            f"port {settings.port} on {settings.host} is in use; pick another with --port or HPTVSIM_PORT"
+        )
+    if settings.viser and settings.viser_port and not _port_free(settings.host, settings.viser_port):
+        raise click.ClickException(
+            f"the live view's port {settings.viser_port} is in use; "
+            "pick another with --viser-port, or --no-viser"
+        )
+    logging.basicConfig(level=log_level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    from services.app import create_app
+
+    shown = "localhost" if settings.host in ("127.0.0.1", "0.0.0.0", "::") else settings.host
+    base = f"http://{shown}:{settings.port}"
+
+    def ready(app: FastAPI) -> None:
+        lines = [
+            "hptvsim service",
+            f"  dashboard:  {base}/",
+            f"  API docs:   {base}/docs",
+            f"  API:        {base}/api/v1",
+            f"  health:     {base}/healthz",
+        ]
+        viser_url = getattr(app.state, "viser_url", None)
+        if viser_url:
+            lines.append(f"  live view:  {viser_url}")
+        lines.append(f"  database:   {settings.db_url}")
+        lines.append(f"  data:       {settings.data_dir.resolve()}")
+        click.echo("\n".join(lines))
+        sys.stdout.flush()
+
+    app = create_app(settings, on_ready=ready)
+    uvicorn.run(
+        app,
+        host=settings.host,
+        port=settings.port,
+        log_level=log_level,
+        lifespan="on",
+        ws_max_size=settings.max_body_bytes,  # WebSocket messages obey the body limit too
+        timeout_graceful_shutdown=5,  # event streams never end by themselves
+    )
+
+
+@main.command("viser")
+@click.option(
+    "--api", "api_url", default="http://127.0.0.1:8000", show_default=True, help="The service to follow."
+)
+@click.option("--host", default="127.0.0.1", show_default=True, help="Interface the live view binds.")
+@click.option("--port", type=int, default=8080, show_default=True, help="Live view port.")
+@click.option(
+    "--api-key", envvar="HPTVSIM_API_KEY", default=None, help="The service's API key (HPTVSIM_API_KEY)."
+)
+def viser_command(api_url: str, host: str, port: int, api_key: str | None) -> None:
+    """Run the viser live view on its own, showing the episodes a service runs (its event stream)."""
+    import time
+
+    import httpx
+
+    from hptvsim.client import Client, ServiceError
+    from hptvsim.viz.viser_view import start_live_view
+
+    view = start_live_view(host=host, port=port)
+    click.echo(f"hptvsim live view: {view.url} (following {api_url})")
+    sys.stdout.flush()
+    client = Client(api_url, api_key=api_key or None)
+    try:
+        while True:
+            try:
+                for event in client.events(None, frames=True, static=True):
+                    data = dict(event["data"])
+                    episode = data.pop("episode", None)
+                    view.on_event({"type": event["event"], "episode": episode, "data": data})
+            except (httpx.HTTPError, ServiceError) as exc:
+                click.echo(f"the service's event stream is unavailable ({exc}); retrying", err=True)
+                time.sleep(2.0)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        client.close()
+        view.stop()
+
+
+@main.command("bench")
+@click.option("--quick", is_flag=True, help="Seconds instead of a minute.")
+@click.option("--url", default=None, help="Measure a running service (default: start one).")
+@click.option("--workers", type=int, default=2, show_default=True, help="Workers of the service it starts.")
+@click.option("--json", "as_json", is_flag=True, help="Print JSON instead of tables.")
+def bench_command(quick: bool, url: str | None, workers: int, as_json: bool) -> None:
+    """What the service costs: RemoteEnv steps and API episode runs against in-process floors."""
+    import json
+
+    from services.bench import bench_service
+
+    results = bench_service(url=url, quick=quick, workers=workers)
+    if as_json:
+        click.echo(json.dumps([r.as_dict() for r in results], indent=2))
+    else:
+        click.echo("\n\n".join(r.table() for r in results))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,219 @@
+"""Service settings: one frozen dataclass, read from ``HPTVSIM_*`` environment variables.
+
+Every setting has an embedded default, so ``python -m services`` runs with nothing configured
+(SQLite in the data folder, the shipped scenarios and policies, a local worker pool). A bad value
+is an error naming the variable and what would be valid.
+
+=============================  ===========================================================
+variable                       meaning (default)
+=============================  ===========================================================
+``HPTVSIM_HOST``               interface the API binds (``127.0.0.1``)
+``HPTVSIM_PORT``               API port (``8000``)
+``HPTVSIM_DATA_DIR``           recordings, trajectories, the SQLite file (``hptvsim-out/service``)
+``DATABASE_URL``               SQLAlchemy URL, e.g. ``postgresql+psycopg://...``
+                               (``sqlite:///<data dir>/hptvsim.db``)
+``HPTVSIM_API_KEY``            when set, every ``/api/v1`` request needs header ``X-API-Key``
+``HPTVSIM_CORS_ORIGINS``       comma-separated allowed origins (``*``)
+``HPTVSIM_EXECUTOR``           ``local`` (worker processes) or ``ray`` (``local``)
+``RAY_ADDRESS``                Ray cluster address for ``HPTVSIM_EXECUTOR=ray`` (a local Ray)
+``HPTVSIM_WORKERS``            worker processes of the local executor (CPU count, at most 4)
+``HPTVSIM_HOSTS``              processes hosting interactive episodes (``1``)
+``HPTVSIM_MAX_STEPS``          largest ``max_steps`` a request may ask for (``20000``)
+``HPTVSIM_MAX_AGENTS``         most vehicles in a scenario (``16``)
+``HPTVSIM_MAX_BODY_BYTES``     largest request body (``1048576``)
+``HPTVSIM_MAX_JOBS``           episodes queued or running at once (``256``)
+``HPTVSIM_MAX_INTERACTIVE``    interactive episodes open at once (``64``)
+``HPTVSIM_MAX_GRID_CELLS``     largest terrain grid of an inline scenario (``4000000``)
+``HPTVSIM_IDLE_TIMEOUT_S``     an interactive episode idle this long is cancelled (``600``)
+``HPTVSIM_JOB_TIMEOUT_S``      a run longer than this (wall clock) is cancelled (``3600``)
+``HPTVSIM_EVENT_HZ``           progress/frame events per second per episode (``10``)
+``HPTVSIM_VISER``              start the viser live view (``1``; ``0`` to skip)
+``HPTVSIM_VISER_PORT``         viser port (``8080``)
+``HPTVSIM_VISER_URL``          address of a live view run as its own service (none)
+``HPTVSIM_WEB_DIR``            dashboard files (the checkout's ``web/``)
+=============================  ===========================================================
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+__all__ = ["Settings", "SettingsError"]
+
+
+class SettingsError(ValueError):
+    """An environment variable holds an invalid value (the message names it)."""
+
+
+def _default_workers() -> int:
+    return max(1, min(4, os.cpu_count() or 1))
+
+
+def _default_web_dir() -> Path:
+    return Path(__file__).resolve().parents[1] / "web"
+
+
+@dataclass(frozen=True, kw_only=True)
+class Settings:
+    """Everything the service is configured by (see the module docstring for the variables).
+
+    Attributes:
+        host: Interface the API binds.
+        port: API port.
+        data_dir: Folder of recordings, trajectories and the default SQLite database.
+        database_url: SQLAlchemy URL (``None``: SQLite in ``data_dir``).
+        api_key: Required ``X-API-Key`` header value (``None``: no authentication).
+        cors_origins: Origins allowed by CORS.
+        executor: ``"local"`` worker processes or ``"ray"`` tasks.
+        ray_address: Ray cluster address (``None``: start or join a local Ray).
+        workers: Worker processes of the local executor.
+        hosts: Processes hosting interactive episodes.
+        max_steps: Largest ``max_steps`` of an episode.
+        max_agents: Most vehicles in an episode's scenario.
+        max_body_bytes: Largest request body [bytes].
+        max_jobs: Most episodes queued or running at once.
+        max_interactive: Most interactive episodes open at once.
+        max_grid_cells: Largest terrain grid (cells) of a client's inline scenario.
+        idle_timeout_s: Interactive episodes idle this long are cancelled [s].
+        job_timeout_s: Runs longer than this (wall clock) are cancelled [s].
+        event_hz: Progress and frame events per second per episode [1/s].
+        viser: Whether to start the viser live view beside the API.
+        viser_port: Port of the viser live view.
+        viser_url: Public address of a live view that runs as its own service (shown by the dashboard).
+        web_dir: Folder of the dashboard's static files.
+    """
+
+    host: str = "127.0.0.1"
+    port: int = 8000
+    data_dir: Path = field(default_factory=lambda: Path("hptvsim-out") / "service")
+    database_url: str | None = None
+    api_key: str | None = None
+    cors_origins: tuple[str, ...] = ("*",)
+    executor: Literal["local", "ray"] = "local"
+    ray_address: str | None = None
+    workers: int = field(default_factory=_default_workers)
+    hosts: int = 1
+    max_steps: int = 20000
+    max_agents: int = 16
+    max_body_bytes: int = 1 << 20
+    max_jobs: int = 256
+    max_interactive: int = 64
+    max_grid_cells: int = 4_000_000
+    idle_timeout_s: float = 600.0
+    job_timeout_s: float = 3600.0
+    event_hz: float = 10.0
+    viser: bool = True
+    viser_port: int = 8080
+    viser_url: str | None = None
+    web_dir: Path = field(default_factory=_default_web_dir)
+
+    def __post_init__(self) -> None:
+        positive = (
+            "workers",
+            "hosts",
+            "max_steps",
+            "max_agents",
+            "max_body_bytes",
+            "max_jobs",
+            "max_interactive",
+            "max_grid_cells",
+            "idle_timeout_s",
+            "job_timeout_s",
+            "event_hz",
+        )
+        for name in positive:
+            if not getattr(self, name) > 0:
+                raise SettingsError(f"{name} = {getattr(self, name)!r} is invalid; valid: > 0")
+        for name in ("port", "viser_port"):
+            if not 0 <= getattr(self, name) <= 65535:
+                raise SettingsError(f"{name} = {getattr(self, name)!r} is invalid; valid: 0..65535")
+        if self.executor not in ("local", "ray"):
+            raise SettingsError(f"executor = {self.executor!r} is invalid; valid: 'local', 'ray'")
+
+    @property
+    def db_url(self) -> str:
+        """The database URL in use (``database_url`` or SQLite in ``data_dir``)."""
+        if self.database_url:
+            return self.database_url
+        return f"sqlite:///{(self.data_dir / 'hptvsim.db').resolve()}"
+
+    @property
+    def episodes_dir(self) -> Path:
+        """Folder holding one sub-folder of files per episode."""
+        return self.data_dir / "episodes"
+
+    def replace(self, **changes: object) -> Settings:
+        """A copy with some settings changed."""
+        return dataclasses.replace(self, **changes)  # type: ignore[arg-type]  # checked in __post_init__
+
+    @classmethod
+    def from_env(cls, env: Mapping[str, str] | None = None) -> Settings:
+        """Read the settings from environment variables (``env``, default ``os.environ``).
+
+        Raises:
+            SettingsError: A variable holds an invalid value (named in the message).
+        """
+        e = os.environ if env is None else env
+        kw: dict[str, object] = {}
+
+        def integer(var: str, name: str) -> None:
+            if var in e:
+                try:
+                    kw[name] = int(e[var])
+                except ValueError:
+                    raise SettingsError(f"{var} = {e[var]!r} is invalid; valid: an integer") from None
+
+        def number(var: str, name: str) -> None:
+            if var in e:
+                try:
+                    kw[name] = float(e[var])
+                except ValueError:
+                    raise SettingsError(f"{var} = {e[var]!r} is invalid; valid: a number") from None
+
+        def text(var: str, name: str) -> None:
+            if e.get(var):
+                kw[name] = e[var]
+
+        text("HPTVSIM_HOST", "host")
+        integer("HPTVSIM_PORT", "port")
+        if e.get("HPTVSIM_DATA_DIR"):
+            kw["data_dir"] = Path(e["HPTVSIM_DATA_DIR"])
+        text("DATABASE_URL", "database_url")
+        text("HPTVSIM_API_KEY", "api_key")
+        if e.get("HPTVSIM_CORS_ORIGINS"):
+            kw["cors_origins"] = tuple(o.strip() for o in e["HPTVSIM_CORS_ORIGINS"].split(",") if o.strip())
+        if e.get("HPTVSIM_EXECUTOR"):
+            value = e["HPTVSIM_EXECUTOR"].strip().lower()
+            if value not in ("local", "ray"):
+                raise SettingsError(f"HPTVSIM_EXECUTOR = {value!r} is invalid; valid: local, ray")
+            kw["executor"] = value
+        text("RAY_ADDRESS", "ray_address")
+        integer("HPTVSIM_WORKERS", "workers")
+        integer("HPTVSIM_HOSTS", "hosts")
+        integer("HPTVSIM_MAX_STEPS", "max_steps")
+        integer("HPTVSIM_MAX_AGENTS", "max_agents")
+        integer("HPTVSIM_MAX_BODY_BYTES", "max_body_bytes")
+        integer("HPTVSIM_MAX_JOBS", "max_jobs")
+        integer("HPTVSIM_MAX_INTERACTIVE", "max_interactive")
+        integer("HPTVSIM_MAX_GRID_CELLS", "max_grid_cells")
+        number("HPTVSIM_IDLE_TIMEOUT_S", "idle_timeout_s")
+        number("HPTVSIM_JOB_TIMEOUT_S", "job_timeout_s")
+        number("HPTVSIM_EVENT_HZ", "event_hz")
+        if "HPTVSIM_VISER" in e:
+            value = e["HPTVSIM_VISER"].strip().lower()
+            if value not in ("0", "1", "true", "false", "yes", "no", "on", "off"):
+                raise SettingsError(f"HPTVSIM_VISER = {value!r} is invalid; valid: 0 or 1")
+            kw["viser"] = value in ("1", "true", "yes", "on")
+        integer("HPTVSIM_VISER_PORT", "viser_port")
+        text("HPTVSIM_VISER_URL", "viser_url")
+        if e.get("HPTVSIM_WEB_DIR"):
+            kw["web_dir"] = Path(e["HPTVSIM_WEB_DIR"])
+        try:
+            return cls(**kw)  # type: ignore[arg-type]  # values were converted above
+        except SettingsError as exc:
+            raise SettingsError(f"{exc} (from the environment)") from None

@@ -1,0 +1,323 @@
+"""Turning an episode request into a job: the checks that need the scenario and the settings.
+
+A client's scenario is data: it is validated by the one scenario schema
+(:meth:`hptvsim.world.scenario.Scenario.from_dict`), and before that screened for what the
+schema allows a local user but a service must not: terrain files outside the shipped data
+folder, and sizes (grid cells, vehicles, sonar beams, integration steps) that would exhaust the
+machine. Policies are named, never loaded from a path a client sends; FMUs are the shipped ones.
+Every problem is an :class:`ApiError` naming the request field.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from services.schemas import EpisodeCreate
+from services.settings import Settings
+
+__all__ = ["ApiError", "Resolved", "resolve_request", "scenario_summary", "shipped_scenario"]
+
+MAX_BEAMS = 1024
+MAX_RECORD_SAMPLES = 200_000
+MAX_SUBSTEPS = 1000  # dt / h_max
+
+
+class ApiError(Exception):
+    """An error answered to the client.
+
+    Args:
+        status: HTTP status.
+        detail: One line naming the field and what would be valid.
+        field: The offending field's dotted path, if one.
+    """
+
+    def __init__(self, status: int, detail: str, field: str | None = None, type: str = "value_error") -> None:
+        super().__init__(detail)
+        self.status = status
+        self.detail = detail
+        self.field = field
+        self.type = type
+
+
+@dataclass(frozen=True, kw_only=True)
+class Resolved:
+    """A validated request, ready to become a job."""
+
+    scenario_ref: str | dict[str, Any]  # shipped name or validated tables
+    scenario_label: str
+    agents: tuple[str, ...]
+    roles: dict[str, str]
+    policies: dict[str, str]  # agent -> policy, for the agents the server drives
+    control: tuple[str, ...]
+    max_steps: int
+
+
+_cache_lock = threading.Lock()
+_shipped: dict[str, tuple[float, Any]] = {}
+
+
+def shipped_scenario(name: str) -> Any:
+    """A shipped scenario by name (cached per file version).
+
+    Raises:
+        ApiError: 404-style 422 when there is no such shipped scenario (lists the valid names).
+    """
+    from hptvsim.world.scenario import list_scenarios, load_scenario, scenario_dir
+
+    names = list_scenarios()
+    if name not in names:
+        raise ApiError(422, f"scenario: no shipped scenario {name!r}; valid: {', '.join(names)}", "scenario")
+    path = scenario_dir() / f"{name}.toml"
+    mtime = path.stat().st_mtime
+    with _cache_lock:
+        hit = _shipped.get(name)
+        if hit is not None and hit[0] == mtime:
+            return hit[1]
+    scenario = load_scenario(name)
+    with _cache_lock:
+        _shipped[name] = (mtime, scenario)
+    return scenario
+
+
+def scenario_summary(scenario: Any) -> dict[str, Any]:
+    """What the scenario list shows about a scenario."""
+    agents = scenario.agents
+    return {
+        "name": scenario.name,
+        "description": scenario.description,
+        "task": scenario.task.kind,
+        "site_size": (float(scenario.site.size[0]), float(scenario.site.size[1])),
+        "agents": [a.name for a in agents],
+        "roles": {a.name: a.role for a in agents},
+        "max_steps": int(scenario.simulation.max_steps),
+        "dt": float(scenario.simulation.dt),
+    }
+
+
+def _number(value: Any) -> float | None:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return None
+    return float(value)
+
+
+def _screen_inline(data: Mapping[str, Any], settings: Settings) -> None:
+    """Checks on a client's raw scenario tables before the schema builds anything from them."""
+    from hptvsim.world.scenario import TERRAIN_KINDS, scenario_dir
+
+    terrain = data.get("terrain", {})
+    kind = terrain.get("kind", "flat") if isinstance(terrain, Mapping) else None
+    # file terrain: only the shipped data files, named relative to the scenarios folder
+    if kind == "file" and isinstance(terrain, Mapping):
+        raw = terrain.get("path")
+        field = "scenario.terrain.path"
+        if not isinstance(raw, str) or not raw:
+            raise ApiError(422, f"{field}: give a shipped data file, e.g. data/salish_sea.tif", field)
+        p = Path(raw)
+        root = scenario_dir().resolve()
+        if p.is_absolute() or raw.startswith("~") or ".." in p.parts or "\\" in raw:
+            raise ApiError(
+                422,
+                f"{field}: {raw!r} is not allowed; the service reads only the shipped data files, "
+                "named relative to the scenarios folder (e.g. data/salish_sea.tif)",
+                field,
+            )
+        resolved = (root / p).resolve()
+        if not resolved.is_relative_to(root) or not resolved.is_file():
+            shipped = sorted(
+                str(f.relative_to(root))
+                for f in (root / "data").glob("*")
+                if f.is_file() and f.suffix != ".py"
+            )
+            raise ApiError(
+                422, f"{field}: {raw!r} is not a shipped data file; valid: {', '.join(shipped)}", field
+            )
+    # grid size: site / resolution
+    site = data.get("site", {})
+    size = site.get("size", (400.0, 300.0)) if isinstance(site, Mapping) else None
+    cls = TERRAIN_KINDS.get(kind) if isinstance(kind, str) else None
+    resolution: float | None = None
+    if isinstance(terrain, Mapping) and "resolution" in terrain:
+        resolution = _number(terrain["resolution"])
+    elif cls is not None:
+        default = cls.__dataclass_fields__["resolution"].default
+        resolution = _number(default)
+    if isinstance(size, list | tuple) and len(size) == 2 and resolution and resolution > 0:
+        sx, sy = _number(size[0]), _number(size[1])
+        if sx is not None and sy is not None and sx > 0 and sy > 0:
+            cells = math.ceil(sx / resolution) * math.ceil(sy / resolution)
+            if cells > settings.max_grid_cells:
+                raise ApiError(
+                    422,
+                    f"scenario.terrain.resolution: a {sx:g} m x {sy:g} m site at {resolution:g} m makes "
+                    f"{cells} grid cells; this service allows {settings.max_grid_cells} (coarsen the "
+                    "resolution or shrink the site)",
+                    "scenario.terrain.resolution",
+                )
+    # vehicles
+    groups = data.get("vehicles")
+    if isinstance(groups, list):
+        total = 0
+        for i, g in enumerate(groups):
+            count = g.get("count", 1) if isinstance(g, Mapping) else 1
+            if isinstance(count, int) and not isinstance(count, bool):
+                total += max(count, 0)
+            if total > settings.max_agents or i >= settings.max_agents:
+                raise ApiError(
+                    422,
+                    f"scenario.vehicles: more than {settings.max_agents} vehicles; this service's limit is "
+                    f"{settings.max_agents}",
+                    "scenario.vehicles",
+                )
+
+
+def _check_costs(scenario: Any, settings: Settings) -> None:
+    """Checks on a built scenario: vehicles, sonar size, integration steps."""
+    agents = scenario.agents
+    if len(agents) > settings.max_agents:
+        raise ApiError(
+            422,
+            f"scenario.vehicles: {len(agents)} vehicles; this service's limit is {settings.max_agents}",
+            "scenario.vehicles",
+        )
+    for a in agents:
+        if a.sonar.beams > MAX_BEAMS:
+            raise ApiError(
+                422, f"scenario.sensors.sonar.beams: {a.sonar.beams} beams; valid: <= {MAX_BEAMS}", "scenario"
+            )
+        if a.sonar.record_samples > MAX_RECORD_SAMPLES:
+            raise ApiError(
+                422,
+                f"scenario.sensors.sonar: a record of {a.sonar.record_samples} samples (2 max_range / c x "
+                f"sampling_rate); valid: <= {MAX_RECORD_SAMPLES}",
+                "scenario.sensors.sonar",
+            )
+    sim = scenario.simulation
+    if sim.dt / sim.h_max > MAX_SUBSTEPS:
+        raise ApiError(
+            422,
+            f"scenario.simulation.h_max: {sim.h_max:g} s makes {sim.dt / sim.h_max:.0f} integration steps "
+            f"per control step; valid: h_max >= dt / {MAX_SUBSTEPS} = {sim.dt / MAX_SUBSTEPS:g} s",
+            "scenario.simulation.h_max",
+        )
+
+
+def _policy_table() -> dict[str, tuple[str, tuple[str, ...]]]:
+    """Policy name -> (canonical name, roles); scripted ones also by their bare name."""
+    from hptvsim.zoo import list_policies
+
+    table: dict[str, tuple[str, tuple[str, ...]]] = {}
+    for p in list_policies():
+        table[p.name] = (p.name, tuple(p.roles))
+        if p.kind == "scripted":
+            table[p.name.removeprefix("scripted:")] = (p.name, tuple(p.roles))
+    return table
+
+
+def _default_policy(task: str, role: str) -> str:
+    if task == "goto" or role == "pursuer":
+        return "scripted:pure_pursuit"
+    return "scripted:potential_field"
+
+
+def resolve_request(req: EpisodeCreate, settings: Settings) -> tuple[Resolved, Any]:
+    """Validate a request against the scenario and the settings.
+
+    Returns:
+        The resolved job parameters and the scenario object.
+
+    Raises:
+        ApiError: The first problem, naming the field (422).
+    """
+    from hptvsim.world.scenario import Scenario, ScenarioError, scenario_dir
+
+    if isinstance(req.scenario, str):
+        import re
+
+        from services.schemas import NAME_PATTERN
+
+        if not re.fullmatch(NAME_PATTERN, req.scenario):
+            raise ApiError(
+                422,
+                f"scenario: {req.scenario!r} is not a scenario name (letters, digits, '_' and '-'); "
+                "give a shipped scenario's name or the scenario as data",
+                "scenario",
+            )
+        scenario = shipped_scenario(req.scenario)
+        ref: str | dict[str, Any] = req.scenario
+        label = req.scenario
+    else:
+        _screen_inline(req.scenario, settings)
+        try:
+            scenario = Scenario.from_dict(req.scenario, source="<request>", base_dir=scenario_dir())
+        except ScenarioError as exc:
+            field = f"scenario.{exc.key}" if exc.key else "scenario"
+            raise ApiError(422, f"{field}: {exc.problem}", field) from None
+        except (ValueError, TypeError, OverflowError) as exc:
+            raise ApiError(422, f"scenario: {exc}", "scenario") from None
+        ref = scenario.to_dict()
+        label = f"{scenario.name} (inline)"
+    _check_costs(scenario, settings)
+    agents = tuple(a.name for a in scenario.agents)
+    roles = {a.name: a.role for a in scenario.agents}
+    # step limit
+    if req.max_steps is not None and req.max_steps > settings.max_steps:
+        raise ApiError(
+            422, f"max_steps: {req.max_steps} exceeds this service's limit {settings.max_steps}", "max_steps"
+        )
+    max_steps = (
+        req.max_steps if req.max_steps is not None else min(scenario.simulation.max_steps, settings.max_steps)
+    )
+    # control
+    control = tuple(req.control)
+    if req.mode == "run" and control:
+        raise ApiError(422, "control: only interactive episodes have client-controlled agents", "control")
+    if req.mode == "interactive" and not control:
+        raise ApiError(
+            422, f"control: name at least one agent to step; agents: {', '.join(agents)}", "control"
+        )
+    for a in control:
+        if a not in agents:
+            raise ApiError(422, f"control: unknown agent {a!r}; agents: {', '.join(agents)}", "control")
+    if len(set(control)) != len(control):
+        raise ApiError(422, "control: an agent is named twice", "control")
+    # policies
+    table = _policy_table()
+    policies: dict[str, str] = {}
+    for agent, name in req.policies.items():
+        field = f"policies.{agent}"
+        if agent not in agents:
+            raise ApiError(422, f"{field}: unknown agent {agent!r}; agents: {', '.join(agents)}", field)
+        if agent in control:
+            raise ApiError(422, f"{field}: {agent} is stepped by the client (control)", field)
+        entry = table.get(name)
+        if entry is None:
+            valid = sorted({canonical for canonical, _ in table.values()})
+            raise ApiError(422, f"{field}: unknown policy {name!r}; valid: {', '.join(valid)}", field)
+        canonical, policy_roles = entry
+        if roles[agent] not in policy_roles:
+            raise ApiError(
+                422,
+                f"{field}: {canonical} drives {', '.join(policy_roles)}; {agent} is a {roles[agent]}",
+                field,
+            )
+        policies[agent] = canonical
+    for agent in agents:
+        if agent not in control and agent not in policies:
+            policies[agent] = _default_policy(scenario.task.kind, roles[agent])
+    return (
+        Resolved(
+            scenario_ref=ref,
+            scenario_label=label,
+            agents=agents,
+            roles=roles,
+            policies=policies,
+            control=control,
+            max_steps=int(max_steps),
+        ),
+        scenario,
+    )

@@ -1,0 +1,102 @@
+"""Helpers of the service tests (imported as ``service_helpers``): live servers over real HTTP."""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import httpx
+
+ROOT = Path(__file__).resolve().parents[2]
+
+# small limits so fuzzed and load-test episodes stay short
+TEST_ENV = {
+    "HPTVSIM_VISER": "0",
+    "HPTVSIM_MAX_STEPS": "400",
+    "HPTVSIM_WORKERS": "2",
+    "HPTVSIM_EVENT_HZ": "20",
+    "OMP_NUM_THREADS": "1",
+}
+
+
+@dataclass
+class Server:
+    """A running ``python -m services``."""
+
+    url: str
+    data_dir: Path
+    process: subprocess.Popen[str]
+    log: Path
+    env: dict[str, str] = field(default_factory=dict)
+
+    def kill(self) -> None:
+        """SIGKILL, as a crash would."""
+        self.process.send_signal(signal.SIGKILL)
+        self.process.wait(10)
+
+    def stop(self) -> None:
+        """SIGTERM (a graceful stop), then SIGKILL if it lingers."""
+        if self.process.poll() is None:
+            self.process.send_signal(signal.SIGTERM)
+            try:
+                self.process.wait(20)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+                self.process.wait(5)
+
+    def output(self) -> str:
+        """What the server printed so far."""
+        return self.log.read_text(errors="replace") if self.log.exists() else ""
+
+
+def start_server(data_dir: Path, extra_env: dict[str, str] | None = None, timeout: float = 60.0) -> Server:
+    """Start the service on a free port and wait until ``/healthz`` answers."""
+    env = dict(os.environ)
+    env.update(TEST_ENV)
+    env.update(extra_env or {})
+    env["HPTVSIM_DATA_DIR"] = str(data_dir)
+    data_dir.mkdir(parents=True, exist_ok=True)
+    log = data_dir / f"server-{time.monotonic_ns()}.log"
+    fh = log.open("w")
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "services", "--port", "0", "--log-level", "warning"],
+        cwd=ROOT,
+        env=env,
+        stdout=fh,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    deadline = time.monotonic() + timeout
+    url = None
+    while time.monotonic() < deadline:
+        if proc.poll() is not None:
+            raise RuntimeError(f"the service exited with {proc.returncode}:\n{log.read_text()}")
+        m = re.search(r"health:\s+(http://\S+)/healthz", log.read_text())
+        if m:
+            url = m.group(1).replace("localhost", "127.0.0.1")
+            try:
+                if httpx.get(f"{url}/healthz", timeout=2.0).status_code == 200:
+                    return Server(url=url, data_dir=data_dir, process=proc, log=log, env=env)
+            except httpx.HTTPError:
+                pass
+        time.sleep(0.1)
+    proc.kill()
+    raise RuntimeError(f"the service did not answer in {timeout} s:\n{log.read_text()}")
+
+
+def wait_final(api: httpx.Client, episode_id: str, timeout: float = 120.0) -> dict[str, Any]:
+    """Poll an episode until its status is final."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        ep: dict[str, Any] = api.get(f"/episodes/{episode_id}").json()
+        if ep["status"] in ("finished", "failed", "cancelled", "interrupted"):
+            return ep
+        time.sleep(0.1)
+    raise AssertionError(f"episode {episode_id} did not end in {timeout} s")

@@ -1,0 +1,120 @@
+"""The viser live view without a browser: scene contents, controls, following a service's events."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from hptvsim.viz.episode import run_episode
+from hptvsim.viz.frames import Frame
+from hptvsim.viz.viser_view import CAMERA_FAR, LiveView, SceneRenderer, start_live_view
+
+
+def test_scene_renderer_places_what_the_frames_say() -> None:
+    import viser
+
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        frames: list[Frame] = []
+        result = run_episode("target", seed=2, max_steps=30, on_frame=frames.append)
+        r = SceneRenderer(server, trail_steps=10)
+        r.set_static(result.static)
+        assert server.initial_camera.far == CAMERA_FAR  # a 400 m site is not clipped
+        for f in frames:
+            r.show(f)
+        last = frames[-1]
+        z = result.static.site.operating_depth
+        for a in last.agents:
+            h = r._agents[a.name]
+            np.testing.assert_allclose(h["frame"].position, (a.x, a.y, z))
+            w, _, _, qz = h["frame"].wxyz
+            assert math.isclose(2 * math.atan2(qz, w), a.psi, abs_tol=1e-9)
+            trail = h["trail"].points
+            assert trail.shape == (9, 2, 3)  # the last 10 positions
+            np.testing.assert_allclose(trail[-1, 1, :2], (a.x, a.y), atol=1e-3)
+        # one sonar ray per beam per agent, from each vehicle to its measured range
+        beams = len(result.static.agents[0].beam_angles)
+        assert r._sonar.points.shape == (beams * len(last.agents), 2, 3)
+        hits = sum(len(a.hits or ()) for a in last.agents)
+        if hits:
+            assert r._hits.points.shape == (hits, 3)
+        # a new episode replaces the scene
+        r.set_static(run_episode("source", seed=0, max_steps=2).static)
+        assert set(r._agents) == {a.name for a in r.static.agents}  # type: ignore[union-attr]
+        with pytest.raises(RuntimeError, match="set_static"):
+            SceneRenderer(server).show(last)
+    finally:
+        server.stop()
+
+
+def test_live_view_controls() -> None:
+    with pytest.raises(ValueError, match="speed"):
+        LiveView(port=0, speed=0.0)
+    view = LiveView(port=0, scenario="target", seed=4, speed=64.0, run_without_clients=True).start()
+    try:
+        assert view.url.startswith("http://127.0.0.1:") and view.port > 0
+        assert view.wait_for(lambda v: v.last_frame is not None and v.last_frame.step >= 10, 30)
+        view.pause()
+        assert view.wait_for(lambda v: not v.playing, 5)
+        s = view.stepper.frame.step
+        assert not view.wait_for(lambda v: v.stepper.frame.step > s, 0.5)
+        view.play()
+        assert view.wait_for(lambda v: v.stepper.frame.step > s, 10)
+        view.set_speed(8.0)
+        assert view.wait_for(lambda v: v.speed == 8.0, 5)
+        with pytest.raises(ValueError, match="speed"):
+            view.set_speed(-1.0)
+        view.reset(scenario="source", seed=7, policies={"evader_0": "scripted:stationary"})
+        assert view.wait_for(lambda v: v.stepper.static.scenario == "source", 30)
+        assert view.stepper.static.seed == 7
+        assert {a.name: a.policy for a in view.stepper.static.agents}["evader_0"] == "scripted:stationary"
+        before = view.stepper
+        view.reset(policies={"pursuer_0": "no-such-policy"})  # refused: the episode goes on
+        assert view.wait_for(lambda v: "cannot start" in v._gui["status"].content, 10)
+        assert view.stepper is before
+    finally:
+        view.stop()
+
+
+def test_an_idle_view_does_not_simulate() -> None:
+    view = LiveView(port=0, speed=64.0).start()  # no browser connected
+    try:
+        assert not view.wait_for(lambda v: v.stepper.frame.step > 0, 0.5)
+    finally:
+        view.stop()
+
+
+class _Hub:
+    def __init__(self) -> None:
+        self.listeners: list[object] = []
+
+
+class _Service:
+    def __init__(self) -> None:
+        self.hub = _Hub()
+
+
+def test_live_view_follows_a_services_episode_events() -> None:
+    frames: list[Frame] = []
+    result = run_episode("source", seed=1, max_steps=25, on_frame=frames.append)
+    svc = _Service()
+    view = start_live_view(port=0, service=svc, speed=1.0, unfollow_delay=0.2)
+    try:
+        assert svc.hub.listeners == [view.on_event]
+        view.on_event({"type": "static", "episode": "e1", "data": result.static.to_dict()})
+        # a second episode starting meanwhile does not take the view over
+        view.on_event({"type": "static", "episode": "e2", "data": result.static.to_dict()})
+        for f in frames:
+            view.on_event({"type": "frame", "episode": "e1", "data": f.to_dict()})
+            view.on_event({"type": "frame", "episode": "e2", "data": frames[0].to_dict()})
+        assert view.wait_for(
+            lambda v: v.following == "e1" and v.last_frame is not None and v.last_frame.step == 25
+        )
+        assert "following **e1**" in view._gui["status"].content
+        view.on_event({"type": "status", "episode": "e1", "data": {"status": "finished", "final": True}})
+        assert view.wait_for(lambda v: v.following is None, 10)
+        assert view.renderer is not None and view.renderer.static == view.stepper.static
+    finally:
+        view.stop()
