@@ -39,7 +39,8 @@ COPY web ./web
 COPY fmus ./fmus
 COPY scenarios ./scenarios
 COPY configs ./configs
-# trained policies, when the repository ships them, go in policies/ (copy it here too)
+# the shipped trained policies (MAISAC pursuers and evader, the defaults of the service)
+COPY policies ./policies
 RUN pip install --no-deps -e . \
     && python -c "import hptvsim.envs, services.app"
 

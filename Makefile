@@ -8,7 +8,7 @@ STAMP  := $(VENV)/.installed-stamp
 # pytest workers: the machines this runs on have 2 cores
 WORKERS ?= 2
 
-.PHONY: run test test-slow lint typecheck unit bench bench-quick fmus setup system-deps clean
+.PHONY: run test test-slow lint typecheck unit bench bench-quick fmus dt-pipeline setup system-deps clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -46,7 +46,7 @@ test: lint typecheck unit
 test-slow: setup system-deps
 	$(BIN)/pytest -n $(WORKERS) -m slow
 
-BENCHES := dynamics cosim sensors world env train episode
+BENCHES := dynamics cosim sensors world env train dt episode
 
 bench: setup
 	@for b in $(BENCHES); do echo; $(BIN)/hptvsim bench $$b || exit 1; done
@@ -56,6 +56,11 @@ bench-quick: setup
 
 fmus: setup
 	$(BIN)/hptvsim fmu build
+
+# The offline stage of ETFDU in one command: expert datasets (Minari), DT pursuers, evaluation
+# over 100 seeded episodes, Figs. 14-17 (about an hour on 2 cores; re-run to resume).
+dt-pipeline: setup
+	$(BIN)/hptvsim dt pipeline --out hptvsim-out/dt-target --target q50 --target q90
 
 clean:
 	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache hptvsim-out

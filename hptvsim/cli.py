@@ -25,6 +25,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "hptvsim.sensors.cli",
     "hptvsim.envs.cli",
     "hptvsim.viz.cli",
+    "hptvsim.offline.cli",
 )
 """Modules whose ``register(main, bench)`` adds commands (one line per package)."""
 
@@ -134,12 +135,15 @@ def bench_dynamics_cmd(quick: bool, vehicle_type: str, as_json: bool) -> None:
     help="Folder for the plot.",
 )
 @click.option("--duration", type=float, default=120.0, show_default=True, help="Simulated seconds.")
-def demo(out_dir: Path, duration: float) -> None:
-    """Both vehicle types manoeuvre through their FMUs; writes a trajectory plot."""
-    from hptvsim.demo import run_demo
+@click.option("--no-episode", is_flag=True, help="Skip the pursuit-evasion episode.")
+def demo(out_dir: Path, duration: float, no_episode: bool) -> None:
+    """The vehicles through their FMUs, then one pursuit episode with the default policies."""
+    from hptvsim.demo import plot_episode, run_demo
 
     path = run_demo(out_dir, duration=duration)
     click.echo(f"trajectory plot: {path.resolve()}")
+    if not no_episode:
+        click.echo(f"episode plot: {plot_episode(out_dir).resolve()}")
 
 
 def _register() -> None:

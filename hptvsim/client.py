@@ -354,7 +354,7 @@ class RemoteEnv(gymnasium.Env[F32, F32]):
         url: The service's base URL.
         scenario: A shipped scenario's name or scenario data.
         agent: The agent to control (default: the scenario's first agent).
-        policies: Policies of the other agents (default: the service's scripted defaults).
+        policies: Policies of the other agents (default: the service's defaults, hptvsim.zoo.default_policy).
         seed: Seed of the first episode; later episodes use the following seeds (``reset(seed=)``
             starts over from a given one).
         max_steps: Step limit of each episode (default: the scenario's).

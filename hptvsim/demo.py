@@ -1,9 +1,12 @@
-"""``hptvsim demo``: both vehicle types manoeuvre through their FMUs; a plot shows how.
+"""``hptvsim demo``: the vehicles through their FMUs, then one pursuit-evasion episode; plots.
 
-A work-class UUV runs a lawnmower pattern and a spherical UUV a figure of eight, both in a
-0.3 m/s north-easterly current, stepped at the paper's 0.25 s through the lean FMI path.
-The figure shows the tracks (north up, east right) and commanded versus achieved surge speed
-and yaw rate.
+1. A work-class UUV runs a lawnmower pattern and a spherical UUV a figure of eight, both in a
+   0.3 m/s north-easterly current, stepped at the paper's 0.25 s through the lean FMI path
+   (``trajectories.png``: tracks, north up and east right, and commanded versus achieved surge
+   speed and yaw rate).
+2. One episode of the game on the target scenario on the FMU backend, every agent with its
+   default policy (:func:`hptvsim.zoo.default_policy`: the shipped trained ones where there are
+   some) (``episode.png``: the tracks over the seabed, and the pursuer-evader distances).
 """
 
 from __future__ import annotations
@@ -68,6 +71,52 @@ def simulate_manoeuvre(vehicle_type: str, duration: float) -> dict[str, npt.NDAr
     inst.free()
     names = ("t", "x", "y", "psi", "u", "r", "v_cmd", "omega_cmd")
     return {name: log[:, i] for i, name in enumerate(names)}
+
+
+def plot_episode(out_dir: Path, *, scenario: str = "target", seed: int = 0, max_steps: int = 1200) -> Path:
+    """Play one episode with the default policies on the FMU backend; write ``episode.png``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from hptvsim.viz.episode import run_episode
+    from hptvsim.world.scenario import load_scenario
+
+    result = run_episode(scenario, {}, seed=seed, max_steps=max_steps, backend="fmu")
+    world = load_scenario(scenario).build_world()
+    traj = result.trajectories
+    fig, (ax_map, ax_d) = plt.subplots(1, 2, figsize=(13, 6), layout="constrained", width_ratios=(1, 1.3))
+    x0, x1, y0, y1 = world.obstacles.geometry.extent
+    ax_map.imshow(-world.heightmap.depth, origin="lower", extent=(y0, y1, x0, x1), cmap="Blues_r", alpha=0.8)
+    ax_map.contour(
+        world.obstacles.occupied.astype(float), levels=[0.5], colors="saddlebrown", origin="lower",
+        extent=(y0, y1, x0, x1),
+    )  # fmt: skip
+    for agent in traj.agents:
+        color = "tab:red" if agent.name.startswith("pursuer") else "tab:blue"
+        ax_map.plot(agent.y, agent.x, color=color, lw=1.2, label=agent.name)
+        ax_map.plot(agent.y[-1], agent.x[-1], marker="o", color=color)
+        if agent.name.startswith("pursuer"):
+            ax_d.plot(
+                traj.time, agent.distance, color=color, lw=1.0, alpha=0.8, label=f"{agent.name} to evader"
+            )
+    ax_map.set_xlabel("east y [m]")
+    ax_map.set_ylabel("north x [m]")
+    ax_map.set_aspect("equal")
+    ax_map.legend(loc="upper right", fontsize=8)
+    outcome = result.summary.outcome
+    ax_map.set_title(f"{scenario}: {outcome} after {result.summary.sim_time:.0f} s")
+    ax_d.axhline(25.0, color="k", ls="--", lw=0.8, label="target distance 25 m (capture)")
+    ax_d.set_xlabel("time [s]")
+    ax_d.set_ylabel("distance [m]")
+    ax_d.grid(alpha=0.3)
+    ax_d.legend(fontsize=8)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    path = out_dir / "episode.png"
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
 
 
 def run_demo(out_dir: Path, *, duration: float = 120.0) -> Path:

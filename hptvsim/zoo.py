@@ -33,6 +33,7 @@ from hptvsim.envs.policies import POLICY_NAMES, Limits, Policy, make_policy
 __all__ = [
     "PolicyInfo",
     "PolicyLoader",
+    "default_policy",
     "list_policies",
     "load_policy",
     "policy_dir",
@@ -58,17 +59,22 @@ class PolicyInfo:
         name: What users type (``scripted:pure_pursuit``, ``maisac-pursuer-target``, ...).
         kind: ``scripted``, ``sb3`` or ``dt``.
         roles: Roles it can drive (``pursuer``, ``evader``).
-        path: Checkpoint file (None for scripted policies).
+        path: Checkpoint file (None for scripted policies); the one of agents not in ``files``.
+        files: Per-agent checkpoint files (``files = { pursuer_0 = "...", ... }`` in the index),
+            for teams trained with one network per agent (MAISAC).
         description: One line.
         provenance: How it was made (command, config, seed, versions), for trained ones.
+        default_for: Tasks (``pursuit``, ``goto``) in which it is the default for its roles.
     """
 
     name: str
     kind: str
     roles: tuple[str, ...]
     path: Path | None = None
+    files: dict[str, Path] = field(default_factory=dict)
     description: str = ""
     provenance: dict[str, Any] = field(default_factory=dict)
+    default_for: tuple[str, ...] = ()
 
 
 def register_loader(kind: str, loader: PolicyLoader) -> None:
@@ -119,17 +125,37 @@ def list_policies(folder: Path | None = None) -> list[PolicyInfo]:
     if index.is_file():
         data = tomllib.loads(index.read_text())
         for name, entry in sorted(data.get("policies", {}).items()):
+            files = {str(a): root / str(f) for a, f in entry.get("files", {}).items()}
+            if "file" not in entry and not files:
+                raise ValueError(f"{index}: policy {name!r} needs 'file' or 'files'")
             out.append(
                 PolicyInfo(
                     name=name,
                     kind=str(entry["kind"]),
                     roles=tuple(entry.get("roles", ("pursuer", "evader"))),
-                    path=root / str(entry["file"]),
+                    path=root / str(entry["file"]) if "file" in entry else next(iter(files.values())),
+                    files=files,
                     description=str(entry.get("description", "")),
                     provenance=dict(entry.get("provenance", {})),
+                    default_for=tuple(entry.get("default_for", ())),
                 )
             )
     return out
+
+
+def default_policy(role: str, task: str) -> str:
+    """The policy an agent of ``role`` follows in ``task`` when none is named.
+
+    A shipped trained policy whose ``default_for`` lists the task (``policies/index.toml``), else
+    the scripted baseline: pure pursuit for pursuers (and for everyone in goto), the potential
+    field for evaders. The demo, the episode runner, the service and the dashboard all ask here.
+    """
+    for p in list_policies():
+        if p.kind != "scripted" and task in p.default_for and role in p.roles:
+            return p.name
+    if task == "goto" or role == "pursuer":
+        return "scripted:pure_pursuit"
+    return "scripted:potential_field"
 
 
 def _role(core: GameCore, agent: str) -> str:
@@ -170,8 +196,9 @@ def load_policy(spec: str, core: GameCore, agent: str, *, seed: int | None = Non
         role = _role(core, agent)
         if role not in info.roles:
             raise ValueError(f"policy {spec!r} drives {', '.join(info.roles)}; {agent} is a {role}")
-        assert info.path is not None
-        return _loader(info.kind)(info.path, core, agent)
+        file = info.files.get(agent, info.path)
+        assert file is not None
+        return _loader(info.kind)(file, core, agent)
     kind, sep, path = spec.partition(":")
     if sep and kind in _LOADER_MODULES:
         p = Path(path)

@@ -54,8 +54,9 @@ class EpisodeCreate(Strict):
     )
     policies: dict[str, str] = Field(
         default_factory=dict,
-        description="policy name per agent (GET /api/v1/policies); agents not named follow the "
-        "scripted defaults (pursuers pure_pursuit, evaders potential_field)",
+        description="policy name per agent (GET /api/v1/policies); agents not named follow their "
+        "role's default: the shipped trained policy (GET /api/v1/policies, default_for), else "
+        "pure_pursuit for pursuers and potential_field for evaders",
         max_length=64,
     )
     control: list[str] = Field(

@@ -219,9 +219,9 @@ def _policy_table() -> dict[str, tuple[str, tuple[str, ...]]]:
 
 
 def _default_policy(task: str, role: str) -> str:
-    if task == "goto" or role == "pursuer":
-        return "scripted:pure_pursuit"
-    return "scripted:potential_field"
+    from hptvsim.zoo import default_policy
+
+    return default_policy(role, task)
 
 
 def resolve_request(req: EpisodeCreate, settings: Settings) -> tuple[Resolved, Any]:

@@ -1,8 +1,9 @@
 """Shared test setup: one torch thread per process, a non-interactive matplotlib backend.
 
-The service's and the visualisation's fixtures live in ``tests/service/service_fixtures.py`` and
-``tests/viz/viz_fixtures.py`` and are registered here as plugins (fixture modules with names of
-their own, rather than several ``conftest.py`` files that the type checker cannot tell apart).
+The offline, service and visualisation fixtures live in ``tests/offline/offline_fixtures.py``,
+``tests/service/service_fixtures.py`` and ``tests/viz/viz_fixtures.py`` and are registered here
+as plugins (fixture modules with names of their own, rather than several ``conftest.py`` files
+that the type checker cannot tell apart).
 """
 
 from __future__ import annotations
@@ -11,10 +12,14 @@ import os
 import sys
 from pathlib import Path
 
-for _sub in ("service", "viz"):  # as pytest's own rootdir handling would: the helpers import by name
+for _sub in (
+    "offline",
+    "service",
+    "viz",
+):  # as pytest's own rootdir handling would: the helpers import by name
     sys.path.insert(0, str(Path(__file__).parent / _sub))
 
-pytest_plugins = ["service_fixtures", "viz_fixtures"]
+pytest_plugins = ["offline_fixtures", "service_fixtures", "viz_fixtures"]
 
 os.environ.setdefault("MPLBACKEND", "Agg")
 

@@ -48,6 +48,7 @@ class UPEGBatchEnv:
         max_steps: int | None = None,
         seed: int | None = None,
         vehicle_parameters: Mapping[str, Mapping[str, float]] | None = None,
+        reward: Mapping[str, float] | None = None,
         threads: int | None = None,
     ) -> None:
         self.core = GameCore(
@@ -57,6 +58,7 @@ class UPEGBatchEnv:
             task=task,
             sensor_fidelity=sensor_fidelity,
             vehicle_parameters=vehicle_parameters,
+            reward=reward,
             fence=fence,
             extended_obs=extended_obs,
             max_steps=max_steps,

@@ -249,6 +249,11 @@ class GameCore:
         vehicle_parameters: Per role (``"pursuer"``, ``"evader"``), vehicle parameters that
             override the scenario's (e.g. ``{"pursuer": {"v_max": 3.5}}``, the paper's ablations
             of Figs. 9-10); validated like the scenario's own.
+        reward: Overrides of the scenario's ``[task.reward]`` weights and magnitudes (e.g.
+            ``{"delta_C": 0.01}``; the fields of :class:`~hptvsim.world.scenario.Reward`),
+            validated like the scenario's own. The paper gives the magnitudes of Eqs. 17-19 but
+            not the weights of Eq. 20, so these are a training choice; capture and collision
+            rules do not depend on them.
     """
 
     def __init__(
@@ -265,6 +270,7 @@ class GameCore:
         seed: int | None = None,
         threads: int | None = None,
         vehicle_parameters: Mapping[str, Mapping[str, float]] | None = None,
+        reward: Mapping[str, float] | None = None,
     ) -> None:
         sc = load_scenario(scenario) if isinstance(scenario, str) else scenario
         if not isinstance(sc, Scenario):
@@ -302,6 +308,8 @@ class GameCore:
                         **dict(sc.vehicles[g].parameters),
                         **{k: float(v) for k, v in extra.items()},
                     }
+        if reward:
+            overrides.setdefault("task", {})["reward"] = {k: float(v) for k, v in reward.items()}
         if overrides:
             sc = sc.with_overrides(overrides)
         if num_envs < 1:

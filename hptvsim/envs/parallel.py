@@ -58,6 +58,7 @@ class UPEGParallelEnv(ParallelEnv[str, npt.NDArray[np.float32], npt.NDArray[np.f
     ``"source"``), ``backend`` (``"batched"`` or ``"fmu"``), ``task`` (override the scenario's),
     ``sensor_fidelity`` (``"geometric"`` or ``"signal"``), ``fence`` (the site's edge is a wall
     the sonar sees; default True), ``extended_obs``, ``max_steps``, ``seed``,
+    ``vehicle_parameters`` and ``reward`` (per-role vehicle limits and ``[task.reward]`` overrides),
     ``render_mode`` (``None`` or ``"rgb_array"``).
 
     ## Version History
@@ -83,6 +84,7 @@ class UPEGParallelEnv(ParallelEnv[str, npt.NDArray[np.float32], npt.NDArray[np.f
         max_steps: int | None = None,
         seed: int | None = None,
         vehicle_parameters: Mapping[str, Mapping[str, float]] | None = None,
+        reward: Mapping[str, float] | None = None,
         render_mode: str | None = None,
     ) -> None:
         if render_mode not in (None, "rgb_array"):
@@ -94,6 +96,7 @@ class UPEGParallelEnv(ParallelEnv[str, npt.NDArray[np.float32], npt.NDArray[np.f
             task=task,
             sensor_fidelity=sensor_fidelity,
             vehicle_parameters=vehicle_parameters,
+            reward=reward,
             fence=fence,
             extended_obs=extended_obs,
             max_steps=max_steps,

@@ -137,6 +137,7 @@ class UPEGSingleAgentEnv(gymnasium.Env[F32, F32]):
         max_steps: int | None = None,
         seed: int | None = None,
         vehicle_parameters: Mapping[str, Mapping[str, float]] | None = None,
+        reward: Mapping[str, float] | None = None,
         render_mode: str | None = None,
     ) -> None:
         if render_mode not in (None, "rgb_array"):
@@ -148,6 +149,7 @@ class UPEGSingleAgentEnv(gymnasium.Env[F32, F32]):
             task=task,
             sensor_fidelity=sensor_fidelity,
             vehicle_parameters=vehicle_parameters,
+            reward=reward,
             fence=fence,
             extended_obs=extended_obs,
             max_steps=max_steps,
@@ -264,6 +266,7 @@ class UPEGVectorEnv(gymnasium.vector.VectorEnv[F32, F32, F32]):
         max_steps: int | None = None,
         seed: int | None = None,
         vehicle_parameters: Mapping[str, Mapping[str, float]] | None = None,
+        reward: Mapping[str, float] | None = None,
         threads: int | None = None,
     ) -> None:
         self.core = GameCore(
@@ -273,6 +276,7 @@ class UPEGVectorEnv(gymnasium.vector.VectorEnv[F32, F32, F32]):
             task=task,
             sensor_fidelity=sensor_fidelity,
             vehicle_parameters=vehicle_parameters,
+            reward=reward,
             fence=fence,
             extended_obs=extended_obs,
             max_steps=max_steps,

@@ -14,9 +14,10 @@ import numpy as np
 import numpy.typing as npt
 
 from hptvsim.envs.core import GameCore
+from hptvsim.envs.task import EXTENDED_SIZE
 from hptvsim.zoo import register_loader
 
-__all__ = ["SB3Policy", "load_sb3_model"]
+__all__ = ["ExtendedObservation", "SB3Policy", "load_sb3_model"]
 
 
 def load_sb3_model(path: Path) -> Any:
@@ -36,6 +37,51 @@ def load_sb3_model(path: Path) -> Any:
     raise ValueError(f"{path} is not an SB3 SAC or PPO file ({'; '.join(errors)})")
 
 
+class ExtendedObservation:
+    """Appends the extended values to Eq. 14 observations, for models trained with them.
+
+    A model trained with ``extended_obs=True`` can then drive an agent in a game that observes
+    plain Eq. 14 (a service episode, say): the six values (sin and cos of the bearing relative
+    to the heading, speed and yaw-rate fractions, position fractions; :mod:`hptvsim.envs.task`)
+    are computed as the task kernel computes them, from the observation's yaw and azimuth and
+    the game's state for this agent (the bearing from the float32 observation, where the kernel
+    uses double angles: equal to about a float32 ulp).
+
+    Args:
+        core: The game whose state the rows come from (rows = its environments, in order).
+        agent: The agent index.
+    """
+
+    def __init__(self, core: GameCore, agent: int) -> None:
+        self.core = core
+        self.agent = agent
+
+    def __call__(self, obs: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
+        """``(B, size)`` Eq. 14 rows of this agent -> ``(B, size + 6)``."""
+        core, i = self.core, self.agent
+        layout = core.layout
+        s = core.state
+        if obs.shape[0] != core.num_envs:
+            raise ValueError(
+                f"expected one observation row per environment ({core.num_envs}), got {obs.shape[0]}"
+            )
+        psi = obs[:, layout.yaw].astype(np.float64) * np.pi
+        rel = obs[:, layout.azimuth].astype(np.float64) * np.pi - psi
+        v_max, om_max = core.robots.limits[i, 1], core.robots.limits[i, 2]
+        extra = np.stack(
+            [
+                np.sin(rel),
+                np.cos(rel),
+                np.clip(s.velocity[:, i, 0] / v_max, -1.0, 1.0),
+                np.clip(s.velocity[:, i, 2] / om_max, -1.0, 1.0),
+                np.clip(s.positions[:, i, 0] / core.site[0], -1.0, 1.0),
+                np.clip(s.positions[:, i, 1] / core.site[1], -1.0, 1.0),
+            ],
+            axis=-1,
+        ).astype(np.float32)
+        return np.concatenate([obs, extra], axis=-1)
+
+
 class SB3Policy:
     """A deterministic policy from an SB3 model; actions clipped to its action space.
 
@@ -46,21 +92,27 @@ class SB3Policy:
         ValueError: The model's observation or action space does not fit the agent's.
     """
 
-    def __init__(self, model: Any, *, obs_size: int | None = None) -> None:
+    def __init__(
+        self, model: Any, *, obs_size: int | None = None, extend: ExtendedObservation | None = None
+    ) -> None:
         self.model = model
         self.low = np.asarray(model.action_space.low, dtype=np.float64)
         self.high = np.asarray(model.action_space.high, dtype=np.float64)
+        self.extend = extend
         shape = model.observation_space.shape
-        if obs_size is not None and shape != (obs_size,):
+        expected = None if obs_size is None else obs_size + (EXTENDED_SIZE if extend is not None else 0)
+        if expected is not None and shape != (expected,):
             raise ValueError(
                 f"the model observes {shape} but the agent's observation has {obs_size} values; it was "
-                "trained on another layout (beam count, or extended_obs on/off)"
+                "trained on another layout (another beam count)"
             )
 
     def act(self, obs: npt.ArrayLike, episode_start: npt.ArrayLike | None = None) -> npt.NDArray[np.float64]:
         """Actions for observations (deterministic)."""
         o = np.asarray(obs, dtype=np.float32)
         flat = o.reshape(-1, o.shape[-1])
+        if self.extend is not None:
+            flat = self.extend(flat)
         action, _ = self.model.predict(flat, deterministic=True)
         out = np.clip(np.asarray(action, dtype=np.float64), self.low, self.high)
         result: npt.NDArray[np.float64] = out.reshape(*o.shape[:-1], out.shape[-1])
@@ -68,7 +120,13 @@ class SB3Policy:
 
 
 def _load(path: Path, core: GameCore, agent: str) -> SB3Policy:
-    return SB3Policy(load_sb3_model(path), obs_size=core.layout.size)
+    model = load_sb3_model(path)
+    size = core.layout.size
+    wants = model.observation_space.shape[0]
+    extend = None
+    if not core.layout.extended and wants == size + EXTENDED_SIZE:
+        extend = ExtendedObservation(core, core.agents.index(agent))
+    return SB3Policy(model, obs_size=size, extend=extend)
 
 
 register_loader("sb3", _load)

@@ -78,7 +78,8 @@ def register(main: click.Group, bench: click.Group) -> None:
         "--policy",
         multiple=True,
         metavar="AGENT=SPEC",
-        help="A zoo policy for an agent (repeatable); others follow their role's scripted default.",
+        help="A zoo policy for an agent (repeatable); others follow their role's default "
+        "(the shipped trained one).",
     )
     @click.option("--seed", type=int, default=None, help="Episode seed (default: the scenario's).")
     @click.option("--max-steps", type=int, default=None, help="Step limit (default: the scenario's).")

@@ -11,8 +11,9 @@ seed), so a service calls them in a worker process; frames reach the parent thro
 ``on_frame`` (e.g. put on a queue) and ``cancel`` may be a ``multiprocessing.Event``.
 
 Policies are zoo specs (:func:`hptvsim.zoo.load_policy`): ``scripted:pure_pursuit``, a shipped
-trained policy's name, ... An agent without a spec follows the scripted default of its role
-(pursuers ``scripted:pure_pursuit``, evaders ``scripted:potential_field``; in the goto task
+trained policy's name, ... An agent without a spec follows its role's default
+(:func:`hptvsim.zoo.default_policy`: the shipped trained policy of its role where there is one,
+else pursuers ``scripted:pure_pursuit``, evaders ``scripted:potential_field``; in the goto task
 every agent ``scripted:pure_pursuit``). The spec :data:`EXTERNAL` marks an agent whose actions
 must come with every :meth:`EpisodeStepper.step`.
 """
@@ -120,10 +121,11 @@ def resolve_scenario(scenario: ScenarioLike, *, allow_paths: bool = False) -> Sc
 
 
 def default_policy(core: GameCore, agent: str) -> str:
-    """The zoo spec an agent follows when none is given."""
-    from hptvsim.envs.single import default_policy_name
+    """The zoo spec an agent follows when none is given (:func:`hptvsim.zoo.default_policy`)."""
+    from hptvsim.zoo import default_policy as zoo_default
 
-    return f"scripted:{default_policy_name(core, agent)}"
+    role = "pursuer" if core.pursuer[core.agents.index(agent)] else "evader"
+    return zoo_default(role, "goto" if core.goto else "pursuit")
 
 
 def _policy_specs(core: GameCore, policies: Mapping[str, str] | None) -> dict[str, str]:
@@ -338,7 +340,7 @@ class EpisodeStepper:
     Args:
         scenario: A shipped scenario's name, a :class:`~hptvsim.world.scenario.Scenario` or
             scenario data (see :func:`resolve_scenario`).
-        policies: ``{agent: zoo spec}``; agents left out follow their role's scripted default;
+        policies: ``{agent: zoo spec}``; agents left out follow their role's default;
             :data:`EXTERNAL` marks agents whose actions every :meth:`step` must give.
         seed: Seed of spawn poses, sensor noise and stochastic policies (default: the scenario's).
         max_steps: Step limit (default: the scenario's).
@@ -730,7 +732,7 @@ def run_episode(
 
     Args:
         scenario: A shipped scenario's name, a Scenario or scenario data (:func:`resolve_scenario`).
-        policies: ``{agent: zoo spec}``; agents left out follow their role's scripted default.
+        policies: ``{agent: zoo spec}``; agents left out follow their role's default.
         seed: Seed of spawn poses, sensor noise and stochastic policies (default: the scenario's).
         max_steps: Step limit (default: the scenario's).
         sensor_fidelity: ``geometric`` or ``signal`` (default: the scenario's).

@@ -243,7 +243,8 @@ class LiveView:
         host: Address to listen on.
         port: Port (0: a free one; see :attr:`port`).
         scenario: Shipped scenario to start with.
-        policies: ``{agent: zoo spec}`` to start with (others: their role's scripted default).
+        policies: ``{agent: zoo spec}`` to start with (others: their role's default,
+            :func:`hptvsim.zoo.default_policy`).
         seed: Seed of the first episode (each automatic restart adds 1).
         speed: Simulated seconds per wall-clock second.
         max_steps: Step limit (default: the scenario's).
@@ -577,7 +578,7 @@ class LiveView:
 
     def _build_gui(self) -> None:
         from hptvsim.world.scenario import list_scenarios
-        from hptvsim.zoo import list_policies
+        from hptvsim.zoo import default_policy, list_policies
 
         gui = self.server.gui
         g = self._gui
@@ -597,12 +598,12 @@ class LiveView:
             g["pursuer_policy"] = gui.add_dropdown(
                 "Pursuers' policy",
                 pursuer,
-                initial_value=self.policies.get("pursuer_0", "scripted:pure_pursuit"),
+                initial_value=self.policies.get("pursuer_0", default_policy("pursuer", "pursuit")),
             )
             g["evader_policy"] = gui.add_dropdown(
                 "Evaders' policy",
                 evader,
-                initial_value=self.policies.get("evader_0", "scripted:potential_field"),
+                initial_value=self.policies.get("evader_0", default_policy("evader", "pursuit")),
             )
             g["seed"] = gui.add_number("Seed", initial_value=self.seed, min=0, step=1)
             g["apply"] = gui.add_button("Start episode")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import pytest
@@ -251,3 +252,50 @@ def test_compiled_bookkeeping_equals_the_numpy_reference(scenario: str) -> None:
         if core.state.done.any():
             core.reset(np.flatnonzero(core.state.done))
     core.close()
+
+
+def test_reward_option_reweights_the_game() -> None:
+    """``reward=`` (GameCore and every env) overrides ``[task.reward]``; bad keys name the valid ones."""
+    import gymnasium
+
+    from hptvsim.envs import UPEGBatchEnv, UPEGParallelEnv, UPEGVectorEnv
+    from hptvsim.world.scenario import ScenarioError
+
+    weights = {"delta_C": 0.01, "delta_E1": 4.0, "delta_E2": 0.1}
+    plain = UPEGParallelEnv("source", seed=3)
+    shaped = UPEGParallelEnv("source", seed=3, reward=weights)
+    try:
+        assert shaped.core.task.reward.delta_E1 == 4.0 and plain.core.task.reward.delta_E1 == 1.0
+        plain.reset(seed=3)
+        shaped.reset(seed=3)
+        seen_nonzero = False
+        for _ in range(40):
+            act: dict[str, Any] = {a: np.array([2.0, 0.3]) for a in plain.agents}
+            _, r_plain, *_, info_plain = plain.step(act)
+            _, r_shaped, *_, info_shaped = shaped.step(act)
+            for a in r_plain:
+                terms = info_plain[a]
+                assert terms == info_shaped[a]  # same game, only the weights differ
+                expected = 0.01 * terms["r_C"] + 4.0 * terms["r_E1"] + 0.1 * terms["r_E2"]
+                assert r_shaped[a] == pytest.approx(expected)
+                assert r_plain[a] == pytest.approx(terms["r_C"] + terms["r_E1"] + terms["r_E2"])
+                seen_nonzero |= terms["r_E1"] != 0.0
+            if not plain.agents:
+                break
+        assert seen_nonzero
+    finally:
+        plain.close()
+        shaped.close()
+    views: list[Any] = [
+        gymnasium.make("hptvsim/UPEG-Pursuer-v0", scenario="source", reward=weights).unwrapped,
+        UPEGBatchEnv(2, "source", reward=weights),
+        UPEGVectorEnv(2, "source", reward=weights),
+    ]
+    for view in views:
+        assert view.core.task.reward.delta_C == 0.01
+        view.close()
+    with pytest.raises(ScenarioError, match="delta_X") as bad:
+        GameCore("source", reward={"delta_X": 1.0})
+    assert "delta_C" in str(bad.value)
+    with pytest.raises(ScenarioError, match="delta_C"):
+        GameCore("source", reward={"delta_C": -1.0})

@@ -17,6 +17,7 @@ from service_helpers import Server, wait_final
 from hptvsim.client import Client, ServiceError
 from hptvsim.viz.frames import EpisodeStatic, EpisodeSummary, Frame, Trajectories
 from hptvsim.viz.recording import read_recording
+from hptvsim.zoo import default_policy
 
 
 def test_health_scenarios_policies_config(server: Server, api: httpx.Client) -> None:
@@ -63,7 +64,7 @@ def test_run_stream_results_and_recording(server: Server, api: httpx.Client, tmp
     assert r.status_code == 201, r.text
     ep = r.json()
     assert ep["status"] in ("queued", "running") and ep["seed"] == 7 and ep["max_steps"] == 300
-    assert ep["policies"]["evader_0"] == "scripted:potential_field"
+    assert ep["policies"]["evader_0"] == default_policy("evader", "pursuit")  # the shipped MAISAC one
     # stream: status first, frames that follow the frame schema, and the final status last
     events = _sse(api, f"/episodes/{ep['id']}/events?static=true")
     kinds = [k for k, _ in events]
@@ -183,11 +184,12 @@ def test_episode_list_filters_and_delete(server: Server, api: httpx.Client) -> N
     page = api.get("/episodes", params={"scenario": "goto_tiny", "status": ["finished"]}).json()
     assert a["id"] in [e["id"] for e in page["items"]] and b["id"] not in [e["id"] for e in page["items"]]
     assert all(e["scenario"] == "goto_tiny" for e in page["items"])
-    by_policy = api.get("/episodes", params={"policy": "scripted:potential_field", "limit": 500}).json()
+    evader = default_policy("evader", "pursuit")  # b's evader; goto_tiny: pure pursuit for all
+    by_policy = api.get("/episodes", params={"policy": evader, "limit": 500}).json()
     assert b["id"] in [e["id"] for e in by_policy["items"]] and a["id"] not in [
         e["id"] for e in by_policy["items"]
     ]
-    assert all("scripted:potential_field" in e["policies"].values() for e in by_policy["items"])
+    assert all(evader in e["policies"].values() for e in by_policy["items"])
     nb = api.get(f"/episodes/{b['id']}").json()
     assert not nb["has_recording"] and api.get(f"/episodes/{b['id']}/recording").status_code == 404
     assert api.get("/episodes", params={"limit": 1}).json()["items"].__len__() == 1

@@ -391,11 +391,10 @@ async function refreshList() {
   const params = new URLSearchParams({ limit: "200" });
   if ($("filter-status").value) params.append("status", $("filter-status").value);
   if ($("filter-scenario").value) params.append("scenario", $("filter-scenario").value);
+  if ($("filter-policy").value) params.append("policy", $("filter-policy").value);
   try {
     const page = await api(`/episodes?${params}`);
-    const policy = $("filter-policy").value;
-    // the API has no policy filter yet (web/API_NEEDS.md): filter this page here
-    state.episodes = page.items.filter((e) => !policy || Object.values(e.policies).includes(policy));
+    state.episodes = page.items;
     $("episode-count").textContent = `${state.episodes.length} shown of ${page.total}`;
     renderList();
   } catch (err) {
