@@ -1,0 +1,149 @@
+"""The shipped trained policies (``policies/index.toml``): they load, act, say how they were made.
+
+The slow tests replay the comparison of the closing note of the training issue over 100 seeded
+target-scenario episodes: the shipped evader escapes pure pursuit more often than the
+potential-field evader does (holds); the shipped pursuers capture the shipped evader more often
+than scripted pure-pursuit pursuers do (does not hold here: a strict xfail, so that it is noticed
+when a better-trained set of pursuers makes it hold).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hptvsim.envs import GameCore
+from hptvsim.train.config import load_config
+from hptvsim.zoo import default_policy, list_policies, load_policy, policy_dir
+
+ROOT = Path(__file__).resolve().parents[2]
+SHIPPED = [p for p in list_policies() if p.kind == "sb3"]
+SHIPPED_DT = [p for p in list_policies() if p.kind == "dt"]
+
+
+def test_the_shipped_folder_is_the_checkout_s_and_lists_both_roles() -> None:
+    assert policy_dir().resolve() == (ROOT / "policies").resolve()
+    roles = {r for p in SHIPPED for r in p.roles}
+    assert roles == {"pursuer", "evader"}, [p.name for p in SHIPPED]
+
+
+@pytest.mark.parametrize("info", SHIPPED, ids=lambda p: p.name)
+def test_a_shipped_policy_records_how_it_was_made(info) -> None:  # type: ignore[no-untyped-def]
+    prov = info.provenance
+    for key in ("command", "config", "seed", "stage", "versions", "evaluation"):
+        assert key in prov, f"{info.name}: provenance lacks {key!r}"
+    config = ROOT / prov["config"]
+    assert config.is_file(), config
+    cfg = load_config(config)
+    assert cfg.seed == prov["seed"]
+    assert prov["stage"] in [s.name for s in cfg.stages]
+    assert prov["config"] in prov["command"]
+    for file in {info.path, *info.files.values()}:
+        assert file is not None and file.is_file(), file
+    _check_sha256(info)
+
+
+def _check_sha256(info) -> None:  # type: ignore[no-untyped-def]
+    """The recorded sha256 (one, or one per agent file) is the shipped file's."""
+    recorded = info.provenance["sha256"]
+    files = info.files if isinstance(recorded, dict) else {"": info.path}
+    digests = recorded if isinstance(recorded, dict) else {"": recorded}
+    assert set(digests) == set(files)
+    for key, file in files.items():
+        assert hashlib.sha256(file.read_bytes()).hexdigest() == digests[key], file
+
+
+@pytest.mark.parametrize("info", SHIPPED, ids=lambda p: p.name)
+@pytest.mark.parametrize("extended", [True, False], ids=["extended-obs", "eq14-obs"])
+def test_a_shipped_policy_acts_within_its_agent_s_limits(info, extended: bool) -> None:  # type: ignore[no-untyped-def]
+    core = GameCore("target", extended_obs=extended, seed=3)
+    obs = core.reset(seed=3)
+    agents = [
+        a for i, a in enumerate(core.agents) if ("pursuer" if core.pursuer[i] else "evader") in info.roles
+    ]
+    for agent in agents:
+        policy = load_policy(info.name, core, agent)
+        i = core.agents.index(agent)
+        act = np.asarray(policy.act(obs[:, i]))
+        v_min, v_max, om = core.robots.limits[i]
+        assert act.shape == (1, 2)
+        assert v_min - 1e-6 <= act[0, 0] <= v_max + 1e-6
+        assert -om - 1e-6 <= act[0, 1] <= om + 1e-6
+
+
+@pytest.mark.parametrize("info", SHIPPED_DT, ids=lambda p: p.name)
+def test_the_shipped_dt_drives_the_pursuers(info) -> None:  # type: ignore[no-untyped-def]
+    """The shipped Decision Transformers: provenance, one model per pursuer, actions in the box."""
+    for key in ("command", "config", "seed", "versions", "evaluation", "data"):
+        assert key in info.provenance, f"{info.name}: provenance lacks {key!r}"
+    assert (ROOT / info.provenance["config"]).is_file()
+    _check_sha256(info)
+    core = GameCore("target", num_envs=2, seed=5)
+    obs = core.reset(seed=5)
+    try:
+        for i in range(3):
+            policy = load_policy(info.name, core, f"pursuer_{i}")
+            for _ in range(3):
+                act = np.asarray(policy.act(obs[:, i]))
+                assert act.shape == (2, 2)
+                assert np.all(act[:, 0] >= 0.0) and np.all(act[:, 0] <= 3.0 + 1e-6)
+                assert np.all(np.abs(act[:, 1]) <= 1.5 + 1e-6)
+        with pytest.raises(ValueError, match="evader"):
+            load_policy(info.name, core, "evader_0")
+    finally:
+        core.close()
+
+
+def test_a_dt_is_shipped() -> None:
+    assert SHIPPED_DT, "policies/index.toml lists no DT"
+
+
+def test_each_pursuer_gets_its_own_network() -> None:
+    pursuers = [p for p in SHIPPED if "pursuer" in p.roles]
+    assert pursuers
+    info = pursuers[0]
+    assert len({f.read_bytes() for f in info.files.values()}) == len(info.files) >= 3
+
+
+def test_the_shipped_policies_are_the_pursuit_defaults() -> None:
+    index = tomllib.loads((ROOT / "policies" / "index.toml").read_text())["policies"]
+    for role in ("pursuer", "evader"):
+        name = default_policy(role, "pursuit")
+        assert name in index and "pursuit" in index[name]["default_for"]
+    assert default_policy("pursuer", "goto") == "scripted:pure_pursuit"
+
+
+def _capture(pursuers: str, evaders: str, scenario: str = "target") -> float:
+    """Capture rate over 100 seeded episodes (extended observation, 1200 steps), as `evaluate`."""
+    from hptvsim.train.envs import EnvSpec, make_env_factory
+    from hptvsim.train.evaluate import evaluate, policies_from_specs
+
+    options = {"extended_obs": True, "max_steps": 1200}
+    factory = make_env_factory(EnvSpec(kind="hptvsim", scenario=scenario, task="pursuit", options=options))
+    res = evaluate(factory, policies_from_specs(pursuers, {"evader": evaders}), episodes=100)
+    rate = res.summary["capture_rate"]["mean"]
+    assert rate is not None
+    return float(rate)
+
+
+@pytest.mark.slow
+def test_the_shipped_evader_escapes_pure_pursuit_more_often_than_the_potential_field() -> None:
+    evader = default_policy("evader", "pursuit")
+    shipped = _capture("scripted:pure_pursuit", evader)  # measured 0.26
+    assert shipped < _capture("scripted:pure_pursuit", "scripted:potential_field")  # measured 0.56
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(
+    strict=True,
+    reason="measured: the shipped pursuers capture the shipped evader in 0.01 of 100 target "
+    "episodes, pure pursuit in 0.26 (they collide at the scenario's ridge; closing note of the "
+    "training issue)",
+)
+def test_the_shipped_pursuers_capture_the_shipped_evader_more_often_than_pure_pursuit() -> None:
+    evader = default_policy("evader", "pursuit")
+    assert _capture(default_policy("pursuer", "pursuit"), evader) > _capture("scripted:pure_pursuit", evader)
