@@ -12,6 +12,7 @@ import pytest
 from hptvsim.viz.episode import EXTERNAL, EpisodeStepper, resolve_scenario, run_episode
 from hptvsim.viz.frames import EpisodeStatic, Frame
 from hptvsim.world.scenario import ScenarioError, load_scenario
+from hptvsim.zoo import default_policy
 
 
 def test_same_seed_same_frames_bit_for_bit() -> None:
@@ -112,10 +113,11 @@ def test_static_part_describes_the_scenario() -> None:
         assert s.scenario == "target" and s.task == "pursuit" and s.dt == 0.25 and s.max_steps == 5
         assert s.site.size == tuple(sc.site.size)
         assert [a.name for a in s.agents] == list(sc.agent_names)
+        pursuer = default_policy("pursuer", "pursuit")  # agents not named: their role's default
         assert {a.name: a.policy for a in s.agents} == {
-            "pursuer_0": "scripted:pure_pursuit",
-            "pursuer_1": "scripted:pure_pursuit",
-            "pursuer_2": "scripted:pure_pursuit",
+            "pursuer_0": pursuer,
+            "pursuer_1": pursuer,
+            "pursuer_2": pursuer,
             "evader_0": "scripted:stationary",
         }
         assert len({a.color for a in s.agents}) == 4
