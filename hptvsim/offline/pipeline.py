@@ -143,6 +143,7 @@ def run_pipeline(
     t0 = time.perf_counter()
     ids = _existing(data_dir, scenario)
     if ids:
+        _check_experts(data_dir, ids, pursuers, evader, scenario)
         log(f"[1/4] reusing datasets: {', '.join(ids)}")
         collected: dict[str, Any] = {"reused": ids}
     else:
@@ -242,6 +243,32 @@ def run_pipeline(
     (out / "summary.json").write_text(json.dumps(summary, indent=1, default=float))
     log(f"done: {out / 'summary.json'}")
     return PipelineResult(out=out, summary=summary)
+
+
+def _check_experts(
+    data_dir: Path, ids: Sequence[str], pursuers: str | None, evader: str | None, scenario: str
+) -> None:
+    """Refuse to reuse datasets collected with other policies than this run asks for.
+
+    Raises:
+        ValueError: Naming the folder, what its data was collected with and what was asked.
+    """
+    from hptvsim.offline.dataset import default_expert_spec
+
+    want = {
+        "pursuer": pursuers or default_expert_spec("pursuer", scenario),
+        "evader": evader or default_expert_spec("evader", scenario),
+    }
+    for ds_id in ids:
+        policies = open_dataset(ds_id, data_dir).storage.metadata.get("hptvsim", {}).get("policies", {})
+        for agent, spec in policies.items():
+            role = "pursuer" if str(agent).startswith("pursuer") else "evader"
+            if spec != want[role]:
+                raise ValueError(
+                    f"{data_dir} holds {ds_id}, collected with {agent} = {spec}, but this run asks "
+                    f"for {role}s = {want[role]}; pass the same --pursuers/--evader, another --out, "
+                    f"or remove {data_dir}"
+                )
 
 
 def _existing(data_dir: Path, scenario: str) -> list[str]:

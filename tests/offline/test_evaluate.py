@@ -118,3 +118,6 @@ def test_pipeline_end_to_end_and_rerun(tmp_path: Path) -> None:
     again = run_pipeline(**kw, log=lines.append)
     assert any("reusing datasets" in line for line in lines)
     assert again.summary["training"]["first_loss"] == s["training"]["first_loss"]
+    # ... but not datasets of other experts than asked for
+    with pytest.raises(ValueError, match="scripted:proportional_navigation"):
+        run_pipeline(**kw, pursuers="scripted:proportional_navigation", log=lines.append)
