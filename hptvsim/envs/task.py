@@ -74,6 +74,7 @@ __all__ = [
     "RewardTerms",
     "bookkeeping",
     "end_flags",
+    "fill_extended",
     "observations",
     "reward_terms",
     "target_geometry",
@@ -249,15 +250,46 @@ def observations(
     if layout.extended:
         if velocity is None or limits is None or site is None:
             raise ValueError("the extended observation needs velocity, limits and site")
-        rel = azimuth - psi
         e = layout.beams + 4
-        obs[..., e] = np.sin(rel)
-        obs[..., e + 1] = np.cos(rel)
-        obs[..., e + 2] = np.clip(velocity[..., 0] / limits[None, :, 0], -1.0, 1.0)
-        obs[..., e + 3] = np.clip(velocity[..., 2] / limits[None, :, 1], -1.0, 1.0)
-        obs[..., e + 4] = np.clip(positions[..., 0] / site[0], -1.0, 1.0)
-        obs[..., e + 5] = np.clip(positions[..., 1] / site[1], -1.0, 1.0)
+        fill_extended(
+            obs[..., e : e + EXTENDED_SIZE],
+            relative_bearing=azimuth - psi,
+            velocity=velocity,
+            v_max=limits[None, :, 0],
+            omega_max=limits[None, :, 1],
+            positions=positions,
+            site=site,
+        )
     return obs
+
+
+def fill_extended(
+    out: npt.NDArray[np.float32],
+    *,
+    relative_bearing: F64,
+    velocity: F64,
+    v_max: F64 | float,
+    omega_max: F64 | float,
+    positions: F64,
+    site: tuple[float, float],
+) -> None:
+    """Write the six extended values (after Eq. 14; module docstring) into ``out[..., :6]``.
+
+    Args:
+        out: ``(..., 6)`` array to fill.
+        relative_bearing: ``(...)`` bearing to the target relative to the heading [rad].
+        velocity: ``(..., 3)`` ``[u, v, r]`` [m/s, m/s, rad/s].
+        v_max: Surge limit [m/s], broadcast against ``(...)``.
+        omega_max: Yaw-rate limit [rad/s], broadcast against ``(...)``.
+        positions: ``(..., 2)`` north and east positions [m].
+        site: ``(L_x, L_y)`` [m].
+    """
+    out[..., 0] = np.sin(relative_bearing)
+    out[..., 1] = np.cos(relative_bearing)
+    out[..., 2] = np.clip(velocity[..., 0] / v_max, -1.0, 1.0)
+    out[..., 3] = np.clip(velocity[..., 2] / omega_max, -1.0, 1.0)
+    out[..., 4] = np.clip(positions[..., 0] / site[0], -1.0, 1.0)
+    out[..., 5] = np.clip(positions[..., 1] / site[1], -1.0, 1.0)
 
 
 @dataclass(frozen=True)

@@ -141,9 +141,10 @@ def run_pipeline(
     times: dict[str, float] = {}
     data_dir = out / "datasets"
     t0 = time.perf_counter()
-    ids = _existing(data_dir, scenario)
+    found = _existing(data_dir, scenario)
+    ids = list(found)
     if ids:
-        _check_experts(data_dir, ids, pursuers, evader, scenario)
+        _check_experts(data_dir, found, pursuers, evader, scenario)
         log(f"[1/4] reusing datasets: {', '.join(ids)}")
         collected: dict[str, Any] = {"reused": ids}
     else:
@@ -246,7 +247,11 @@ def run_pipeline(
 
 
 def _check_experts(
-    data_dir: Path, ids: Sequence[str], pursuers: str | None, evader: str | None, scenario: str
+    data_dir: Path,
+    found: Mapping[str, Mapping[str, Any]],
+    pursuers: str | None,
+    evader: str | None,
+    scenario: str,
 ) -> None:
     """Refuse to reuse datasets collected with other policies than this run asks for.
 
@@ -259,9 +264,8 @@ def _check_experts(
         "pursuer": pursuers or default_expert_spec("pursuer", scenario),
         "evader": evader or default_expert_spec("evader", scenario),
     }
-    for ds_id in ids:
-        policies = open_dataset(ds_id, data_dir).storage.metadata.get("hptvsim", {}).get("policies", {})
-        for agent, spec in policies.items():
+    for ds_id, meta in found.items():
+        for agent, spec in meta.get("policies", {}).items():
             role = "pursuer" if str(agent).startswith("pursuer") else "evader"
             if spec != want[role]:
                 raise ValueError(
@@ -271,11 +275,11 @@ def _check_experts(
                 )
 
 
-def _existing(data_dir: Path, scenario: str) -> list[str]:
-    """Ids of the pursuer datasets of ``scenario`` already under ``data_dir``."""
+def _existing(data_dir: Path, scenario: str) -> dict[str, dict[str, Any]]:
+    """The pursuer datasets of ``scenario`` already under ``data_dir``: id -> their ``hptvsim`` metadata."""
     if not data_dir.is_dir():
-        return []
-    ids = []
+        return {}
+    found: dict[str, dict[str, Any]] = {}
     for meta in sorted(data_dir.glob("**/data/metadata.json")):
         ds_id = str(meta.parent.parent.relative_to(data_dir))
         try:
@@ -285,5 +289,5 @@ def _existing(data_dir: Path, scenario: str) -> list[str]:
         h = ds.storage.metadata.get("hptvsim", {})
         if h.get("role") == "pursuer" and Path(str(h.get("scenario", ""))).stem == Path(scenario).stem:
             dataset_path(ds_id, data_dir)
-            ids.append(ds_id)
-    return ids
+            found[ds_id] = dict(h)
+    return found

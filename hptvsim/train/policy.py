@@ -14,7 +14,7 @@ import numpy as np
 import numpy.typing as npt
 
 from hptvsim.envs.core import GameCore
-from hptvsim.envs.task import EXTENDED_SIZE
+from hptvsim.envs.task import EXTENDED_SIZE, fill_extended
 from hptvsim.zoo import register_loader
 
 __all__ = ["ExtendedObservation", "SB3Policy", "load_sb3_model"]
@@ -67,18 +67,16 @@ class ExtendedObservation:
             )
         psi = obs[:, layout.yaw].astype(np.float64) * np.pi
         rel = obs[:, layout.azimuth].astype(np.float64) * np.pi - psi
-        v_max, om_max = core.robots.limits[i, 1], core.robots.limits[i, 2]
-        extra = np.stack(
-            [
-                np.sin(rel),
-                np.cos(rel),
-                np.clip(s.velocity[:, i, 0] / v_max, -1.0, 1.0),
-                np.clip(s.velocity[:, i, 2] / om_max, -1.0, 1.0),
-                np.clip(s.positions[:, i, 0] / core.site[0], -1.0, 1.0),
-                np.clip(s.positions[:, i, 1] / core.site[1], -1.0, 1.0),
-            ],
-            axis=-1,
-        ).astype(np.float32)
+        extra = np.empty((obs.shape[0], EXTENDED_SIZE), dtype=np.float32)
+        fill_extended(
+            extra,
+            relative_bearing=rel,
+            velocity=s.velocity[:, i],
+            v_max=core.robots.limits[i, 1],
+            omega_max=core.robots.limits[i, 2],
+            positions=s.positions[:, i, :2],
+            site=core.site,
+        )
         return np.concatenate([obs, extra], axis=-1)
 
 
