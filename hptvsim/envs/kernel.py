@@ -64,6 +64,7 @@ class _Task(ctypes.Structure):
                 "collision_penalty",
                 "progress_reward",
                 "capture_reward",
+                "crash_penalty",
             )
         ],
         *[(n, ctypes.c_void_p) for n in ("pursuer", "radii", "limits", "cmd_limits", "goal_radius", "sdf")],
@@ -228,6 +229,7 @@ class TaskKernel:
             collision_penalty=w.collision_penalty,
             progress_reward=w.progress_reward,
             capture_reward=w.capture_reward,
+            crash_penalty=w.crash_penalty,
             pursuer=self._pursuer.ctypes.data,
             radii=self._radii.ctypes.data,
             limits=self._limits.ctypes.data,

@@ -53,6 +53,9 @@ not the noisy reported ones.
   every agent terminates;
 * leaving the site: a vehicle's centre outside ``[0, L_x] x [0, L_y]``: every agent terminates;
 * the step limit (6000 steps, Table II): every agent is truncated.
+
+An agent whose own collision or exit ends the episode also gets ``-crash_penalty`` that step
+(``[task.reward]``, 0 by default: not in the paper; see :class:`~hptvsim.world.scenario.Reward`).
 """
 
 from __future__ import annotations
@@ -420,7 +423,9 @@ class Bookkeeping:
     newly_done: Bool  # (B,) environments whose episode ended this step
 
 
-def bookkeeping(*, total: F64, flags: EndFlags, active: Bool, done: Bool) -> Bookkeeping:
+def bookkeeping(
+    *, total: F64, flags: EndFlags, active: Bool, done: Bool, crash_penalty: float = 0.0
+) -> Bookkeeping:
     """Apply the end rules to the agents that were active and the environments that ran.
 
     Capture and failures (collision, leaving the site) end the episode for every agent; a goal
@@ -432,9 +437,12 @@ def bookkeeping(*, total: F64, flags: EndFlags, active: Bool, done: Bool) -> Boo
         flags: The end flags of this step.
         active: ``(B, N)`` agents active before the step.
         done: ``(B,)`` environments done before the step (they did not run).
+        crash_penalty: Subtracted from the reward of each agent whose own collision or exit
+            from the site ends the episode (``[task.reward] crash_penalty``; 0 in the paper).
     """
     acted = active & ~done[:, None]
-    reward = np.where(acted, total, 0.0)
+    crashed = flags.collision | flags.out_of_site
+    reward = np.where(acted, total - np.where(crashed, crash_penalty, 0.0), 0.0)
     ends_all = (flags.captured | flags.failed)[:, None]
     terminated = acted & (ends_all | flags.reached)
     truncated = acted & ~terminated & flags.truncated[:, None]

@@ -16,6 +16,7 @@ typedef struct {
     double max_range, diagonal, site_x, site_y;
     double safe_distance, target_distance;
     double delta_C, delta_E1, delta_E2, collision_penalty, progress_reward, capture_reward;
+    double crash_penalty; /* subtracted when the agent's own collision or exit ends the episode */
     const uint8_t *pursuer;    /* (N,) */
     const double *radii;       /* (N,) m */
     const double *limits;      /* (N, 2): v_max [m/s], omega_max [rad/s] (extended only) */
@@ -219,7 +220,8 @@ int hptv_task_eval(const hptv_task_t *t, const hptv_task_io_t *io, int64_t b0, i
                 uint8_t acted = io->active[k] && !was_done;
                 uint8_t term = acted && (ends_all || io->reached[k]);
                 uint8_t trunc = acted && !term && io->truncated[b];
-                double r = acted ? io->total[k] : 0.0;
+                uint8_t crashed = io->collision[k] | io->out_of_site[k];
+                double r = acted ? io->total[k] - (crashed ? t->crash_penalty : 0.0) : 0.0;
                 io->reward[k] = r;
                 io->terminated_agent[k] = term;
                 io->truncated_agent[k] = trunc;

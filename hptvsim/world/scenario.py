@@ -284,6 +284,11 @@ class Reward:
     capture_reward`` within the target distance (Eq. 19). The paper gives the magnitudes
     (400, 0.25, 900) but not the weights; the default weights 1 reproduce its equations as
     published.
+
+    ``crash_penalty`` is ours (default 0, the paper's reward): a collision or leaving the site ends
+    the episode, and with it the stream of ``r_C`` penalties, so a learner that stays near an
+    obstacle earns more by running into it. A terminal penalty larger than the discounted sum of
+    those penalties (``delta_C collision_penalty / (1 - gamma)``) removes that incentive.
     """
 
     delta_C: float = spec(1.0, doc="weight of the collision term r_C (Eq. 20)", ge=0.0)
@@ -292,6 +297,11 @@ class Reward:
     collision_penalty: float = spec(400.0, doc="magnitude of r_C (Eq. 17)", ge=0.0)
     progress_reward: float = spec(0.25, doc="magnitude of r_E1 (Eq. 18)", ge=0.0)
     capture_reward: float = spec(900.0, doc="value of r_E2 within the target distance (Eq. 19)", ge=0.0)
+    crash_penalty: float = spec(
+        0.0,
+        doc="subtracted once from an agent whose own collision or exit ends the episode (not in the paper)",
+        ge=0.0,
+    )
 
     def __post_init__(self) -> None:
         check_bounds(self)

@@ -223,11 +223,12 @@ def test_compiled_task_layer_equals_the_numpy_reference(scenario: str, extended:
     core.close()
 
 
-@pytest.mark.parametrize("scenario", ["target", "source_goto"])
-def test_compiled_bookkeeping_equals_the_numpy_reference(scenario: str) -> None:
+@pytest.mark.parametrize(("scenario", "crash"), [("target", 0.0), ("source_goto", 0.0), ("target", 500.0)])
+def test_compiled_bookkeeping_equals_the_numpy_reference(scenario: str, crash: float) -> None:
     from hptvsim.envs.task import bookkeeping
 
-    core = GameCore(scenario, num_envs=16, max_steps=60, seed=2)
+    core = GameCore(scenario, num_envs=16, max_steps=60, seed=2, reward={"crash_penalty": crash})
+    crashes = 0
     core.reset(seed=2)
     rng = np.random.default_rng(1)
     lim = core.robots.limits
@@ -241,7 +242,12 @@ def test_compiled_bookkeeping_equals_the_numpy_reference(scenario: str) -> None:
             axis=-1,
         )
         result = core.step(actions)
-        ref = bookkeeping(total=result.terms.total, flags=result.flags, active=active, done=done)
+        ref = bookkeeping(
+            total=result.terms.total, flags=result.flags, active=active, done=done, crash_penalty=crash
+        )
+        hit = ref.terminated & (result.flags.collision | result.flags.out_of_site)
+        crashes += int(hit.sum())
+        np.testing.assert_array_equal(result.reward[hit], result.terms.total[hit] - crash)
         np.testing.assert_array_equal(result.reward, ref.reward)
         np.testing.assert_array_equal(result.terminated, ref.terminated)
         np.testing.assert_array_equal(result.truncated, ref.truncated)
@@ -252,6 +258,7 @@ def test_compiled_bookkeeping_equals_the_numpy_reference(scenario: str) -> None:
         if core.state.done.any():
             core.reset(np.flatnonzero(core.state.done))
     core.close()
+    assert crashes > 0 or scenario == "source_goto"  # random actions crash in target
 
 
 def test_reward_option_reweights_the_game() -> None:
