@@ -475,7 +475,8 @@ def train(
     """Train (or resume) a run (see the module docstring).
 
     Args:
-        cfg: The run's config. On resume it must equal the one in ``run_dir/config.toml``.
+        cfg: The run's config. On resume it must equal the one in ``run_dir/config.toml``,
+            except that ``updates`` may grow (training goes on; the warm-up must not change).
         run_dir: The run folder (created).
         progress: Show a progress bar.
         tensorboard: Write TensorBoard events.
@@ -493,10 +494,15 @@ def train(
     ckpt_path = run_dir / "checkpoint.pt"
     if cfg_path.is_file() and ckpt_path.is_file():
         previous = load_train_config(cfg_path)
-        if previous != cfg:
+        extends = (
+            dataclasses.replace(previous, updates=cfg.updates) == cfg
+            and cfg.updates >= previous.updates
+            and cfg.warmup == previous.warmup
+        )
+        if previous != cfg and not extends:
             raise ValueError(
                 f"{run_dir} holds a run with another config ({cfg_path}); use another folder, or the same "
-                "config to resume"
+                "config to resume (only `updates` may grow, with the same warm-up)"
             )
     cfg_path.write_text(dump_toml(cfg.as_dict()))
     if cfg.threads is not None:

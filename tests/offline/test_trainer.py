@@ -65,6 +65,26 @@ def test_resume_after_a_kill_equals_one_run(dial_root: Path, tmp_path: Path) -> 
     assert again.resumed_from == 12
 
 
+def test_a_finished_run_trains_on_when_updates_grow(dial_root: Path, tmp_path: Path) -> None:
+    """Raising ``updates`` resumes a run to the new total, as if it had been set from the start."""
+    straight = train(
+        _cfg(dial_root, updates=20, warmup_steps=2), tmp_path / "a", progress=False, tensorboard=False
+    )
+    train(_cfg(dial_root, updates=12, warmup_steps=2), tmp_path / "b", progress=False, tensorboard=False)
+    more = train(
+        _cfg(dial_root, updates=20, warmup_steps=2), tmp_path / "b", progress=False, tensorboard=False
+    )
+    assert more.resumed_from == 12 and more.updates == straight.updates == 20
+    a = load_policy_file(tmp_path / "a" / "dt.pt")["state_dict"]
+    b = load_policy_file(tmp_path / "b" / "dt.pt")["state_dict"]
+    for key in a:
+        torch.testing.assert_close(a[key], b[key], rtol=0, atol=0)
+    with pytest.raises(ValueError, match="only `updates` may grow"):  # fewer updates
+        train(_cfg(dial_root, updates=16, warmup_steps=2), tmp_path / "b", progress=False, tensorboard=False)
+    with pytest.raises(ValueError, match="another config"):  # a warm-up derived from `updates` moves
+        train(_cfg(dial_root, updates=40), tmp_path / "b", progress=False, tensorboard=False)
+
+
 def test_loss_log_and_policy_file(dial_root: Path, tmp_path: Path) -> None:
     cfg = _cfg(dial_root)
     res = train(cfg, tmp_path, progress=False, tensorboard=False)
