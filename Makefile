@@ -57,15 +57,14 @@ bench-quick: setup
 fmus: setup
 	$(BIN)/hptvsim fmu build
 
-# The offline stage of ETFDU in one command: expert datasets (Minari), DT pursuers, evaluation
-# over 100 seeded episodes, Figs. 14-17 (about 1.5 hours on 2 cores; re-run to resume). The
-# experts are scripted pure pursuit against the potential-field evader: the shipped MAISAC
-# pursuers capture too rarely in the target scenario to be worth imitating (README).
+# The offline stage of ETFDU in one command, as in the paper: the shipped MAISAC pursuers play the
+# shipped MAISAC evader on the target scenario (200 expert episodes of up to 1200 steps, the
+# length the shipped policies were trained and evaluated at), one DT per pursuer learns from them
+# (configs/dt/target.toml, 3000 updates), and the DTs play the same evader over 100 seeded
+# episodes; Figs. 14-17. About 1.5 hours on 2 cores; re-run to resume.
 dt-pipeline: setup
-	$(BIN)/hptvsim dt pipeline --out hptvsim-out/dt-target --pursuers scripted:pure_pursuit \
-		--evader scripted:potential_field --target q50 --target q90
-	$(BIN)/hptvsim dt evaluate hptvsim-out/dt-target/run/dt.pt --evader maisac-evader --target q90 \
-		--out hptvsim-out/dt-target/eval-vs-maisac-evader
+	$(BIN)/hptvsim dt pipeline --out hptvsim-out/dt-target --pursuers maisac-pursuers \
+		--evader maisac-evader --max-steps 1200 --target q50 --target q90
 
 clean:
 	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache hptvsim-out

@@ -1,17 +1,14 @@
 """The offline stage on the shipped target scenario, full size (about 1.5 hours on 2 cores: slow).
 
 What the issue asks: the DT training loss falls by at least 10x (the paper: 0.84 to 0.07), and
-the DT pursuers reach a capture rate within 10 percentage points of the experts they learned
-from, over 100 seeded episodes (the same episodes for both), against the trained evader. The
-experts are scripted pure-pursuit pursuers against the potential-field evader, as in
-``make dt-pipeline``: the shipped MAISAC pursuers capture the trained evader in the target
-scenario too rarely to be worth imitating (closing note of the training issue).
+the DT pursuers reach a capture rate within 10 percentage points of the SAC experts they learned
+from, over 100 seeded episodes (the same episodes for both), against the trained evader. As in
+the paper and ``make dt-pipeline``: the experts are the shipped MAISAC pursuers, the evader the
+shipped MAISAC evader, episodes of up to 1200 steps (what those policies were trained at).
 
-Measured here (README, closing note of the offline issue): with scripted pure-pursuit experts
-against the potential-field evader, the DT (q90) captures the shipped MAISAC evader in 0.43 of
-100 episodes, the experts in 0.52: within 10 points; against the potential-field evader the
-data came from, 0.29 against 0.72: not within 10 points (marked xfail, strict, so that it is
-noticed when it starts to hold).
+Measured here (README, closing note of the offline issue): loss 0.393/0.472/0.372 ->
+0.0295/0.0140/0.0362 (13.3x/33.6x/10.2x) in 3000 updates; capture over 100 seeded episodes:
+experts 0.72, DT @ q50 0.73, DT @ q90 0.67.
 
 ``HPTVSIM_DT_PIPELINE_DIR`` names a folder to run in (resumes what is there, e.g. the output of
 ``make dt-pipeline``); by default a fresh temporary folder.
@@ -25,8 +22,9 @@ from typing import Any
 
 import pytest
 
-from hptvsim.offline.evaluate import evaluate_dt
 from hptvsim.offline.pipeline import run_pipeline
+
+TARGETS = ["q50", "q90"]
 
 
 @pytest.fixture(scope="module")
@@ -35,10 +33,11 @@ def pipeline(tmp_path_factory: pytest.TempPathFactory) -> Any:
     return run_pipeline(
         out=out,
         scenario="target",
-        pursuers="scripted:pure_pursuit",
-        evader="scripted:potential_field",
+        pursuers="maisac-pursuers",
+        evader="maisac-evader",
+        max_steps=1200,
         eval_episodes=100,
-        targets=["q90"],
+        targets=TARGETS,
         progress=False,
     )
 
@@ -53,21 +52,9 @@ def test_dt_loss_falls_tenfold_and_figures_exist(pipeline: Any) -> None:
 
 
 @pytest.mark.slow
-def test_dt_pursuers_against_the_trained_evader(pipeline: Any) -> None:
-    report = evaluate_dt(
-        pipeline.out / "run" / "dt.pt", evader="maisac-evader", targets=["q90"], episodes=100
-    )
-    expert, dt = report.row("expert").mean("capture_rate"), report.row("DT @ q90").mean("capture_rate")
-    assert dt >= expert - 0.10, f"DT capture rate {dt:.2f} vs experts {expert:.2f}"
-
-
-@pytest.mark.slow
-@pytest.mark.xfail(
-    strict=True,
-    reason="measured 0.29 vs 0.72 against the data's potential-field evader: the DTs collide at "
-    "the target scenario's ridge far more often than their experts (see the module docstring)",
-)
-def test_dt_pursuers_against_the_data_s_evader(pipeline: Any) -> None:
+@pytest.mark.parametrize("target", TARGETS)
+def test_dt_pursuers_capture_within_ten_points_of_their_experts(pipeline: Any, target: str) -> None:
     ev = pipeline.summary["evaluation"]
-    expert, dt = ev["expert"]["capture_rate"], ev["DT @ q90"]["capture_rate"]
+    expert, dt = ev["expert"]["capture_rate"], ev[f"DT @ {target}"]["capture_rate"]
+    assert expert > 0.5, f"the experts capture in {expert:.2f} only"  # measured 0.72
     assert dt >= expert - 0.10, f"DT capture rate {dt:.2f} vs experts {expert:.2f}"
