@@ -24,23 +24,23 @@ out of the loss.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from typing import Any
 
 import torch
 import torch.nn.functional as F  # noqa: N812 - torch's own convention
 from torch import Tensor, nn
 
-__all__ = ["DTConfig", "DecisionTransformer"]
+__all__ = ["DTConfig", "DTShape", "DecisionTransformer"]
 
 
 @dataclass(frozen=True, kw_only=True)
-class DTConfig:
-    """Shape of a Decision Transformer (defaults: the original implementation's).
+class DTShape:
+    """The transformer's shape, without the data's sizes (defaults: the original implementation's).
+
+    Training configs name this (``[model]``); :class:`DTConfig` adds the state and action sizes.
 
     Attributes:
-        state_dim: Observation size (Eq. 14: sonar beams + 4).
-        act_dim: Action size (Eq. 16: 2).
         context: K, the number of steps the model sees.
         embed_dim: Width of every token's embedding.
         layers: Transformer blocks.
@@ -50,8 +50,6 @@ class DTConfig:
             reuse the last embedding.
     """
 
-    state_dim: int
-    act_dim: int = 2
     context: int = 20
     embed_dim: int = 128
     layers: int = 3
@@ -60,7 +58,7 @@ class DTConfig:
     max_ep_len: int = 6000
 
     def __post_init__(self) -> None:
-        for name in ("state_dim", "act_dim", "context", "embed_dim", "layers", "heads", "max_ep_len"):
+        for name in (f.name for f in fields(self) if f.name != "dropout"):  # the rest are integers
             value = getattr(self, name)
             if not isinstance(value, int) or value < 1:
                 raise ValueError(f"{name} = {value!r} is invalid; valid: an integer >= 1")
@@ -68,6 +66,19 @@ class DTConfig:
             raise ValueError(f"embed_dim = {self.embed_dim} must be a multiple of heads = {self.heads}")
         if not 0.0 <= self.dropout < 1.0:
             raise ValueError(f"dropout = {self.dropout} is invalid; valid: 0 <= dropout < 1")
+
+
+@dataclass(frozen=True, kw_only=True)
+class DTConfig(DTShape):
+    """Everything that fixes a Decision Transformer's parameters: its shape and the data's sizes.
+
+    Attributes:
+        state_dim: Observation size (Eq. 14: sonar beams + 4).
+        act_dim: Action size (Eq. 16: 2).
+    """
+
+    state_dim: int
+    act_dim: int = 2
 
     def as_dict(self) -> dict[str, Any]:
         """Plain form (checkpoints)."""

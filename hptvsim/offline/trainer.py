@@ -40,7 +40,7 @@ import numpy.typing as npt
 import torch
 
 from hptvsim.offline.dataset import DEFAULT_DATASET_DIR, Trajectories, load_trajectories, versions
-from hptvsim.offline.model import DecisionTransformer, DTConfig
+from hptvsim.offline.model import DecisionTransformer, DTConfig, DTShape
 
 __all__ = [
     "LOSS_COLUMNS",
@@ -58,27 +58,6 @@ F64 = npt.NDArray[np.float64]
 Precision = Literal["float32", "bfloat16"]
 LOSS_COLUMNS = ("update", "model", "agents", "loss", "lr", "grad_norm", "wall_s")
 POLICY_FORMAT = "hptvsim-dt"
-
-
-@dataclass(frozen=True, kw_only=True)
-class ModelShape:
-    """The transformer's shape in a training config (state and action sizes come from the data).
-
-    Attributes:
-        context: K, steps per window.
-        embed_dim: Token width.
-        layers: Transformer blocks.
-        heads: Attention heads.
-        dropout: Dropout probability.
-        max_ep_len: Largest embedded timestep (default: the scenario's 6000 steps).
-    """
-
-    context: int = 20
-    embed_dim: int = 128
-    layers: int = 3
-    heads: int = 1
-    dropout: float = 0.1
-    max_ep_len: int = 6000
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -116,7 +95,7 @@ class DTTrainConfig:
     datasets: tuple[str, ...]
     dataset_dir: str = str(DEFAULT_DATASET_DIR)
     shared: bool = False
-    model: ModelShape = field(default_factory=ModelShape)
+    model: DTShape = field(default_factory=DTShape)
     updates: int = 3000
     batch_size: int = 64
     learning_rate: float = 1e-4
@@ -180,7 +159,7 @@ def _build(cls: type[Any], data: Mapping[str, Any], where: str) -> Any:
         if key == "model":
             if not isinstance(value, Mapping):
                 raise ValueError(f"{where}: [model] must be a table, got {value!r}")
-            kwargs[key] = _build(ModelShape, value, f"{where} [model]")
+            kwargs[key] = _build(DTShape, value, f"{where} [model]")
         elif key == "datasets":
             kwargs[key] = (value,) if isinstance(value, str) else tuple(str(v) for v in value)
         else:
@@ -407,17 +386,7 @@ def loss_per_model(
 
 def make_model(cfg: DTTrainConfig, state_dim: int, act_dim: int, num_models: int) -> DecisionTransformer:
     """The stacked model for a config."""
-    shape = cfg.model
-    dt_cfg = DTConfig(
-        state_dim=state_dim,
-        act_dim=act_dim,
-        context=shape.context,
-        embed_dim=shape.embed_dim,
-        layers=shape.layers,
-        heads=shape.heads,
-        dropout=shape.dropout,
-        max_ep_len=shape.max_ep_len,
-    )
+    dt_cfg = DTConfig(state_dim=state_dim, act_dim=act_dim, **dataclasses.asdict(cfg.model))
     return DecisionTransformer(dt_cfg, num_models=num_models)
 
 
