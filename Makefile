@@ -29,11 +29,11 @@ system-deps:
 		DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq --no-install-recommends chromium gcc; }
 
 run: setup
-	$(BIN)/python -m services
+	$(BIN)/hptvsim serve
 
 lint: setup
-	$(BIN)/ruff check hptvsim services tests
-	$(BIN)/ruff format --check hptvsim services tests
+	$(BIN)/ruff check hptvsim tests
+	$(BIN)/ruff format --check hptvsim tests
 
 typecheck: setup
 	$(BIN)/mypy

@@ -26,6 +26,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "hptvsim.envs.cli",
     "hptvsim.viz.cli",
     "hptvsim.offline.cli",
+    "hptvsim.service.cli",  # the top layer: only the CLI imports it
 )
 """Modules whose ``register(main, bench)`` adds commands (one line per package)."""
 

@@ -19,14 +19,13 @@ kind is needed.
 from __future__ import annotations
 
 import importlib
-import os
 import tomllib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from hptvsim._paths import shipped_dir
 from hptvsim.envs.core import GameCore
 from hptvsim.envs.policies import POLICY_NAMES, Limits, Policy, make_policy
 
@@ -94,13 +93,7 @@ def _loader(kind: str) -> PolicyLoader:
 
 def policy_dir() -> Path:
     """The folder of shipped trained policies (``$HPTVSIM_POLICY_DIR``, the checkout's, or the wheel's)."""
-    env = os.environ.get("HPTVSIM_POLICY_DIR")
-    if env:
-        return Path(env)
-    checkout = Path(__file__).resolve().parents[1] / "policies"
-    if checkout.is_dir():
-        return checkout
-    return Path(str(resources.files("hptvsim").joinpath("_data", "policies")))
+    return shipped_dir("policies", env="HPTVSIM_POLICY_DIR")
 
 
 _SCRIPTED_ROLES = {

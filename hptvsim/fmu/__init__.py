@@ -6,10 +6,9 @@
 
 from __future__ import annotations
 
-import os
-from importlib import resources
 from pathlib import Path
 
+from hptvsim._paths import shipped_dir
 from hptvsim.dynamics import FMU_NAMES, VEHICLE_TYPES
 
 __all__ = ["fmu_dir", "fmu_path"]
@@ -17,13 +16,7 @@ __all__ = ["fmu_dir", "fmu_path"]
 
 def fmu_dir() -> Path:
     """Return the folder that holds the shipped FMUs."""
-    env = os.environ.get("HPTVSIM_FMU_DIR")
-    if env:
-        return Path(env)
-    checkout = Path(__file__).resolve().parents[2] / "fmus"
-    if checkout.is_dir():
-        return checkout
-    return Path(str(resources.files("hptvsim").joinpath("_data", "fmus")))
+    return shipped_dir("fmus", env="HPTVSIM_FMU_DIR")
 
 
 def fmu_path(vehicle_type: str) -> Path:

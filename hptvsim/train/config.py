@@ -31,7 +31,6 @@ Example (``configs/train/quick.toml`` has the full set)::
 from __future__ import annotations
 
 import dataclasses
-import os
 import tomllib
 import types
 import typing
@@ -41,6 +40,7 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any, Literal, TypeVar, get_args, get_origin
 
+from hptvsim._paths import shipped_dir
 from hptvsim.train.envs import EnvSpec
 
 __all__ = [
@@ -379,15 +379,7 @@ def _from_mapping(cls: type[_T], data: Mapping[str, Any], where: str) -> _T:
 
 def config_dir() -> Path:
     """The folder of the shipped training configs (``configs/train`` of a checkout or the wheel)."""
-    env = os.environ.get("HPTVSIM_CONFIG_DIR")
-    if env:
-        return Path(env)
-    checkout = Path(__file__).resolve().parents[2] / "configs" / "train"
-    if checkout.is_dir():
-        return checkout
-    from importlib import resources
-
-    return Path(str(resources.files("hptvsim").joinpath("_data", "configs", "train")))
+    return shipped_dir("configs", "train", env="HPTVSIM_CONFIG_DIR")
 
 
 def resolve_config_path(name_or_path: str | Path) -> Path:

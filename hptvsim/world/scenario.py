@@ -49,13 +49,13 @@ import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from functools import cached_property, lru_cache
-from importlib import resources
 from pathlib import Path
 from typing import Any, ClassVar, Literal
 
 import numpy as np
 import numpy.typing as npt
 
+from hptvsim._paths import shipped_dir
 from hptvsim.dynamics import VEHICLE_RADIUS, VEHICLE_TYPES, ParameterError, VehicleParameters
 from hptvsim.sensors.config import AcousticLinkConfig, SonarConfig
 from hptvsim.world._schema import (
@@ -1032,13 +1032,7 @@ def scenario_dir() -> Path:
     ``$HPTVSIM_SCENARIO_DIR`` if set, else the checkout's ``scenarios/``, else the copy inside
     an installed wheel.
     """
-    env = os.environ.get("HPTVSIM_SCENARIO_DIR")
-    if env:
-        return Path(env)
-    checkout = Path(__file__).resolve().parents[2] / "scenarios"
-    if checkout.is_dir():
-        return checkout
-    return Path(str(resources.files("hptvsim").joinpath("_data", "scenarios")))
+    return shipped_dir("scenarios", env="HPTVSIM_SCENARIO_DIR")
 
 
 def list_scenarios() -> list[str]:

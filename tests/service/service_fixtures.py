@@ -1,4 +1,4 @@
-"""Fixtures of the service tests: a live ``python -m services`` in a subprocess, over real HTTP."""
+"""Fixtures of the service tests: a live ``hptvsim serve`` in a subprocess, over real HTTP."""
 
 from __future__ import annotations
 

@@ -28,7 +28,7 @@ TEST_ENV = {
 
 @dataclass
 class Server:
-    """A running ``python -m services``."""
+    """A running ``hptvsim serve``."""
 
     url: str
     data_dir: Path
@@ -66,7 +66,7 @@ def start_server(data_dir: Path, extra_env: dict[str, str] | None = None, timeou
     log = data_dir / f"server-{time.monotonic_ns()}.log"
     fh = log.open("w")
     proc = subprocess.Popen(
-        [sys.executable, "-m", "services", "--port", "0", "--log-level", "warning"],
+        [sys.executable, "-m", "hptvsim.service", "--port", "0", "--log-level", "warning"],
         cwd=ROOT,
         env=env,
         stdout=fh,

@@ -1,4 +1,4 @@
-"""``make run`` / ``python -m services``: starts with embedded defaults, prints its URLs, and the
+"""``make run`` / ``hptvsim serve``: starts with embedded defaults, prints its URLs, and the
 dashboard, API and live view answer; the settings; docker-compose.yml against the Compose schema."""
 
 from __future__ import annotations
@@ -13,16 +13,16 @@ import httpx
 import pytest
 from service_helpers import ROOT, Server, start_server
 
-from services.settings import Settings, SettingsError
+from hptvsim.service.settings import Settings, SettingsError
 
 
 def test_make_run_starts_the_service() -> None:
     makefile = (ROOT / "Makefile").read_text()
     recipe = re.search(r"^run:.*\n((?:\t.*\n)+)", makefile, re.MULTILINE)
-    assert recipe is not None and "-m services" in recipe.group(1)
+    assert recipe is not None and "hptvsim serve" in recipe.group(1)
 
 
-def test_python_m_services_prints_its_urls_and_everything_answers(tmp_path: Path) -> None:
+def test_hptvsim_serve_prints_its_urls_and_everything_answers(tmp_path: Path) -> None:
     srv = start_server(
         tmp_path / "main", {"HPTVSIM_VISER": "1", "HPTVSIM_VISER_PORT": "0", "HPTVSIM_WORKERS": "1"}
     )
@@ -84,8 +84,8 @@ def test_docker_compose_is_valid_against_the_compose_schema() -> None:
     text = dockerfile.read_text()
     assert "torch==2.13.0" in text and "python" in text
     # the commands the containers run exist
-    assert services["api"]["command"][:3] == ["python", "-m", "services"]
-    assert services["viser"]["command"][:4] == ["python", "-m", "services", "viser"]
+    assert services["api"]["command"][:2] == ["hptvsim", "serve"]
+    assert services["viser"]["command"][:3] == ["hptvsim", "serve", "view"]
 
 
 def test_a_broken_compose_file_is_caught(tmp_path: Path) -> None:
@@ -100,7 +100,7 @@ def test_a_broken_compose_file_is_caught(tmp_path: Path) -> None:
 
 @pytest.mark.slow
 def test_bench_quick_against_a_running_service(server: Server) -> None:
-    from services.bench import bench_service
+    from hptvsim.service.bench import bench_service
 
     steps, episodes = bench_service(url=server.url, quick=True)
     assert [r.name for r in steps.rows] == [

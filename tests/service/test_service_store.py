@@ -5,7 +5,7 @@ from __future__ import annotations
 import sqlite3
 from pathlib import Path
 
-from services.db import EpisodeRow, Store, utcnow
+from hptvsim.service.db import EpisodeRow, Store, utcnow
 
 
 def _row(i: int, status: str, policies: dict[str, str], scenario: str = "source") -> EpisodeRow:

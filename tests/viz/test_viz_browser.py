@@ -60,11 +60,11 @@ def browser() -> Iterator[Any]:
 
 @pytest.fixture(scope="module")
 def service(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
-    """The real service (``python -m services``) on a free port, without its viser view."""
+    """The real service (``hptvsim serve``) on a free port, without its viser view."""
     port = _free_port()
     data = tmp_path_factory.mktemp("service")
     env = {**os.environ, "HPTVSIM_DATA_DIR": str(data), "RERUN_ANALYTICS": "0"}
-    cmd = [sys.executable, "-m", "services", "--port", str(port), "--no-viser", "--workers", "1"]
+    cmd = [sys.executable, "-m", "hptvsim.service", "--port", str(port), "--no-viser", "--workers", "1"]
     proc = subprocess.Popen(
         cmd, cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
     )

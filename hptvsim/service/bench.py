@@ -1,4 +1,4 @@
-"""``python -m services bench``: what the service costs over doing the same work in process.
+"""``hptvsim bench service``: what the service costs over doing the same work in process.
 
 Two tables, each with a floor measured in the same run (machines are shared and noisy: compare
 the ratios):
@@ -9,7 +9,7 @@ the ratios):
   episode, i.e. throughput), against :func:`hptvsim.viz.episode.run_episode` in process, one after
   another; the ``/healthz`` latency while they run is given in the notes.
 
-Without ``--url`` the benchmark starts its own service (``python -m services`` on a free port,
+Without ``--url`` the benchmark starts its own service (``hptvsim serve`` on a free port,
 a temporary data folder) and stops it afterwards.
 """
 
@@ -35,7 +35,7 @@ __all__ = ["bench_service", "running_service"]
 
 @contextlib.contextmanager
 def running_service(workers: int = 2, timeout: float = 120.0) -> Iterator[str]:
-    """Start ``python -m services`` on a free port with a temporary data folder; yields its URL."""
+    """Start ``hptvsim serve`` on a free port with a temporary data folder; yields its URL."""
     import httpx
 
     with tempfile.TemporaryDirectory(prefix="hptvsim-bench-") as tmp:
@@ -51,7 +51,7 @@ def running_service(workers: int = 2, timeout: float = 120.0) -> Iterator[str]:
         log = Path(tmp) / "server.log"
         with log.open("w") as fh:
             proc = subprocess.Popen(
-                [sys.executable, "-m", "services", "--port", "0", "--log-level", "warning"],
+                [sys.executable, "-m", "hptvsim.service", "--port", "0", "--log-level", "warning"],
                 cwd=Path(__file__).resolve().parents[1],
                 env=env,
                 stdout=fh,

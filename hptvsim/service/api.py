@@ -1,7 +1,7 @@
 """The ``/api/v1`` routes: scenarios, policies, episodes (run and interactive), events, results.
 
-Every handler gets the :class:`~services.service.Service` from the app's state; errors are
-:class:`~services.validation.ApiError` (answered as :class:`~services.schemas.ErrorBody`).
+Every handler gets the :class:`~hptvsim.service.service.Service` from the app's state; errors are
+:class:`~hptvsim.service.validation.ApiError` (answered as :class:`~hptvsim.service.schemas.ErrorBody`).
 """
 
 from __future__ import annotations
@@ -19,8 +19,8 @@ from fastapi.responses import FileResponse, JSONResponse, Response
 from fastapi.sse import EventSourceResponse, ServerSentEvent
 from pydantic import ValidationError
 
-from services.db import ACTIVE, FINAL, STATUSES, EpisodeRow
-from services.schemas import (
+from hptvsim.service.db import ACTIVE, FINAL, STATUSES, EpisodeRow
+from hptvsim.service.schemas import (
     POLICY_PATTERN,
     EpisodeCreate,
     EpisodeList,
@@ -32,8 +32,8 @@ from services.schemas import (
     StepIn,
     StepOut,
 )
-from services.service import Service
-from services.validation import ApiError, scenario_summary, shipped_scenario
+from hptvsim.service.service import Service
+from hptvsim.service.validation import ApiError, scenario_summary, shipped_scenario
 
 __all__ = ["check_api_key", "router"]
 

@@ -1,7 +1,7 @@
 """The service's state and behaviour, apart from HTTP: episodes, jobs, interactive hosts, events.
 
 :class:`Service` owns the store (database), the executor (local worker processes or Ray), the
-interactive host processes and the event hub. Handlers in :mod:`services.api` call it; it never
+interactive host processes and the event hub. Handlers in :mod:`hptvsim.service.api` call it; it never
 touches HTTP. Workers report through the executor's monitor thread; :meth:`Service._on_job_event`
 updates the database there and forwards events to the hub on the event loop.
 """
@@ -18,17 +18,17 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
 
-from services.db import ACTIVE, EpisodeRow, Store, utcnow
-from services.engine import JobSpec, read_result, versions
-from services.hub import Hub
-from services.schemas import EpisodeCreate
-from services.settings import Settings
-from services.validation import ApiError, resolve_request
-from services.workers import HostError, HostProcess, WorkerPool
+from hptvsim.service.db import ACTIVE, EpisodeRow, Store, utcnow
+from hptvsim.service.engine import JobSpec, read_result, versions
+from hptvsim.service.hub import Hub
+from hptvsim.service.schemas import EpisodeCreate
+from hptvsim.service.settings import Settings
+from hptvsim.service.validation import ApiError, resolve_request
+from hptvsim.service.workers import HostError, HostProcess, WorkerPool
 
 __all__ = ["Executor", "Service"]
 
-log = logging.getLogger("services")
+log = logging.getLogger("hptvsim.service")
 
 
 class Executor(Protocol):
@@ -98,7 +98,7 @@ class Service:
                 len(self.recovered[1]),
             )
         if self.settings.executor == "ray":
-            from services.ray_executor import RayExecutor
+            from hptvsim.service.ray_executor import RayExecutor
 
             self.executor = RayExecutor(self.settings, self._on_job_event)
         else:
@@ -406,7 +406,7 @@ class Service:
         self._publish_status(episode_id, final, summary=summary)
 
     def _publish_status(self, episode_id: str, status: str, **extra: Any) -> None:
-        from services.db import FINAL
+        from hptvsim.service.db import FINAL
 
         event = {
             "type": "status",
@@ -490,8 +490,8 @@ class Service:
 
 
 def _warm_scenarios() -> None:
+    from hptvsim.service.validation import shipped_scenario
     from hptvsim.world.scenario import list_scenarios
-    from services.validation import shipped_scenario
 
     for name in list_scenarios():
         with contextlib.suppress(Exception):  # a broken file shows up when it is asked for

@@ -1,6 +1,6 @@
 """Service settings: one frozen dataclass, read from ``HPTVSIM_*`` environment variables.
 
-Every setting has an embedded default, so ``python -m services`` runs with nothing configured
+Every setting has an embedded default, so ``hptvsim serve`` runs with nothing configured
 (SQLite in the data folder, the shipped scenarios and policies, a local worker pool). A bad value
 is an error naming the variable and what would be valid.
 
@@ -43,6 +43,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
+from hptvsim._paths import shipped_dir
+
 __all__ = ["Settings", "SettingsError"]
 
 
@@ -55,7 +57,7 @@ def _default_workers() -> int:
 
 
 def _default_web_dir() -> Path:
-    return Path(__file__).resolve().parents[1] / "web"
+    return shipped_dir("web", env="HPTVSIM_WEB_DIR")
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -1,8 +1,9 @@
-"""``python -m services``: start the digital-twin service (API, dashboard, live view) and print its URLs.
+"""``hptvsim serve``: start the digital-twin service (API, dashboard, live view) and print its URLs.
 
-Settings come from the environment (:mod:`services.settings`); the options here override them.
-With nothing configured it runs on localhost with SQLite in ``hptvsim-out/service``, the shipped
-scenarios and policies, and local worker processes.
+Settings come from the environment (:mod:`hptvsim.service.settings`); the options here override
+them. With nothing configured it runs on localhost with SQLite in ``hptvsim-out/service``, the
+shipped scenarios and policies, and local worker processes. ``make run``, the Docker image and
+``python -m hptvsim.service`` all start it through :func:`serve`.
 """
 
 from __future__ import annotations
@@ -12,11 +13,16 @@ import os
 import socket
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
-from fastapi import FastAPI
 
-from services.settings import Settings, SettingsError
+from hptvsim.service.settings import Settings, SettingsError
+
+if TYPE_CHECKING:
+    from fastapi import FastAPI
+
+__all__ = ["register", "serve"]
 
 
 def _port_free(host: str, port: int) -> bool:
@@ -47,7 +53,7 @@ def _port_free(host: str, port: int) -> bool:
 )
 @click.option("--log-level", default="info", type=click.Choice(["debug", "info", "warning", "error"]))
 @click.pass_context
-def main(
+def serve(
     ctx: click.Context,
     host: str | None,
     port: int | None,
@@ -59,7 +65,7 @@ def main(
 ) -> None:
     """Start the hptvsim service: REST API, dashboard and viser live view (and print their URLs).
 
-    ``python -m services viser --api URL`` runs the live view alone, following a service's episodes.
+    ``hptvsim serve view --api URL`` runs the live view alone, following a service's episodes.
     """
     if ctx.invoked_subcommand is not None:
         return
@@ -98,7 +104,7 @@ def main(
             "pick another with --viser-port, or --no-viser"
         )
     logging.basicConfig(level=log_level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s")
-    from services.app import create_app
+    from hptvsim.service.app import create_app
 
     shown = "localhost" if settings.host in ("127.0.0.1", "0.0.0.0", "::") else settings.host
     base = f"http://{shown}:{settings.port}"
@@ -131,7 +137,7 @@ def main(
     )
 
 
-@main.command("viser")
+@serve.command("view")
 @click.option(
     "--api", "api_url", default="http://127.0.0.1:8000", show_default=True, help="The service to follow."
 )
@@ -170,23 +176,25 @@ def viser_command(api_url: str, host: str, port: int, api_key: str | None) -> No
         view.stop()
 
 
-@main.command("bench")
-@click.option("--quick", is_flag=True, help="Seconds instead of a minute.")
-@click.option("--url", default=None, help="Measure a running service (default: start one).")
-@click.option("--workers", type=int, default=2, show_default=True, help="Workers of the service it starts.")
-@click.option("--json", "as_json", is_flag=True, help="Print JSON instead of tables.")
-def bench_command(quick: bool, url: str | None, workers: int, as_json: bool) -> None:
-    """What the service costs: RemoteEnv steps and API episode runs against in-process floors."""
-    import json
+def register(main: click.Group, bench: click.Group) -> None:
+    """Add ``hptvsim serve`` to ``main`` and the service benchmark to ``bench``."""
+    main.add_command(serve)
 
-    from services.bench import bench_service
+    @bench.command("service")
+    @click.option("--quick", is_flag=True, help="Seconds instead of a minute.")
+    @click.option("--url", default=None, help="Measure a running service (default: start one).")
+    @click.option(
+        "--workers", type=int, default=2, show_default=True, help="Workers of the service it starts."
+    )
+    @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of tables.")
+    def bench_command(quick: bool, url: str | None, workers: int, as_json: bool) -> None:
+        """What the service costs: RemoteEnv steps and API episode runs against in-process floors."""
+        import json
 
-    results = bench_service(url=url, quick=quick, workers=workers)
-    if as_json:
-        click.echo(json.dumps([r.as_dict() for r in results], indent=2))
-    else:
-        click.echo("\n\n".join(r.table() for r in results))
+        from hptvsim.service.bench import bench_service
 
-
-if __name__ == "__main__":
-    main()
+        results = bench_service(url=url, quick=quick, workers=workers)
+        if as_json:
+            click.echo(json.dumps([r.as_dict() for r in results], indent=2))
+        else:
+            click.echo("\n\n".join(r.table() for r in results))

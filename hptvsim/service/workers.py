@@ -4,10 +4,10 @@ Simulation is CPU-bound, so it never runs in the API's event loop. Each worker i
 process with its own duplex pipe (no shared queue whose lock a killed process could take with it):
 
 * :class:`WorkerPool`: ``n`` workers; the API hands each idle worker the next queued
-  :class:`~services.engine.JobSpec`; a worker streams events back and polls its pipe for a
+  :class:`~hptvsim.service.engine.JobSpec`; a worker streams events back and polls its pipe for a
   cancel request between steps. A monitor thread multiplexes all pipes and process sentinels:
   a worker that dies takes only its own job (reported ``failed``) and is replaced.
-* :class:`HostProcess`: keeps interactive episodes (:class:`~services.engine.EpisodeEngine`)
+* :class:`HostProcess`: keeps interactive episodes (:class:`~hptvsim.service.engine.EpisodeEngine`)
   and answers requests (open, step, observe, close) in order; the API awaits the answers
   without blocking its event loop.
 
@@ -34,11 +34,11 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from services.engine import JobSpec
+from hptvsim.service.engine import JobSpec
 
 __all__ = ["HostError", "HostProcess", "WorkerPool"]
 
-log = logging.getLogger("services.workers")
+log = logging.getLogger("hptvsim.service.workers")
 
 Event = tuple[Any, ...]
 """What workers report: ``("started", id, pid)``, ``("event", id, kind, data)``,
@@ -76,7 +76,7 @@ def _child_setup() -> None:
 def _worker_main(conn: multiprocessing.connection.Connection) -> None:
     """A pool worker: run the jobs it is sent, one at a time, until told to stop."""
     _child_setup()
-    from services.engine import run_job
+    from hptvsim.service.engine import run_job
 
     conn.send(("ready", os.getpid()))
     stopping = False
@@ -313,7 +313,7 @@ class HostError(RuntimeError):
 def _host_main(conn: multiprocessing.connection.Connection) -> None:
     """An interactive host: keep episodes and answer requests in order."""
     _child_setup()
-    from services.engine import InteractiveEpisode
+    from hptvsim.service.engine import InteractiveEpisode
 
     episodes: dict[str, InteractiveEpisode] = {}
     while True:

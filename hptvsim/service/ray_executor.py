@@ -2,7 +2,7 @@
 
 ``HPTVSIM_EXECUTOR=ray`` selects it; ``RAY_ADDRESS`` names a cluster (``ray://head:10001`` or
 ``head:6379``), else a local Ray starts. Each episode is a ``@ray.remote`` task running
-:func:`services.engine.run_job` in a scratch folder on whichever node it lands; its files come
+:func:`hptvsim.service.engine.run_job` in a scratch folder on whichever node it lands; its files come
 back with the task's result and the API writes them to its own data folder, so nodes need no
 shared disk. Events and cancel requests pass through one small actor (:class:`_Control`): tasks
 push their events in batches and poll for a cancel a few times a second.
@@ -21,12 +21,12 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from services.engine import RESULT_FILE, JobSpec, write_json_atomic
-from services.settings import Settings
+from hptvsim.service.engine import RESULT_FILE, JobSpec, write_json_atomic
+from hptvsim.service.settings import Settings
 
 __all__ = ["RayExecutor"]
 
-log = logging.getLogger("services.ray")
+log = logging.getLogger("hptvsim.service.ray")
 
 Event = tuple[Any, ...]
 
@@ -59,7 +59,7 @@ def _task(spec_dict: dict[str, Any], control: Any) -> dict[str, Any]:
     """The remote task: run the job in a scratch folder, return its result and files."""
     import ray
 
-    from services.engine import run_job
+    from hptvsim.service.engine import run_job
 
     scratch = Path(tempfile.mkdtemp(prefix="hptvsim-ray-"))
     spec = JobSpec(**{**spec_dict, "out_dir": str(scratch)})

@@ -1,8 +1,8 @@
 """The FastAPI application: lifespan, middleware, structured errors, health, dashboard files.
 
-``create_app(settings)`` builds the app; the lifespan starts the :class:`~services.service.Service`
+``create_app(settings)`` builds the app; the lifespan starts the :class:`~hptvsim.service.service.Service`
 (database recovery, worker processes, interactive hosts) and, when enabled, the viser live view
-on its own port. Every error answers :class:`~services.schemas.ErrorBody`: the status, one line
+on its own port. Every error answers :class:`~hptvsim.service.schemas.ErrorBody`: the status, one line
 naming the field, and the list of field errors.
 """
 
@@ -22,15 +22,15 @@ from fastapi.staticfiles import StaticFiles
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from services.api import router, ws_router
-from services.schemas import Health
-from services.service import Service
-from services.settings import Settings
-from services.validation import ApiError
+from hptvsim.service.api import router, ws_router
+from hptvsim.service.schemas import Health
+from hptvsim.service.service import Service
+from hptvsim.service.settings import Settings
+from hptvsim.service.validation import ApiError
 
 __all__ = ["create_app"]
 
-log = logging.getLogger("services")
+log = logging.getLogger("hptvsim.service")
 
 API_DESCRIPTION = """\
 Runs underwater pursuit-evasion episodes (hptvsim) as jobs on worker processes, steps them

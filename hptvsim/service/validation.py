@@ -17,8 +17,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from services.schemas import EpisodeCreate
-from services.settings import Settings
+from hptvsim.service.schemas import EpisodeCreate
+from hptvsim.service.settings import Settings
 
 __all__ = ["ApiError", "Resolved", "resolve_request", "scenario_summary", "shipped_scenario"]
 
@@ -238,7 +238,7 @@ def resolve_request(req: EpisodeCreate, settings: Settings) -> tuple[Resolved, A
     if isinstance(req.scenario, str):
         import re
 
-        from services.schemas import NAME_PATTERN
+        from hptvsim.service.schemas import NAME_PATTERN
 
         if not re.fullmatch(NAME_PATTERN, req.scenario):
             raise ApiError(
