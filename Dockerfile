@@ -17,7 +17,7 @@ ENV PYTHONDONTWRITEBYTECODE=1 \
     HPTVSIM_DATA_DIR=/data \
     HPTVSIM_HOST=0.0.0.0
 
-# a C compiler: the sonar and task kernels and the FMUs' binaries are built from source on first use
+# a C compiler: the sonar, error and task kernels are compiled from their C sources on first use
 RUN apt-get update \
     && apt-get install -y --no-install-recommends build-essential curl \
     && rm -rf /var/lib/apt/lists/*

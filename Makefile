@@ -21,12 +21,16 @@ $(STAMP): pyproject.toml
 setup: $(STAMP)
 
 # System packages the tests need (a clean CI machine has none of them): Debian's Chromium for
-# the browser tests (never a browser downloaded by a test tool), gcc for the FMU and C kernels.
+# the browser tests (never a browser downloaded by a test tool), gcc for the FMU and C kernels,
+# Debian's PostgreSQL server programs, from which the database tests start throwaway clusters of
+# their own (initdb into a temporary folder, as the postgres user when run as root).
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 system-deps:
-	@command -v chromium >/dev/null 2>&1 && command -v gcc >/dev/null 2>&1 || { \
+	@command -v chromium >/dev/null 2>&1 && command -v gcc >/dev/null 2>&1 && \
+		ls /usr/lib/postgresql/*/bin/initdb >/dev/null 2>&1 || { \
 		$(SUDO) apt-get update -qq && \
-		DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq --no-install-recommends chromium gcc; }
+		DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq --no-install-recommends \
+			chromium gcc postgresql; }
 
 run: setup
 	$(BIN)/hptvsim serve
@@ -38,13 +42,14 @@ lint: setup
 typecheck: setup
 	$(BIN)/mypy
 
+# HPTVSIM_REQUIRE_POSTGRES=1: the PostgreSQL tests fail, never skip, when PostgreSQL is missing
 unit: setup system-deps
-	$(BIN)/pytest -n $(WORKERS)
+	HPTVSIM_REQUIRE_POSTGRES=1 $(BIN)/pytest -n $(WORKERS)
 
 test: lint typecheck unit
 
 test-slow: setup system-deps
-	$(BIN)/pytest -n $(WORKERS) -m slow
+	HPTVSIM_REQUIRE_POSTGRES=1 $(BIN)/pytest -n $(WORKERS) -m slow
 
 BENCHES := dynamics cosim sensors world env train dt episode
 

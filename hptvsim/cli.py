@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import importlib
 import json
+import os
 import sys
 from pathlib import Path
 from typing import Any
@@ -56,10 +57,13 @@ def fmu() -> None:
 @click.option("--type", "vehicle_types", multiple=True, help="Vehicle type(s) to build (default: all).")
 def fmu_build(out_dir: Path | None, vehicle_types: tuple[str, ...]) -> None:
     """Generate C from the CasADi model, compile it and pack one FMU per vehicle type."""
+    from hptvsim._paths import checkout_dir
     from hptvsim.dynamics import VEHICLE_TYPES
     from hptvsim.fmu import fmu_dir
     from hptvsim.fmu.build import build_fmu
 
+    if out_dir is None and checkout_dir() is None and not os.environ.get("HPTVSIM_FMU_DIR"):
+        raise click.UsageError("this is an installed copy, not a checkout: give the output folder with --out")
     target = out_dir if out_dir is not None else fmu_dir()
     for vt in vehicle_types or tuple(VEHICLE_TYPES):
         path = build_fmu(vt, target)

@@ -155,19 +155,24 @@ def _role(core: GameCore, agent: str) -> str:
     return "pursuer" if core.pursuer[core.agents.index(agent)] else "evader"
 
 
-def load_policy(spec: str, core: GameCore, agent: str, *, seed: int | None = None) -> Policy:
+def load_policy(
+    spec: str, core: GameCore, agent: str, *, seed: int | None = None, allow_paths: bool = False
+) -> Policy:
     """Build the policy ``spec`` for ``agent`` of the game ``core``.
 
     Args:
         spec: A zoo name (:func:`list_policies`), ``scripted:<name>`` (or just ``<name>`` of a
-            scripted policy), or ``<kind>:<path>`` for a checkpoint file.
+            scripted policy), or, with ``allow_paths``, ``<kind>:<path>`` for a checkpoint file.
         core: The game the policy will play (observation layout, limits, beams).
         agent: The agent it drives.
         seed: Seed of stochastic policies (``random``).
+        allow_paths: Also load a checkpoint file the spec names. A checkpoint is code (SB3 zips
+            and torch files unpickle), so only a local user's own commands turn this on; the
+            service and the live view name shipped policies only.
 
     Raises:
-        ValueError: Unknown name or kind, or a policy made for another role (the message lists
-            the valid names).
+        ValueError: Unknown name or kind, a path while paths are not allowed, or a policy made
+            for another role (the message lists the valid names).
     """
     if agent not in core.agents:
         raise ValueError(f"unknown agent {agent!r}; agents: {', '.join(core.agents)}")
@@ -193,12 +198,16 @@ def load_policy(spec: str, core: GameCore, agent: str, *, seed: int | None = Non
         assert file is not None
         return _loader(info.kind)(file, core, agent)
     kind, sep, path = spec.partition(":")
+    valid: Sequence[str] = [p.name for p in known.values()]
+    if sep and kind in _LOADER_MODULES and not allow_paths:
+        raise ValueError(
+            f"policy {spec!r} names a checkpoint file, which is not allowed here; valid: {', '.join(valid)}"
+        )
     if sep and kind in _LOADER_MODULES:
         p = Path(path)
         if not p.is_file():
             raise ValueError(f"policy file not found: {p}")
         return _loader(kind)(p, core, agent)
-    valid: Sequence[str] = [p.name for p in known.values()]
     raise ValueError(
         f"unknown policy {spec!r}; valid: {', '.join(valid)}, or <kind>:<checkpoint> with kind in "
         f"{', '.join(_LOADER_MODULES)}"

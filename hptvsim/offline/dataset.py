@@ -181,7 +181,9 @@ def build_policies(core: GameCore, specs: Mapping[str, str], *, seed: int) -> li
     """Zoo policies in ``core.agents`` order (stochastic ones seeded ``seed + agent index``)."""
     from hptvsim.zoo import load_policy
 
-    return [load_policy(specs[a], core, a, seed=seed + i) for i, a in enumerate(core.agents)]
+    return [
+        load_policy(specs[a], core, a, seed=seed + i, allow_paths=True) for i, a in enumerate(core.agents)
+    ]
 
 
 @dataclass(frozen=True)

@@ -226,7 +226,7 @@ def evaluate_dt(
                 p.set_target(resolved[a])
                 p.reset()
             policies = [
-                dts[a] if a in dts else load_policy(base[a], core, a, seed=seed + i)
+                dts[a] if a in dts else load_policy(base[a], core, a, seed=seed + i, allow_paths=True)
                 for i, a in enumerate(core.agents)
             ]
             if precision != "float32":

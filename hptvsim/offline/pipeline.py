@@ -29,12 +29,9 @@ __all__ = ["PipelineResult", "dt_config_dir", "figures_for_run", "run_pipeline"]
 
 def dt_config_dir() -> Path:
     """The folder of the shipped DT training configs (``configs/dt`` of a checkout or the wheel)."""
-    checkout = Path(__file__).resolve().parents[2] / "configs" / "dt"
-    if checkout.is_dir():
-        return checkout
-    from importlib import resources
+    from hptvsim._paths import shipped_dir
 
-    return Path(str(resources.files("hptvsim").joinpath("_data", "configs", "dt")))
+    return shipped_dir("configs", "dt")
 
 
 @dataclass(frozen=True)
@@ -82,7 +79,9 @@ def figures_for_run(
         policies = [
             dts[a]
             if a in dts
-            else load_policy(evader or specs.get(a, "scripted:potential_field"), core, a, seed=seed)
+            else load_policy(
+                evader or specs.get(a, "scripted:potential_field"), core, a, seed=seed, allow_paths=True
+            )
             for a in core.agents
         ]
         ep = play(core, policies, episodes=1, seed=seed, record=True)[0]

@@ -2,9 +2,12 @@
 
 Every class here is a frozen, keyword-only dataclass whose fields all have defaults, so a
 scenario file only names what it changes. Units are SI inside (metres, seconds, hertz,
-radians); angle fields carry ``metadata={"unit": "rad"}`` so that file loaders may accept them
-as ``<field>_deg`` in degrees. Each ``__post_init__`` raises :class:`ValueError` naming the
-field and what would be valid.
+radians). Fields are declared with :func:`hptvsim.world._schema.spec`: their docs, and the
+limits (bounds) every number has, are metadata that the scenario schema, its JSON Schema and the
+checks here share. Angle fields carry ``unit = "rad"`` so that file loaders may accept them as
+``<field>_deg`` in degrees; the other units are stated in the docs. Each ``__post_init__``
+raises :class:`ValueError` naming the field and what would be valid
+(``SonarConfig.beams = 0 is invalid; valid: an integer in [1, 1024]``).
 
 The scenario schema (``hptvsim.world``) maps TOML tables onto these classes through
 :func:`dataclasses.fields`; a nested dataclass field (``SonarConfig.errors``) is a nested table.
@@ -13,8 +16,10 @@ The scenario schema (``hptvsim.world``) maps TOML tables onto these classes thro
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, fields
 from typing import Any, Literal
+
+from hptvsim.world._schema import describe_bounds, show, spec, within_bounds
 
 __all__ = [
     "PULSE_KINDS",
@@ -36,23 +41,28 @@ TRANSMITTERS: tuple[str, ...] = ("target", "buoy")
 
 
 def _fail(cls: str, name: str, value: Any, valid: str) -> ValueError:
-    return ValueError(f"{cls}.{name} = {value!r} is invalid; valid: {valid}")
+    return ValueError(f"{cls}.{name} = {show(value)} is invalid; valid: {valid}")
 
 
-def _finite(
-    cls: str, name: str, value: float, *, lower: float | None = None, open_lower: bool = False
-) -> None:
-    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-    if ok and lower is not None:
-        ok = value > lower if open_lower else value >= lower
+def _meta(obj: Any, name: str) -> Any:
+    return next(f.metadata for f in fields(obj) if f.name == name)
+
+
+def _finite(obj: Any, name: str) -> None:
+    """Check a number field: finite and within the bounds of its metadata."""
+    value = getattr(obj, name)
+    meta = _meta(obj, name)
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and within_bounds(value, meta)
     if not ok:
-        bound = "" if lower is None else (f" > {lower:g}" if open_lower else f" >= {lower:g}")
-        raise _fail(cls, name, value, f"a finite number{bound}")
+        raise _fail(type(obj).__name__, name, value, f"a finite number {describe_bounds(meta)}")
 
 
-def _integer(cls: str, name: str, value: int, *, lower: int) -> None:
-    if isinstance(value, bool) or not isinstance(value, int) or value < lower:
-        raise _fail(cls, name, value, f"an integer >= {lower}")
+def _integer(obj: Any, name: str) -> None:
+    """Check an integer field against the bounds of its metadata."""
+    value = getattr(obj, name)
+    meta = _meta(obj, name)
+    if isinstance(value, bool) or not isinstance(value, int) or not within_bounds(value, meta):
+        raise _fail(type(obj).__name__, name, value, f"an integer {describe_bounds(meta)}")
 
 
 def _boolean(cls: str, name: str, value: bool) -> None:
@@ -73,22 +83,30 @@ class GaussMarkovConfig:
 
     Attributes:
         enabled: False: the sensor is perfect (``s = y``).
-        bias_std: Stationary standard deviation of the bias ``n`` [unit of the signal], >= 0.
-        tau: Correlation time ``tau`` of the bias [s], > 0.
-        noise_std: Standard deviation of the white noise ``G_s`` [unit of the signal], >= 0.
+        bias_std: Stationary standard deviation of the bias ``n`` [unit of the signal], in [0, 100].
+        tau: Correlation time ``tau`` of the bias [s], in (0, 1e6].
+        noise_std: Standard deviation of the white noise ``G_s`` [unit of the signal], in [0, 100].
     """
 
-    enabled: bool = True
-    bias_std: float = 0.05  # m for ranges: a slowly drifting calibration / sound-speed error
-    tau: float = 10.0  # s
-    noise_std: float = 0.1  # m for ranges: per-ping jitter
+    enabled: bool = spec(True, doc="false: the sensor is perfect")
+    bias_std: float = spec(
+        0.05,  # m for ranges: a slowly drifting calibration / sound-speed error
+        doc="stationary standard deviation of the bias n [unit of the signal: m for ranges]",
+        ge=0.0,
+        le=100.0,
+    )
+    tau: float = spec(10.0, doc="correlation time of the bias [s]", gt=0.0, le=1e6)
+    noise_std: float = spec(
+        0.1,  # m for ranges: per-ping jitter
+        doc="standard deviation of the white noise G_s [unit of the signal: m for ranges]",
+        ge=0.0,
+        le=100.0,
+    )
 
     def __post_init__(self) -> None:
-        c = type(self).__name__
-        _boolean(c, "enabled", self.enabled)
-        _finite(c, "bias_std", self.bias_std, lower=0.0)
-        _finite(c, "tau", self.tau, lower=0.0, open_lower=True)
-        _finite(c, "noise_std", self.noise_std, lower=0.0)
+        _boolean(type(self).__name__, "enabled", self.enabled)
+        for name in ("bias_std", "tau", "noise_std"):
+            _finite(self, name)
 
     @property
     def active(self) -> bool:
@@ -132,9 +150,9 @@ class SonarConfig:
     about 7 degrees.
 
     Attributes:
-        beams: Number of beams ``K`` (>= 1).
+        beams: Number of beams ``K``, in [1, 1024].
         fov: Angular width covered by the beams [rad], in (0, 2 pi]; 2 pi is a full circle.
-        max_range: Maximum range [m], > 0; a beam that hits nothing reports it.
+        max_range: Maximum range [m], in (0, 10000]; a beam that hits nothing reports it.
         fidelity: ``"geometric"`` (exact ray casts, for training) or ``"signal"`` (echo
             synthesis and the estimators of Eqs. 1-2).
         detect_vehicles: Whether beams hit other vehicles (circles of
@@ -149,42 +167,64 @@ class SonarConfig:
             the noise power per sample (matched-filter output SNR adds ``10 log10(pulse samples)``).
         false_alarm_probability: Probability that a noise-only record crosses the detection
             threshold somewhere (the signal-level sonar reports ``max_range`` below threshold).
-        array_elements: Hydrophones ``M`` of the receiving uniform linear array (>= 2).
+        array_elements: Hydrophones ``M`` of the receiving uniform linear array, in [2, 256].
         array_spacing: Element spacing ``d`` [m]; ``d <= c / (2 F0)`` avoids grating lobes.
         errors: Gauss-Markov error model (Eq. 3) added to the reported ranges [m].
     """
 
-    beams: int = 16
-    fov: float = field(default=2.0 * math.pi, metadata={"unit": "rad"})  # rad
-    max_range: float = 50.0  # m
-    fidelity: Literal["geometric", "signal"] = "geometric"
-    detect_vehicles: bool = True
-    pulse: Literal["lfm", "cw"] = "lfm"
-    center_frequency: float = 20e3  # Hz
-    bandwidth: float = 10e3  # Hz
-    pulse_length: float = 2e-3  # s
-    sampling_rate: float = 80e3  # Hz
-    sound_speed: float = 1500.0  # m/s
-    snr_db: float = 0.0  # dB
-    false_alarm_probability: float = 1e-3  # per record
-    array_elements: int = 16
-    array_spacing: float = 0.0375  # m, half a wavelength at 20 kHz and 1500 m/s
-    errors: GaussMarkovConfig = field(default_factory=GaussMarkovConfig)
+    # Units are stated in the docs, not as "unit" metadata: only angles carry that (fov).
+    beams: int = spec(16, doc="number of beams K", ge=1, le=1024)
+    fov: float = spec(
+        2.0 * math.pi,
+        doc="angular width covered by the beams (2 pi: a full circle)",
+        unit="rad",
+        gt=0.0,
+        le=2.0 * math.pi,
+    )
+    max_range: float = spec(
+        50.0, doc="maximum range; a beam that hits nothing reports it [m]", gt=0.0, le=1e4
+    )
+    fidelity: Literal["geometric", "signal"] = spec(
+        "geometric", doc="'geometric' (exact ray casts, training) or 'signal' (echoes, Eqs. 1-2)"
+    )
+    detect_vehicles: bool = spec(True, doc="whether beams hit other vehicles as well as terrain")
+    pulse: Literal["lfm", "cw"] = spec("lfm", doc="transmitted pulse: 'lfm' chirp or 'cw' tone burst")
+    center_frequency: float = spec(20e3, doc="centre frequency F0 [Hz]", gt=0.0, le=1e7)
+    bandwidth: float = spec(
+        10e3, doc="swept bandwidth of the LFM chirp, below 2 F0 (ignored by 'cw') [Hz]", ge=0.0, le=1e7
+    )
+    pulse_length: float = spec(2e-3, doc="pulse duration, at least 2 samples [s]", gt=0.0, le=1.0)
+    sampling_rate: float = spec(
+        80e3, doc="sampling rate fs, above twice the pulse's highest frequency [Hz]", gt=0.0, le=1e7
+    )
+    sound_speed: float = spec(1500.0, doc="speed of sound c [m/s]", ge=1000.0, le=2000.0)
+    snr_db: float = spec(0.0, doc="echo signal-to-noise ratio [dB]", ge=-100.0, le=100.0)
+    false_alarm_probability: float = spec(
+        1e-3, doc="probability that a noise-only record crosses the detection threshold", gt=0.0, lt=1.0
+    )
+    array_elements: int = spec(16, doc="hydrophones M of the receiving uniform linear array", ge=2, le=256)
+    array_spacing: float = spec(
+        0.0375,  # m, half a wavelength at 20 kHz and 1500 m/s
+        doc="element spacing d; d <= c / (2 F0) avoids grating lobes [m]",
+        gt=0.0,
+        le=100.0,
+    )
+    errors: GaussMarkovConfig = spec(
+        default_factory=GaussMarkovConfig, doc="Gauss-Markov error model (Eq. 3) of the reported ranges [m]"
+    )
 
     def __post_init__(self) -> None:
         c = type(self).__name__
-        _integer(c, "beams", self.beams, lower=1)
-        _finite(c, "fov", self.fov, lower=0.0, open_lower=True)
-        if self.fov > 2.0 * math.pi * (1.0 + 1e-12):
-            raise _fail(c, "fov", self.fov, "an angle in (0, 2 pi] rad (files: fov_deg in (0, 360])")
-        _finite(c, "max_range", self.max_range, lower=0.0, open_lower=True)
+        _integer(self, "beams")
+        _finite(self, "fov")
+        _finite(self, "max_range")
         if self.fidelity not in SONAR_FIDELITIES:
             raise _fail(c, "fidelity", self.fidelity, " or ".join(repr(f) for f in SONAR_FIDELITIES))
         _boolean(c, "detect_vehicles", self.detect_vehicles)
         if self.pulse not in PULSE_KINDS:
             raise _fail(c, "pulse", self.pulse, " or ".join(repr(p) for p in PULSE_KINDS))
-        _finite(c, "center_frequency", self.center_frequency, lower=0.0, open_lower=True)
-        _finite(c, "bandwidth", self.bandwidth, lower=0.0)
+        _finite(self, "center_frequency")
+        _finite(self, "bandwidth")
         if self.pulse == "lfm" and not 0.0 < self.bandwidth < 2.0 * self.center_frequency:
             raise _fail(
                 c,
@@ -192,9 +232,9 @@ class SonarConfig:
                 self.bandwidth,
                 f"in (0, 2 * center_frequency = {2 * self.center_frequency:g}) Hz",
             )
-        _finite(c, "pulse_length", self.pulse_length, lower=0.0, open_lower=True)
-        _finite(c, "sampling_rate", self.sampling_rate, lower=0.0, open_lower=True)
-        _finite(c, "sound_speed", self.sound_speed, lower=0.0, open_lower=True)
+        _finite(self, "pulse_length")
+        _finite(self, "sampling_rate")
+        _finite(self, "sound_speed")
         f_high = self.center_frequency + (0.5 * self.bandwidth if self.pulse == "lfm" else 0.0)
         if self.sampling_rate <= 2.0 * f_high:
             raise _fail(
@@ -207,12 +247,10 @@ class SonarConfig:
             raise _fail(
                 c, "pulse_length", self.pulse_length, f">= 2 samples, i.e. >= {2.0 / self.sampling_rate:g} s"
             )
-        _finite(c, "snr_db", self.snr_db)
-        _finite(c, "false_alarm_probability", self.false_alarm_probability, lower=0.0, open_lower=True)
-        if self.false_alarm_probability >= 1.0:
-            raise _fail(c, "false_alarm_probability", self.false_alarm_probability, "a probability in (0, 1)")
-        _integer(c, "array_elements", self.array_elements, lower=2)
-        _finite(c, "array_spacing", self.array_spacing, lower=0.0, open_lower=True)
+        _finite(self, "snr_db")
+        _finite(self, "false_alarm_probability")
+        _integer(self, "array_elements")
+        _finite(self, "array_spacing")
         if not isinstance(self.errors, GaussMarkovConfig):
             raise _fail(
                 c,
@@ -260,48 +298,62 @@ class AcousticLinkConfig:
     Attributes:
         enabled: False: perfect, instantaneous knowledge of the target's position.
         sound_speed: Speed of sound [m/s].
-        report_period: Time between reports [s], > 0.
+        report_period: Time between reports [s], in (0, 3600].
         packet_loss: Probability that a pursuer misses a report, in [0, 1).
-        max_range: Farthest a report reaches [m], > 0 (acoustic modem range).
+        max_range: Farthest a report reaches [m], in (0, 1e6] (acoustic modem range).
         transmitter: ``"target"`` or ``"buoy"``.
         buoy_position: ``(x, y)`` of the gateway buoy [m] (NED, used with ``"buoy"``).
-        buoy_vertical_offset: Vertical distance between buoy and plane of motion [m], >= 0.
+        buoy_vertical_offset: Vertical distance between buoy and plane of motion [m], in [0, 11000].
         initial_fix: Whether pursuers know the target's exact position at reset (briefing);
             otherwise they know nothing (NaN position, infinite age) until the first report.
         position_error: Localisation error of the reported position, per axis [m].
     """
 
-    enabled: bool = True
-    sound_speed: float = 1500.0  # m/s
-    report_period: float = 1.0  # s
-    packet_loss: float = 0.1  # probability per pursuer and report
-    max_range: float = 1000.0  # m
-    transmitter: Literal["target", "buoy"] = "target"
-    buoy_position: tuple[float, float] = (200.0, 150.0)  # m, centre of a 400 m x 300 m site at (0, 0)
-    buoy_vertical_offset: float = 0.0  # m
-    initial_fix: bool = True
-    position_error: GaussMarkovConfig = field(
-        default_factory=lambda: GaussMarkovConfig(bias_std=1.0, tau=30.0, noise_std=0.5)
+    enabled: bool = spec(True, doc="false: perfect, instantaneous knowledge of the target's position")
+    sound_speed: float = spec(1500.0, doc="speed of sound [m/s]", ge=1000.0, le=2000.0)
+    report_period: float = spec(1.0, doc="time between reports [s]", gt=0.0, le=3600.0)
+    packet_loss: float = spec(0.1, doc="probability that a pursuer misses a report", ge=0.0, lt=1.0)
+    max_range: float = spec(
+        1000.0, doc="farthest a report reaches (acoustic modem range) [m]", gt=0.0, le=1e6
+    )
+    transmitter: Literal["target", "buoy"] = spec("target", doc="who sends the reports: 'target' or 'buoy'")
+    buoy_position: tuple[float, float] = spec(
+        (200.0, 150.0),  # m, centre of a 400 m x 300 m site at (0, 0)
+        doc="(x north, y east) of the gateway buoy, used with transmitter = 'buoy' [m]",
+        ge=-1e7,
+        le=1e7,
+    )
+    buoy_vertical_offset: float = spec(
+        0.0, doc="vertical distance between buoy and plane of motion [m]", ge=0.0, le=11000.0
+    )
+    initial_fix: bool = spec(True, doc="whether pursuers know the target's exact position at reset")
+    position_error: GaussMarkovConfig = spec(
+        default_factory=lambda: GaussMarkovConfig(bias_std=1.0, tau=30.0, noise_std=0.5),
+        doc="localisation error of the reported position, per axis [m]",
     )
 
     def __post_init__(self) -> None:
         c = type(self).__name__
         _boolean(c, "enabled", self.enabled)
-        _finite(c, "sound_speed", self.sound_speed, lower=0.0, open_lower=True)
-        _finite(c, "report_period", self.report_period, lower=0.0, open_lower=True)
-        _finite(c, "packet_loss", self.packet_loss, lower=0.0)
-        if self.packet_loss >= 1.0:
-            raise _fail(c, "packet_loss", self.packet_loss, "a probability in [0, 1)")
-        _finite(c, "max_range", self.max_range, lower=0.0, open_lower=True)
+        _finite(self, "sound_speed")
+        _finite(self, "report_period")
+        _finite(self, "packet_loss")
+        _finite(self, "max_range")
         if self.transmitter not in TRANSMITTERS:
             raise _fail(c, "transmitter", self.transmitter, " or ".join(repr(t) for t in TRANSMITTERS))
+        meta = _meta(self, "buoy_position")
         pos = tuple(self.buoy_position) if isinstance(self.buoy_position, (tuple, list)) else ()
         if len(pos) != 2 or not all(
-            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in pos
+            isinstance(v, (int, float)) and not isinstance(v, bool) and within_bounds(v, meta) for v in pos
         ):
-            raise _fail(c, "buoy_position", self.buoy_position, "two finite numbers (x, y) in metres")
+            raise _fail(
+                c,
+                "buoy_position",
+                self.buoy_position,
+                f"two finite numbers (x, y) in metres, each {describe_bounds(meta)}",
+            )
         object.__setattr__(self, "buoy_position", (float(pos[0]), float(pos[1])))
-        _finite(c, "buoy_vertical_offset", self.buoy_vertical_offset, lower=0.0)
+        _finite(self, "buoy_vertical_offset")
         _boolean(c, "initial_fix", self.initial_fix)
         if not isinstance(self.position_error, GaussMarkovConfig):
             raise _fail(c, "position_error", self.position_error, "a GaussMarkovConfig table")

@@ -1,45 +1,47 @@
 """The ``/api/v1`` routes: scenarios, policies, episodes (run and interactive), events, results.
 
-Every handler gets the :class:`~hptvsim.service.service.Service` from the app's state; errors are
-:class:`~hptvsim.service.validation.ApiError` (answered as :class:`~hptvsim.service.schemas.ErrorBody`).
+:func:`build_routers` makes them for one service's settings: the request models state the
+service's names and limits (:func:`~hptvsim.service.schemas.request_models`), so the OpenAPI
+document is exactly what the server takes. Every handler gets the
+:class:`~hptvsim.service.service.Service` from the app's state; errors are
+:class:`~hptvsim.service.validation.ApiError` (answered as
+:class:`~hptvsim.service.schemas.ErrorBody`). The API key goes in the ``X-API-Key`` header; GET
+requests that a browser makes without headers (EventSource, links, images) may give it as
+``api_key`` in the query (the access log never shows it: :mod:`hptvsim.service.app`).
 """
-
-from __future__ import annotations
 
 import asyncio
 import hmac
 import io
 import json
-import threading
 from collections.abc import AsyncIterator
 from typing import Annotated, Any, Literal
 
-from fastapi import APIRouter, Depends, Query, Request, WebSocket, WebSocketDisconnect
+from fastapi import APIRouter, Depends, Path, Query, Request, Security, WebSocket, WebSocketDisconnect
 from fastapi.responses import FileResponse, JSONResponse, Response
+from fastapi.security import APIKeyHeader, APIKeyQuery
 from fastapi.sse import EventSourceResponse, ServerSentEvent
 from pydantic import ValidationError
 
 from hptvsim.service.db import ACTIVE, FINAL, STATUSES, EpisodeRow
 from hptvsim.service.schemas import (
     POLICY_PATTERN,
-    EpisodeCreate,
     EpisodeList,
     EpisodeOut,
     ErrorBody,
     InteractiveState,
     PolicyOut,
     ScenarioOut,
-    StepIn,
     StepOut,
+    request_models,
 )
 from hptvsim.service.service import Service
+from hptvsim.service.settings import Settings
 from hptvsim.service.validation import ApiError, scenario_summary, shipped_scenario
 
-__all__ = ["check_api_key", "router"]
+__all__ = ["build_routers", "episode_out", "key_ok", "trajectory_json"]
 
-ERRORS: dict[int | str, dict[str, Any]] = {
-    code: {"model": ErrorBody} for code in (400, 401, 404, 409, 413, 422, 429, 500, 503)
-}
+EPISODE_ID_PATTERN = r"^[0-9a-f]{1,32}$"
 
 
 def service(request: Request) -> Service:
@@ -48,30 +50,15 @@ def service(request: Request) -> Service:
     return svc
 
 
-def _key_ok(expected: str | None, given: str | None) -> bool:
+def key_ok(expected: str | None, given: str | None) -> bool:
+    """Whether ``given`` is the API key (always, when the service has none)."""
     if expected is None:
         return True
     return given is not None and hmac.compare_digest(given.encode(), expected.encode())
 
 
-def check_api_key(request: Request) -> None:
-    """Require the API key (header ``X-API-Key``, or ``api_key`` in the query for EventSource)."""
-    svc = service(request)
-    given = request.headers.get("x-api-key") or request.query_params.get("api_key")
-    if not _key_ok(svc.settings.api_key, given):
-        raise ApiError(401, "missing or wrong API key; send it in the X-API-Key header", "X-API-Key")
-
-
-router = APIRouter(prefix="/api/v1", responses=ERRORS, dependencies=[Depends(check_api_key)])
-ws_router = APIRouter(prefix="/api/v1")
-
 Svc = Annotated[Service, Depends(service)]
-
-
-def _episode_id(episode_id: str) -> str:
-    if not (1 <= len(episode_id) <= 32) or any(c not in "0123456789abcdef" for c in episode_id):
-        raise ApiError(404, f"no episode {episode_id!r} (ids are hexadecimal)", "episode_id")
-    return episode_id
+EpisodeId = Annotated[str, Path(pattern=EPISODE_ID_PATTERN, description="an episode's id (hexadecimal)")]
 
 
 def episode_out(svc: Service, row: EpisodeRow) -> EpisodeOut:
@@ -107,179 +94,16 @@ def episode_out(svc: Service, row: EpisodeRow) -> EpisodeOut:
         created_at=row.created_at,
         started_at=row.started_at,
         finished_at=row.finished_at,
+        updated_at=row.updated_at,
         links=links,
     )
 
 
-# --- scenarios and policies --------------------------------------------------------------------------
-
-
-@router.get("/scenarios", response_model=list[ScenarioOut], tags=["scenarios"])
-def list_scenarios_route() -> list[dict[str, Any]]:
-    """The shipped scenarios."""
-    from hptvsim.world.scenario import list_scenarios
-
-    return [scenario_summary(shipped_scenario(name)) for name in list_scenarios()]
-
-
-def _scenario_or_404(name: str) -> Any:
-    try:
-        return shipped_scenario(name)
-    except ApiError as exc:
-        raise ApiError(404, exc.detail.removeprefix("scenario: "), "name") from None
-
-
-@router.get("/scenarios/{name}", tags=["scenarios"])
-def get_scenario(name: str) -> dict[str, Any]:
-    """A shipped scenario's tables (the data an inline scenario starts from)."""
-    scenario = _scenario_or_404(name)
-    data: dict[str, Any] = scenario.to_dict()
-    return data
-
-
-_render_lock = threading.Lock()
-
-
-@router.get(
-    "/scenarios/{name}/map.png",
-    tags=["scenarios"],
-    response_class=Response,
-    responses={200: {"content": {"image/png": {}}, "description": "the scenario's map"}},
-)
-def scenario_map(name: str, svc: Svc) -> Response:
-    """A map of the scenario (seabed, obstacles, spawn regions, goals, currents) as a PNG."""
-    from hptvsim.world.render import render_scenario
-    from hptvsim.world.scenario import scenario_dir
-
-    scenario = _scenario_or_404(name)
-    source = scenario_dir() / f"{name}.toml"
-    cache = svc.settings.data_dir / "maps" / f"{name}-{source.stat().st_mtime_ns}.png"
-    if not cache.is_file():
-        cache.parent.mkdir(parents=True, exist_ok=True)
-        with _render_lock:  # matplotlib's pyplot is not thread-safe
-            if not cache.is_file():
-                tmp = cache.with_suffix(".tmp.png")
-                render_scenario(scenario, tmp)
-                tmp.replace(cache)
-    return FileResponse(cache, media_type="image/png", headers={"Cache-Control": "max-age=3600"})
-
-
-@router.get("/policies", response_model=list[PolicyOut], tags=["policies"])
-def list_policies_route(
-    role: Annotated[
-        Literal["pursuer", "evader"] | None, Query(description="only policies for this role")
-    ] = None,
-) -> list[dict[str, Any]]:
-    """Every named policy (scripted and shipped trained ones)."""
-    from hptvsim.zoo import list_policies
-
-    return [
-        {"name": p.name, "kind": p.kind, "roles": list(p.roles), "description": p.description}
-        for p in list_policies()
-        if role is None or role in p.roles
-    ]
-
-
-@router.get("/config", tags=["service"])
-def config(request: Request, svc: Svc) -> dict[str, Any]:
-    """Limits, versions and the live view's address (what the dashboard needs)."""
-    s = svc.settings
-    viser = getattr(request.app.state, "viser_url", None)
-    return {
-        "version": svc.versions.get("hptvsim"),
-        "versions": svc.versions,
-        "executor": s.executor,
-        "auth": s.api_key is not None,
-        "viser_url": viser,
-        "limits": {
-            "max_steps": s.max_steps,
-            "max_agents": s.max_agents,
-            "max_body_bytes": s.max_body_bytes,
-            "max_jobs": s.max_jobs,
-            "max_interactive": s.max_interactive,
-            "idle_timeout_s": s.idle_timeout_s,
-        },
-    }
-
-
-# --- episodes ---------------------------------------------------------------------------------------
-
-
-@router.post("/episodes", status_code=201, response_model=EpisodeOut, tags=["episodes"])
-async def create_episode(body: EpisodeCreate, svc: Svc) -> EpisodeOut:
-    """Create an episode: ``run`` queues it on the workers; ``interactive`` opens it for stepping."""
-    row = await svc.create(body)
-    return episode_out(svc, row)
-
-
-@router.get("/episodes", response_model=EpisodeList, tags=["episodes"])
-def list_episodes(
-    svc: Svc,
-    status: Annotated[list[Literal[STATUSES]] | None, Query(description="any of these statuses")] = None,  # type: ignore[valid-type]  # a Literal of the status tuple
-    scenario: Annotated[str | None, Query(max_length=200)] = None,
-    mode: Annotated[Literal["run", "interactive"] | None, Query()] = None,
-    policy: Annotated[
-        str | None,
-        Query(pattern=POLICY_PATTERN, description="episodes in which any agent follows this policy"),
-    ] = None,
-    limit: Annotated[int, Query(ge=1, le=500)] = 50,
-    offset: Annotated[int, Query(ge=0, le=1_000_000)] = 0,
-) -> EpisodeList:
-    """Episodes, newest first, filtered by status, scenario, mode and policy (all must match)."""
-    rows, total = svc.store.list(
-        status=status or (), scenario=scenario, mode=mode, policy=policy, limit=limit, offset=offset
-    )
-    return EpisodeList(total=total, limit=limit, offset=offset, items=[episode_out(svc, r) for r in rows])
-
-
 def _row(svc: Service, episode_id: str) -> EpisodeRow:
-    row = svc.store.get(_episode_id(episode_id))
+    row = svc.store.get(episode_id)
     if row is None:
         raise ApiError(404, f"no episode {episode_id}", "episode_id")
     return row
-
-
-@router.get("/episodes/{episode_id}", response_model=EpisodeOut, tags=["episodes"])
-def get_episode(episode_id: str, svc: Svc) -> EpisodeOut:
-    """One episode."""
-    return episode_out(svc, _row(svc, episode_id))
-
-
-@router.post("/episodes/{episode_id}/cancel", response_model=EpisodeOut, tags=["episodes"])
-async def cancel_episode(episode_id: str, svc: Svc) -> EpisodeOut:
-    """Cancel a queued or running episode (a running one stops at its next step and keeps its files)."""
-    row = await svc.cancel(_episode_id(episode_id))
-    return episode_out(svc, row)
-
-
-@router.delete("/episodes/{episode_id}", status_code=204, tags=["episodes"])
-async def delete_episode(episode_id: str, svc: Svc) -> Response:
-    """Delete a finished episode and its files."""
-    await svc.delete(_episode_id(episode_id))
-    return Response(status_code=204)
-
-
-@router.get("/episodes/{episode_id}/summary", tags=["results"])
-def get_summary(episode_id: str, svc: Svc) -> dict[str, Any]:
-    """How the episode ended: outcome, steps, times and metrics (the frame schema's EpisodeSummary)."""
-    row = _row(svc, episode_id)
-    if row.summary is None:
-        raise ApiError(409, f"episode {episode_id} is {row.status}; its summary exists once it has ended")
-    return row.summary
-
-
-@router.get("/episodes/{episode_id}/static", tags=["results"])
-def get_static(episode_id: str, svc: Svc) -> dict[str, Any]:
-    """The static part of the episode's frames (site, terrain mesh, obstacles, agents; frame schema)."""
-    row = _row(svc, episode_id)
-    path = svc.settings.episodes_dir / row.id / "static.json"
-    if path.is_file():
-        data: dict[str, Any] = json.loads(path.read_text())
-        return data
-    live = svc.hub.static(row.id)
-    if live is None:
-        raise ApiError(409, f"episode {episode_id} is {row.status}; its static part is not known yet")
-    return live
 
 
 def _trajectory_table(svc: Service, row: EpisodeRow) -> Any:
@@ -307,85 +131,17 @@ def trajectory_json(table: Any) -> dict[str, Any]:
     return out
 
 
-@router.get(
-    "/episodes/{episode_id}/trajectory",
-    tags=["results"],
-    responses={
-        200: {
-            "content": {"application/json": {}, "text/csv": {}, "application/vnd.apache.parquet": {}},
-            "description": "the trajectories: one row per step and agent (csv, parquet) or per agent (json)",
-        }
-    },
-)
-def get_trajectory(
-    episode_id: str,
-    svc: Svc,
-    format: Annotated[Literal["json", "csv", "parquet"], Query(description="json, csv or parquet")] = "json",
-) -> Response:
-    """Every agent's trajectory (pose, velocity, commands, rewards, distances per step)."""
-    row = _row(svc, episode_id)
-    table = _trajectory_table(svc, row)
-    if format == "json":
-        return JSONResponse(trajectory_json(table))
-    name = f"{row.id}-trajectory"
-    if format == "csv":
-        import pyarrow.csv as pacsv
-
-        buf = io.BytesIO()
-        pacsv.write_csv(table, buf)
-        return Response(
-            buf.getvalue(),
-            media_type="text/csv",
-            headers={"Content-Disposition": f'attachment; filename="{name}.csv"'},
-        )
-    path = svc.episode_file(row, "trajectory")
-    assert path is not None
-    return FileResponse(path, media_type="application/vnd.apache.parquet", filename=f"{name}.parquet")
-
-
-@router.get(
-    "/episodes/{episode_id}/recording",
-    tags=["results"],
-    response_class=Response,
-    responses={
-        200: {"content": {"application/octet-stream": {}}, "description": "the rerun recording (.rrd)"}
-    },
-)
-def get_recording(episode_id: str, svc: Svc) -> Response:
-    """The episode's rerun recording (open with ``hptvsim replay FILE`` or the rerun viewer)."""
-    row = _row(svc, episode_id)
-    if row.status in ACTIVE:
-        raise ApiError(409, f"episode {row.id} is {row.status}; its recording is ready once it has ended")
-    path = svc.episode_file(row, "recording")
-    if path is None:
-        raise ApiError(
-            404, f"episode {row.id} has no recording (record was off, or it {row.status} before one)"
-        )
-    return FileResponse(path, media_type="application/octet-stream", filename=f"{row.id}.rrd")
-
-
-# --- interactive --------------------------------------------------------------------------------------
-
-
-@router.get("/episodes/{episode_id}/observation", response_model=InteractiveState, tags=["interactive"])
-async def observe(episode_id: str, svc: Svc) -> dict[str, Any]:
-    """An interactive episode's agents, spaces and the controlled agents' observations (Eq. 14)."""
-    return await svc.observe(_episode_id(episode_id))
-
-
-@router.post("/episodes/{episode_id}/step", response_model=StepOut, tags=["interactive"])
-async def step(episode_id: str, body: StepIn, svc: Svc) -> dict[str, Any]:
-    """Advance an interactive episode one control step with the controlled agents' ``[v, omega]``."""
-    actions = {a: list(v) for a, v in body.actions.items()}
-    return await svc.step(_episode_id(episode_id), actions)
-
-
-# --- events -------------------------------------------------------------------------------------------
-
-
 async def _events(
     svc: Service, key: str, frames: bool, static: bool, request: Request
 ) -> AsyncIterator[ServerSentEvent]:
+    """The events of episode ``key`` (or ``"*"``).
+
+    The stream ends at the episode's final status or after ``event_stream_s`` (EventSource
+    clients reconnect by themselves, after ``retry`` ms).
+    """
+    loop = asyncio.get_running_loop()
+    end = loop.time() + svc.settings.event_stream_s
+
     def wanted(kind: str) -> bool:
         return (frames or kind != "frame") and (static or kind != "static")
 
@@ -396,7 +152,7 @@ async def _events(
             if row is None:
                 return
             status = {"status": row.status, "final": row.status in FINAL, "summary": row.summary}
-            yield ServerSentEvent(event="status", data={"episode": key, **status})
+            yield ServerSentEvent(event="status", data={"episode": key, **status}, retry=2000)
             if row.status in FINAL:
                 return
             known = svc.hub.static(key)
@@ -405,9 +161,11 @@ async def _events(
             for e in svc.hub.last(key):
                 if wanted(e["type"]):
                     yield ServerSentEvent(event=e["type"], data={"episode": key, **e["data"]})
-        while True:
+        else:
+            yield ServerSentEvent(comment="connected", retry=2000)
+        while (left := end - loop.time()) > 0:
             try:
-                e = await asyncio.wait_for(q.get(), timeout=15.0)
+                e = await asyncio.wait_for(q.get(), timeout=min(15.0, left))
             except TimeoutError:
                 if await request.is_disconnected():
                     return
@@ -422,64 +180,343 @@ async def _events(
         svc.hub.unsubscribe(key, q)
 
 
-@router.get("/episodes/{episode_id}/events", response_class=EventSourceResponse, tags=["events"])
-async def episode_events(
-    episode_id: str,
-    request: Request,
-    svc: Svc,
-    frames: Annotated[bool, Query(description="include frame events (frame schema Frame)")] = True,
-    static: Annotated[
-        bool, Query(description="begin with the static event (frame schema EpisodeStatic)")
-    ] = False,
-) -> AsyncIterator[ServerSentEvent]:
-    """Server-sent events of one episode: ``status``, ``progress``, ``frame`` (and ``static``).
+def build_routers(settings: Settings) -> tuple[APIRouter, APIRouter]:
+    """The REST router and the WebSocket router of a service with these settings."""
+    models = request_models(settings)
+    EpisodeCreateBody = models.episode_create
+    StepBody = models.step_in
+    ScenarioName = models.scenario_name
 
-    The stream ends after the final status.
-    """
-    _row(svc, episode_id)
-    async for e in _events(svc, episode_id, frames, static, request):
-        yield e
+    dependencies = []
+    if settings.api_key is not None:
+        header = APIKeyHeader(name="X-API-Key", auto_error=False, description="the service's API key")
+        query = APIKeyQuery(
+            name="api_key",
+            auto_error=False,
+            description="the API key, for GET requests a browser makes without headers (EventSource, links)",
+        )
 
+        def check_api_key(
+            request: Request,
+            by_header: Annotated[str | None, Security(header)] = None,
+            by_query: Annotated[str | None, Security(query)] = None,
+        ) -> None:
+            given = by_header if by_header is not None or request.method != "GET" else by_query
+            if not key_ok(settings.api_key, given):
+                raise ApiError(401, "missing or wrong API key; send it in the X-API-Key header", "X-API-Key")
 
-@router.get("/events", response_class=EventSourceResponse, tags=["events"])
-async def all_events(
-    request: Request,
-    svc: Svc,
-    frames: Annotated[bool, Query(description="include frame events (frame schema Frame)")] = False,
-    static: Annotated[bool, Query(description="include static events (frame schema EpisodeStatic)")] = False,
-) -> AsyncIterator[ServerSentEvent]:
-    """Server-sent events of every episode (status and progress; frames and static parts on request)."""
-    async for e in _events(svc, "*", frames, static, request):
-        yield e
+        dependencies.append(Depends(check_api_key))
+    errors: dict[int | str, dict[str, Any]] = {
+        code: {"model": ErrorBody}
+        for code in (400, 403, 404, 409, 413, 415, 422, 429, 500, 503) + ((401,) if settings.api_key else ())
+    }
+    router = APIRouter(prefix="/api/v1", responses=errors, dependencies=dependencies)
+    # event streams answer errors as JSON too (a response class of text/event-stream would
+    # otherwise be documented for them)
+    stream_errors: dict[int | str, dict[str, Any]] = {
+        code: {
+            "description": "an error (ErrorBody)",
+            "content": {"application/json": {"schema": {"$ref": "#/components/schemas/ErrorBody"}}},
+        }
+        for code in errors
+    }
+    ws_router = APIRouter(prefix="/api/v1")
 
+    # --- scenarios and policies ----------------------------------------------------------------
 
-@ws_router.websocket("/episodes/{episode_id}/ws")
-async def episode_ws(websocket: WebSocket, episode_id: str) -> None:
-    """WebSocket of one episode.
+    @router.get("/scenarios", response_model=list[ScenarioOut], tags=["scenarios"])
+    def list_scenarios_route() -> list[dict[str, Any]]:
+        """The shipped scenarios."""
+        return [scenario_summary(shipped_scenario(name)) for name in models.scenarios]
 
-    Interactive episodes answer requests in order: ``{"op": "observe"}``,
-    ``{"op": "step", "actions": {"pursuer_0": [v, omega]}}``, ``{"op": "cancel"}``; answers are
-    ``{"type": "state" | "step" | "episode" | "error", ...}``. Run episodes send their events
-    (``status``, ``progress``, ``frame``) until the final status, then close. The API key goes in
-    the ``X-API-Key`` header or the ``api_key`` query parameter.
-    """
-    svc: Service = websocket.app.state.service
-    given = websocket.headers.get("x-api-key") or websocket.query_params.get("api_key")
-    if not _key_ok(svc.settings.api_key, given):
-        await websocket.close(code=4401, reason="missing or wrong API key")
-        return
-    row = svc.store.get(episode_id) if all(c in "0123456789abcdef" for c in episode_id) else None
-    if row is None:
-        await websocket.close(code=4404, reason=f"no episode {episode_id}")
-        return
-    await websocket.accept()
-    try:
-        if row.mode == "interactive":
-            await _ws_interactive(websocket, svc, episode_id)
-        else:
-            await _ws_stream(websocket, svc, row)
-    except WebSocketDisconnect:
-        return
+    from hptvsim.world.scenario import scenario_json_schema
+
+    @router.get(
+        "/scenarios/{name}",
+        tags=["scenarios"],
+        responses={
+            200: {
+                "content": {"application/json": {"schema": scenario_json_schema(standalone=False)}},
+                "description": "the scenario's tables (what an inline scenario starts from)",
+            }
+        },
+    )
+    def get_scenario(name: Annotated[ScenarioName, Path()]) -> dict[str, Any]:  # type: ignore[valid-type]
+        """A shipped scenario's tables (the data an inline scenario starts from)."""
+        data: dict[str, Any] = shipped_scenario(str(name)).to_dict()
+        return data
+
+    @router.get(
+        "/scenarios/{name}/map.png",
+        tags=["scenarios"],
+        response_class=Response,
+        responses={200: {"content": {"image/png": {}}, "description": "the scenario's map"}},
+    )
+    async def scenario_map(
+        name: Annotated[ScenarioName, Path()],  # type: ignore[valid-type]  # an enum of the catalog
+        svc: Svc,
+    ) -> Response:
+        """A map of the scenario (seabed, obstacles, spawn regions, goals, currents) as a PNG."""
+        from hptvsim.world.scenario import scenario_dir
+
+        source = scenario_dir() / f"{name}.toml"
+        cache = svc.settings.data_dir / "maps" / f"{name}-{source.stat().st_mtime_ns}.png"
+        if not cache.is_file():
+            cache.parent.mkdir(parents=True, exist_ok=True)
+            await svc.render_map(str(name), cache)
+        return FileResponse(cache, media_type="image/png", headers={"Cache-Control": "max-age=3600"})
+
+    @router.get("/policies", response_model=list[PolicyOut], tags=["policies"])
+    def list_policies_route(
+        role: Annotated[
+            Literal["pursuer", "evader"] | None, Query(description="only policies for this role")
+        ] = None,
+    ) -> list[dict[str, Any]]:
+        """Every named policy (scripted and shipped trained ones)."""
+        from hptvsim.catalog import policies
+
+        return [
+            {"name": p.name, "kind": p.kind, "roles": list(p.roles), "description": p.description}
+            for p in policies(role)
+        ]
+
+    @router.get("/config", tags=["service"])
+    def config(request: Request, svc: Svc) -> dict[str, Any]:
+        """Limits, versions and the live view's address (what the dashboard needs)."""
+        s = svc.settings
+        viser = getattr(request.app.state, "viser_url", None)
+        return {
+            "version": svc.versions.get("hptvsim"),
+            "versions": svc.versions,
+            "executor": s.executor,
+            "auth": s.api_key is not None,
+            "viser_url": viser,
+            "limits": {
+                "max_steps": s.max_steps,
+                "max_agents": s.max_agents,
+                "max_body_bytes": s.max_body_bytes,
+                "max_jobs": s.max_jobs,
+                "max_interactive": s.max_interactive,
+                "idle_timeout_s": s.idle_timeout_s,
+            },
+        }
+
+    # --- episodes ------------------------------------------------------------------------------
+
+    @router.post("/episodes", status_code=201, response_model=EpisodeOut, tags=["episodes"])
+    async def create_episode(body: EpisodeCreateBody, svc: Svc) -> EpisodeOut:  # type: ignore[valid-type]
+        """Create an episode: ``run`` queues it on the workers; ``interactive`` opens it for stepping."""
+        row = await svc.create(body)
+        return episode_out(svc, row)
+
+    @router.get("/episodes", response_model=EpisodeList, tags=["episodes"])
+    def list_episodes(
+        svc: Svc,
+        status: Annotated[
+            list[Literal[STATUSES]] | None,  # type: ignore[valid-type]  # a Literal of the status tuple
+            Query(description="any of these statuses", max_length=len(STATUSES)),
+        ] = None,
+        scenario: Annotated[str | None, Query(max_length=200)] = None,
+        mode: Annotated[Literal["run", "interactive"] | None, Query()] = None,
+        policy: Annotated[
+            str | None,
+            Query(pattern=POLICY_PATTERN, description="episodes in which any agent follows this policy"),
+        ] = None,
+        limit: Annotated[int, Query(ge=1, le=500)] = 50,
+        offset: Annotated[int, Query(ge=0, le=1_000_000)] = 0,
+    ) -> EpisodeList:
+        """Episodes, newest first, filtered by status, scenario, mode and policy (all must match)."""
+        rows, total = svc.store.list(
+            status=status or (), scenario=scenario, mode=mode, policy=policy, limit=limit, offset=offset
+        )
+        return EpisodeList(total=total, limit=limit, offset=offset, items=[episode_out(svc, r) for r in rows])
+
+    @router.get("/episodes/{episode_id}", response_model=EpisodeOut, tags=["episodes"])
+    def get_episode(episode_id: EpisodeId, svc: Svc) -> EpisodeOut:
+        """One episode."""
+        return episode_out(svc, _row(svc, episode_id))
+
+    @router.post("/episodes/{episode_id}/cancel", response_model=EpisodeOut, tags=["episodes"])
+    async def cancel_episode(episode_id: EpisodeId, svc: Svc) -> EpisodeOut:
+        """Cancel a queued or running episode (a running one stops at its next step and keeps its files)."""
+        row = await svc.cancel(episode_id)
+        return episode_out(svc, row)
+
+    @router.delete("/episodes/{episode_id}", status_code=204, tags=["episodes"])
+    async def delete_episode(episode_id: EpisodeId, svc: Svc) -> Response:
+        """Delete a finished episode and its files."""
+        await svc.delete(episode_id)
+        return Response(status_code=204)
+
+    @router.get("/episodes/{episode_id}/summary", tags=["results"])
+    def get_summary(episode_id: EpisodeId, svc: Svc) -> dict[str, Any]:
+        """How the episode ended: outcome, steps, times and metrics (the frame schema's EpisodeSummary)."""
+        row = _row(svc, episode_id)
+        if row.summary is None:
+            raise ApiError(409, f"episode {episode_id} is {row.status}; its summary exists once it has ended")
+        return row.summary
+
+    @router.get("/episodes/{episode_id}/static", tags=["results"])
+    def get_static(episode_id: EpisodeId, svc: Svc) -> dict[str, Any]:
+        """The static part of the episode's frames (site, terrain mesh, obstacles, agents; frame schema)."""
+        row = _row(svc, episode_id)
+        path = svc.settings.episodes_dir / row.id / "static.json"
+        if path.is_file():
+            data: dict[str, Any] = json.loads(path.read_text())
+            return data
+        live = svc.hub.static(row.id)
+        if live is None:
+            raise ApiError(409, f"episode {episode_id} is {row.status}; its static part is not known yet")
+        return live
+
+    @router.get(
+        "/episodes/{episode_id}/trajectory",
+        tags=["results"],
+        responses={
+            200: {
+                "content": {"application/json": {}, "text/csv": {}, "application/vnd.apache.parquet": {}},
+                "description": "the trajectories: a row per step and agent (csv, parquet), per agent (json)",
+            }
+        },
+    )
+    def get_trajectory(
+        episode_id: EpisodeId,
+        svc: Svc,
+        format: Annotated[
+            Literal["json", "csv", "parquet"], Query(description="json, csv or parquet")
+        ] = "json",
+    ) -> Response:
+        """Every agent's trajectory (pose, velocity, commands, rewards, distances per step)."""
+        row = _row(svc, episode_id)
+        table = _trajectory_table(svc, row)
+        if format == "json":
+            return JSONResponse(trajectory_json(table))
+        name = f"{row.id}-trajectory"
+        if format == "csv":
+            import pyarrow.csv as pacsv
+
+            buf = io.BytesIO()
+            pacsv.write_csv(table, buf)
+            return Response(
+                buf.getvalue(),
+                media_type="text/csv",
+                headers={"Content-Disposition": f'attachment; filename="{name}.csv"'},
+            )
+        path = svc.episode_file(row, "trajectory")
+        assert path is not None
+        return FileResponse(path, media_type="application/vnd.apache.parquet", filename=f"{name}.parquet")
+
+    @router.get(
+        "/episodes/{episode_id}/recording",
+        tags=["results"],
+        response_class=Response,
+        responses={
+            200: {"content": {"application/octet-stream": {}}, "description": "the rerun recording (.rrd)"}
+        },
+    )
+    def get_recording(episode_id: EpisodeId, svc: Svc) -> Response:
+        """The episode's rerun recording (open with ``hptvsim replay FILE`` or the rerun viewer)."""
+        row = _row(svc, episode_id)
+        if row.status in ACTIVE:
+            raise ApiError(409, f"episode {row.id} is {row.status}; its recording is ready once it has ended")
+        path = svc.episode_file(row, "recording")
+        if path is None:
+            raise ApiError(
+                404, f"episode {row.id} has no recording (record was off, or it {row.status} before one)"
+            )
+        return FileResponse(path, media_type="application/octet-stream", filename=f"{row.id}.rrd")
+
+    # --- interactive ---------------------------------------------------------------------------
+
+    @router.get("/episodes/{episode_id}/observation", response_model=InteractiveState, tags=["interactive"])
+    async def observe(episode_id: EpisodeId, svc: Svc) -> dict[str, Any]:
+        """An interactive episode's agents, spaces and the controlled agents' observations (Eq. 14)."""
+        return await svc.observe(episode_id)
+
+    @router.post("/episodes/{episode_id}/step", response_model=StepOut, tags=["interactive"])
+    async def step(episode_id: EpisodeId, body: StepBody, svc: Svc) -> dict[str, Any]:  # type: ignore[valid-type]
+        """Advance an interactive episode one control step with the controlled agents' ``[v, omega]``."""
+        actions = {a: list(v) for a, v in body.actions.items()}  # type: ignore[attr-defined]
+        return await svc.step(episode_id, actions)
+
+    # --- events --------------------------------------------------------------------------------
+
+    def existing_episode(episode_id: EpisodeId, svc: Svc) -> str:
+        """The episode id, or 404 before any stream starts."""
+        _row(svc, episode_id)
+        return episode_id
+
+    @router.get(
+        "/episodes/{episode_id}/events",
+        response_class=EventSourceResponse,
+        tags=["events"],
+        responses=stream_errors,
+    )
+    async def episode_events(
+        episode_id: Annotated[str, Depends(existing_episode)],
+        request: Request,
+        svc: Svc,
+        frames: Annotated[bool, Query(description="include frame events (frame schema Frame)")] = True,
+        static: Annotated[
+            bool, Query(description="begin with the static event (frame schema EpisodeStatic)")
+        ] = False,
+    ) -> AsyncIterator[ServerSentEvent]:
+        """Server-sent events of one episode: ``status``, ``progress``, ``frame`` (and ``static``).
+
+        The stream ends after the final status, or after the service's longest stream life.
+        """
+        async for e in _events(svc, episode_id, frames, static, request):
+            yield e
+
+    @router.get("/events", response_class=EventSourceResponse, tags=["events"], responses=stream_errors)
+    async def all_events(
+        request: Request,
+        svc: Svc,
+        frames: Annotated[bool, Query(description="include frame events (frame schema Frame)")] = False,
+        static: Annotated[
+            bool, Query(description="include static events (frame schema EpisodeStatic)")
+        ] = False,
+    ) -> AsyncIterator[ServerSentEvent]:
+        """Server-sent events of every episode (status and progress; frames and static parts on request).
+
+        The stream ends after the service's longest stream life (EventSource reconnects).
+        """
+        async for e in _events(svc, "*", frames, static, request):
+            yield e
+
+    @ws_router.websocket("/episodes/{episode_id}/ws")
+    async def episode_ws(websocket: WebSocket, episode_id: str) -> None:
+        """WebSocket of one episode.
+
+        Interactive episodes answer requests in order: ``{"op": "observe"}``,
+        ``{"op": "step", "actions": {"pursuer_0": [v, omega]}}``, ``{"op": "cancel"}``; answers are
+        ``{"type": "state" | "step" | "episode" | "error", ...}``. Run episodes send their events
+        (``status``, ``progress``, ``frame``) until the final status, then close. The API key goes in
+        the ``X-API-Key`` header or the ``api_key`` query parameter.
+        """
+        svc: Service = websocket.app.state.service
+        given = websocket.headers.get("x-api-key") or websocket.query_params.get("api_key")
+        # accepted first, so that the client sees why it is closed (a close before the
+        # handshake is a bare HTTP 403)
+        await websocket.accept()
+        if not key_ok(svc.settings.api_key, given):
+            await websocket.close(code=4401, reason="missing or wrong API key")
+            return
+        row = None
+        if len(episode_id) <= 32 and all(c in "0123456789abcdef" for c in episode_id):
+            row = await asyncio.to_thread(svc.store.get, episode_id)
+        if row is None:
+            await websocket.close(code=4404, reason=f"no episode {episode_id[:40]}")
+            return
+        try:
+            if row.mode == "interactive":
+                await _ws_interactive(websocket, svc, episode_id, StepBody)
+            else:
+                await _ws_stream(websocket, svc, row)
+        except WebSocketDisconnect:
+            return
+
+    return router, ws_router
 
 
 async def _ws_stream(websocket: WebSocket, svc: Service, row: EpisodeRow) -> None:
@@ -508,7 +545,7 @@ async def _ws_stream(websocket: WebSocket, svc: Service, row: EpisodeRow) -> Non
         svc.hub.unsubscribe(row.id, q)
 
 
-async def _ws_interactive(websocket: WebSocket, svc: Service, episode_id: str) -> None:
+async def _ws_interactive(websocket: WebSocket, svc: Service, episode_id: str, step_model: Any) -> None:
     while True:
         text = await websocket.receive_text()
         try:
@@ -522,7 +559,7 @@ async def _ws_interactive(websocket: WebSocket, svc: Service, episode_id: str) -
                     raise ApiError(
                         422, f"{sorted(extra)[0]}: unknown key; valid: op, actions", sorted(extra)[0]
                     )
-                body = StepIn.model_validate({"actions": msg.get("actions", {})})
+                body = step_model.model_validate({"actions": msg.get("actions", {})})
                 actions = {a: list(v) for a, v in body.actions.items()}
                 out = await svc.step(episode_id, actions)
                 await websocket.send_text(json.dumps({"type": "step", "data": out}))

@@ -52,7 +52,7 @@ def running_service(workers: int = 2, timeout: float = 120.0) -> Iterator[str]:
         with log.open("w") as fh:
             proc = subprocess.Popen(
                 [sys.executable, "-m", "hptvsim.service", "--port", "0", "--log-level", "warning"],
-                cwd=Path(__file__).resolve().parents[1],
+                cwd=tmp,
                 env=env,
                 stdout=fh,
                 stderr=subprocess.STDOUT,

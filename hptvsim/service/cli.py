@@ -94,6 +94,12 @@ def serve(
         settings = settings.replace(**changes)
     except SettingsError as exc:
         raise click.ClickException(str(exc)) from None
+    from hptvsim.service.service import check_writable
+
+    try:
+        check_writable(settings.episodes_dir)
+    except RuntimeError as exc:
+        raise click.ClickException(str(exc)) from None
     if not _port_free(settings.host, settings.port):
         raise click.ClickException(
             f"port {settings.port} on {settings.host} is in use; pick another with --port or HPTVSIM_PORT"
@@ -155,10 +161,24 @@ def viser_command(api_url: str, host: str, port: int, api_key: str | None) -> No
     from hptvsim.client import Client, ServiceError
     from hptvsim.viz.viser_view import start_live_view
 
-    view = start_live_view(host=host, port=port)
+    try:
+        Settings(host=host, api_key=api_key or None)  # the same rule as the service's
+    except SettingsError as exc:
+        raise click.ClickException(str(exc)) from None
+    client = Client(api_url, api_key=api_key or None)
+
+    def launcher(scenario: str, policies: dict[str, str], seed: int) -> str:
+        try:
+            episode = client.create_episode(
+                scenario, policies=policies, seed=seed, label="from the live view"
+            )
+        except ServiceError as exc:
+            raise ValueError(exc.detail) from None
+        return str(episode["id"])
+
+    view = start_live_view(host=host, port=port, launcher=launcher, api_key=api_key or None)
     click.echo(f"hptvsim live view: {view.url} (following {api_url})")
     sys.stdout.flush()
-    client = Client(api_url, api_key=api_key or None)
     try:
         while True:
             try:

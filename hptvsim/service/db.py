@@ -4,6 +4,13 @@ Only the API process writes the database; worker processes report to it through 
 runner. SQLite runs in WAL mode so readers never wait for the writer; ``DATABASE_URL`` selects
 another database (PostgreSQL: ``postgresql+psycopg://user:password@host/db``).
 
+The schema is made and upgraded by the Alembic revisions in ``hptvsim/service/migrations``:
+opening a :class:`Store` upgrades its database to the newest revision (a fresh database gets
+every revision; a database made by 0.1.0, which has the ``episodes`` table but no
+``alembic_version`` table, is stamped ``0001`` first), so an existing database survives an
+upgrade of hptvsim. Services starting together on one database upgrade it one at a time:
+PostgreSQL under a transaction-level advisory lock, SQLite under ``BEGIN IMMEDIATE``.
+
 On startup :meth:`Store.recover` turns every ``queued`` or ``running`` row left by a previous
 process into ``interrupted`` (or ``finished``, when the episode's worker had completed and written
 its result file before the API went down), so a restart loses no finished episode.
@@ -17,18 +24,44 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from sqlalchemy import JSON, Column, event, func
-from sqlalchemy.engine import Engine
+from sqlalchemy import JSON, Column, Index, event, func, inspect, make_url, text
+from sqlalchemy.engine import Connection, Engine
+from sqlalchemy.pool import NullPool
 from sqlmodel import Field, Session, SQLModel, col, create_engine, select
 
-__all__ = ["ACTIVE", "FINAL", "STATUSES", "EpisodeRow", "Store", "utcnow"]
+if TYPE_CHECKING:
+    from alembic.config import Config
+
+__all__ = [
+    "ACTIVE",
+    "BASELINE_REVISION",
+    "FINAL",
+    "STATUSES",
+    "EpisodeRow",
+    "Store",
+    "migration_config",
+    "upgrade_schema",
+    "utcnow",
+]
 
 STATUSES: tuple[str, ...] = ("queued", "running", "finished", "failed", "cancelled", "interrupted")
 """Every episode status; the first two are active, the rest final."""
 ACTIVE: tuple[str, ...] = ("queued", "running")
 FINAL: tuple[str, ...] = ("finished", "failed", "cancelled", "interrupted")
+
+MIGRATIONS = Path(__file__).with_name("migrations")
+"""The Alembic script folder (shipped inside the package)."""
+BASELINE_REVISION = "0001"
+"""The revision of the schema 0.1.0 made with ``create_all`` (before migrations existed)."""
+_BASELINE_COLUMNS = (
+    "id", "mode", "status", "label", "scenario", "seed", "max_steps", "backend", "sensor_fidelity",
+    "agents", "policies", "policy_list", "config", "versions", "summary", "steps", "error",
+    "recording_path", "trajectory_path", "created_at", "started_at", "finished_at",
+)  # fmt: skip
+_PG_LOCK_KEY = 0x68707476_73696D00  # "hptvsim\0": the advisory lock of schema upgrades
+_MIGRATING = threading.Lock()  # Alembic's ``context``/``op`` are module globals: one run per process
 
 
 def utcnow() -> datetime:
@@ -40,10 +73,12 @@ class EpisodeRow(SQLModel, table=True):
     """One episode: its configuration, status, results and files."""
 
     __tablename__ = "episodes"
+    # the list filters by status and orders by creation time (revision 0002)
+    __table_args__ = (Index("ix_episodes_status_created_at", "status", "created_at"),)
 
     id: str = Field(primary_key=True, max_length=32)
     mode: str = Field(default="run", index=True, max_length=16)  # "run" or "interactive"
-    status: str = Field(default="queued", index=True, max_length=16)
+    status: str = Field(default="queued", max_length=16)
     label: str = Field(default="", max_length=200)
     scenario: str = Field(index=True, max_length=200)  # shipped name, or "<name> (inline)"
     seed: int = 0
@@ -65,6 +100,8 @@ class EpisodeRow(SQLModel, table=True):
     created_at: datetime = Field(default_factory=utcnow, index=True)
     started_at: datetime | None = None
     finished_at: datetime | None = None
+    # when the row last changed: set on insert, by every Store write, and by any other ORM update
+    updated_at: datetime = Field(default_factory=utcnow, sa_column_kwargs={"onupdate": utcnow})
 
 
 def _sqlite_pragmas(dbapi_connection: Any, connection_record: Any) -> None:
@@ -82,18 +119,137 @@ def _aware(value: datetime | None) -> datetime | None:
     return value
 
 
+def _in_memory(url: str) -> bool:
+    parsed = make_url(url)
+    return parsed.get_backend_name() == "sqlite" and (
+        parsed.database in (None, "", ":memory:") or parsed.query.get("mode") == "memory"
+    )
+
+
+def migration_config(connection: Connection | None = None) -> Config:
+    """An Alembic configuration of the shipped migrations (no ``alembic.ini`` needed).
+
+    Args:
+        connection: The connection the revisions run on (``config.attributes["connection"]``);
+            when it is inside a transaction, Alembic leaves committing to the caller.
+
+    Returns:
+        The configuration, for the functions of ``alembic.command``.
+    """
+    from alembic.config import Config
+
+    cfg = Config()
+    cfg.set_main_option("script_location", str(MIGRATIONS).replace("%", "%%"))
+    if connection is not None:
+        cfg.attributes["connection"] = connection
+    return cfg
+
+
+def _migration_engine(url: str) -> Engine:
+    """A one-connection engine on which an upgrade runs in one transaction.
+
+    On SQLite the driver's own transaction handling is switched off and the transaction begins
+    with ``BEGIN IMMEDIATE``: the write lock is taken before the schema is read, so two processes
+    upgrading one file run one after the other, and the table copies of batch mode are atomic.
+    """
+    sqlite = make_url(url).get_backend_name() == "sqlite"
+    engine = create_engine(url, poolclass=NullPool, connect_args={"timeout": 30} if sqlite else {})
+    if sqlite:
+
+        def connect(dbapi_connection: Any, connection_record: Any) -> None:
+            _sqlite_pragmas(dbapi_connection, connection_record)
+            dbapi_connection.isolation_level = None
+
+        def begin(conn: Connection) -> None:
+            conn.exec_driver_sql("BEGIN IMMEDIATE")
+
+        event.listen(engine, "connect", connect)
+        event.listen(engine, "begin", begin)
+    return engine
+
+
+def upgrade_schema(engine: Engine) -> tuple[str | None, str]:
+    """Upgrade a database to the newest revision, in one transaction where the database allows.
+
+    A fresh database gets every revision; a database made by 0.1.0 (an ``episodes`` table and no
+    ``alembic_version`` table) is stamped :data:`BASELINE_REVISION` first. On PostgreSQL the
+    transaction first takes an advisory lock, so services starting together on one database
+    upgrade it one after the other (the later ones then find nothing to do).
+
+    Args:
+        engine: An engine of the database (see :func:`_migration_engine` for SQLite files).
+
+    Returns:
+        The revision found (None for a fresh database) and the revision now.
+
+    Raises:
+        RuntimeError: The database is at a revision this version does not know (a newer
+            hptvsim made it), or holds an ``episodes`` table that is not the 0.1.0 one.
+    """
+    from alembic import command
+    from alembic.runtime.migration import MigrationContext
+    from alembic.script import ScriptDirectory
+
+    with _MIGRATING, engine.connect() as conn:
+        if conn.dialect.name == "postgresql":  # the first statement: held until the commit
+            conn.execute(text("SELECT pg_advisory_xact_lock(:key)"), {"key": _PG_LOCK_KEY})
+        cfg = migration_config(conn)
+        script = ScriptDirectory.from_config(cfg)
+        head = script.get_current_head()
+        if head is None:  # pragma: no cover - the package ships its revisions
+            raise RuntimeError(f"no migrations in {MIGRATIONS}")
+        tables = set(inspect(conn).get_table_names())
+        if "episodes" in tables and "alembic_version" not in tables:
+            _check_baseline(conn)
+            command.stamp(cfg, BASELINE_REVISION)
+            found: str | None = BASELINE_REVISION
+        else:
+            found = MigrationContext.configure(conn).get_current_revision()
+        known = {s.revision for s in script.walk_revisions()}
+        if found is not None and found not in known:
+            raise RuntimeError(
+                f"the database {engine.url.render_as_string(hide_password=True)} is at schema "
+                f"revision {found!r}, which this hptvsim does not know (its newest is {head!r}): "
+                "a newer hptvsim made it; run that version, or point DATABASE_URL elsewhere"
+            )
+        if found != head:
+            command.upgrade(cfg, "head")
+        conn.commit()
+    return found, head
+
+
+def _check_baseline(conn: Connection) -> None:
+    """Refuse to stamp an ``episodes`` table that lacks columns of the 0.1.0 schema."""
+    present = {c["name"] for c in inspect(conn).get_columns("episodes")}
+    missing = [c for c in _BASELINE_COLUMNS if c not in present]
+    if missing:
+        raise RuntimeError(
+            "the database has an episodes table without an alembic_version table, as 0.1.0 made, "
+            f"but it lacks the columns {', '.join(missing)} of that schema; it was not made by "
+            "hptvsim 0.1.0 and is left alone"
+        )
+
+
 class Store:
     """The episodes table: create, read, list with filters, update.
 
+    Opening a store upgrades the database schema to the newest revision (see the module
+    docstring).
+
     Args:
         url: SQLAlchemy database URL.
+
+    Attributes:
+        revisions: The schema revision the database was at when opened (None: a fresh database)
+            and the revision it is at now.
     """
 
     def __init__(self, url: str) -> None:
         self.url = url
-        sqlite = url.startswith("sqlite")
-        if sqlite and url.startswith("sqlite:///") and url != "sqlite:///:memory:":
-            Path(url.removeprefix("sqlite:///")).parent.mkdir(parents=True, exist_ok=True)
+        parsed = make_url(url)
+        sqlite = parsed.get_backend_name() == "sqlite"
+        if sqlite and parsed.database and not _in_memory(url):
+            Path(parsed.database).parent.mkdir(parents=True, exist_ok=True)
         self.engine: Engine = create_engine(
             url,
             connect_args={"check_same_thread": False, "timeout": 30} if sqlite else {},
@@ -102,32 +258,16 @@ class Store:
         )
         if sqlite:
             event.listen(self.engine, "connect", _sqlite_pragmas)
-        SQLModel.metadata.create_all(self.engine)
-        self._add_missing_columns()
+        self.revisions: tuple[str | None, str]
+        if _in_memory(url):  # only this engine's connection sees the database
+            self.revisions = upgrade_schema(self.engine)
+        else:
+            migrator = _migration_engine(url)
+            try:
+                self.revisions = upgrade_schema(migrator)
+            finally:
+                migrator.dispose()
         self._lock = threading.Lock()  # one writer at a time (SQLite's own rule, kept for all)
-
-    def _add_missing_columns(self) -> None:
-        """Add columns a newer version of the table has (a database made by an older version)."""
-        from sqlalchemy import inspect, text
-
-        table = EpisodeRow.__table__  # type: ignore[attr-defined]  # SQLModel's table object
-        present = {c["name"] for c in inspect(self.engine).get_columns(table.name)}
-        with self.engine.begin() as conn:
-            for column in table.columns:
-                if column.name in present:
-                    continue
-                kind = column.type.compile(dialect=self.engine.dialect)
-                value = getattr(column.default, "arg", None)
-                default = "NULL"
-                if isinstance(value, bool):
-                    default = "1" if value else "0"
-                elif isinstance(value, int | float):
-                    default = repr(value)
-                elif isinstance(value, str):
-                    default = "'" + value.replace("'", "''") + "'"
-                conn.execute(
-                    text(f'ALTER TABLE {table.name} ADD COLUMN "{column.name}" {kind} DEFAULT {default}')
-                )
 
     @staticmethod
     def policy_list(policies: dict[str, str]) -> str:
@@ -149,25 +289,28 @@ class Store:
         row.created_at = _aware(row.created_at) or row.created_at
         row.started_at = _aware(row.started_at)
         row.finished_at = _aware(row.finished_at)
+        row.updated_at = _aware(row.updated_at) or row.updated_at
         return row
 
     # -- writes ------------------------------------------------------------------------------------
 
     def add(self, row: EpisodeRow) -> EpisodeRow:
-        """Insert a new episode."""
+        """Insert a new episode (its ``updated_at`` is now)."""
+        row.updated_at = utcnow()
         with self._lock, self.session() as s:
             s.add(row)
             s.commit()
         return self._fix(row)
 
     def update(self, episode_id: str, **values: Any) -> EpisodeRow | None:
-        """Set columns of one episode; returns the updated row (None if it does not exist)."""
+        """Set columns of one episode and its ``updated_at``; returns the row (None if it does not exist)."""
         with self._lock, self.session() as s:
             row = s.get(EpisodeRow, episode_id)
             if row is None:
                 return None
             for key, value in values.items():
                 setattr(row, key, value)
+            row.updated_at = utcnow()
             s.add(row)
             s.commit()
             return self._fix(row)
@@ -179,7 +322,7 @@ class Store:
             if row is None or (only_if_active and row.status not in ACTIVE):
                 return False
             row.status = status
-            row.finished_at = utcnow()
+            row.finished_at = row.updated_at = utcnow()
             for key, value in values.items():
                 setattr(row, key, value)
             s.add(row)
@@ -202,7 +345,7 @@ class Store:
             rows = s.exec(select(EpisodeRow).where(col(EpisodeRow.status).in_(ACTIVE))).all()
             for row in rows:
                 result = result_reader(row) if result_reader is not None else None
-                row.finished_at = utcnow()
+                row.finished_at = row.updated_at = utcnow()
                 if result is not None:
                     row.status = "finished"
                     for key, value in result.items():

@@ -25,6 +25,7 @@ import json
 import math
 import os
 import platform
+import re
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
@@ -38,10 +39,33 @@ __all__ = [
     "TRAJECTORY_FILE",
     "InteractiveEpisode",
     "JobSpec",
+    "client_message",
     "read_result",
     "run_job",
     "versions",
 ]
+
+_PATH = re.compile(r"(?<![\w.])(?:~|\.{1,2})?/(?:[^\s/:'\"]+/)*([^\s/:'\"]+)")
+
+
+def client_message(exc: BaseException) -> str:
+    """A short message about ``exc`` that is safe to show a client (no traceback, no server paths).
+
+    The log gets the traceback; this is what the episode's ``error`` and the API's answers say.
+    """
+    from hptvsim.viz.episode import SimulationError
+
+    if isinstance(exc, SimulationError):
+        return str(exc)
+    if isinstance(exc, PermissionError | FileNotFoundError | IsADirectoryError | NotADirectoryError):
+        return f"the service could not write the episode's files ({exc.strerror or 'permission denied'})"
+    if isinstance(exc, OSError):
+        return f"the service could not write the episode's files ({exc.strerror or type(exc).__name__})"
+    if isinstance(exc, ValueError):  # ours name the field; paths become file names
+        text = _PATH.sub(lambda m: m.group(1), str(exc).splitlines()[0] if str(exc) else "")
+        return text[:500] or type(exc).__name__
+    return f"internal error ({type(exc).__name__}); the service logged the details"
+
 
 RESULT_FILE = "result.json"
 STATIC_FILE = "static.json"

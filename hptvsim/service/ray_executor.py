@@ -121,11 +121,16 @@ class RayExecutor:
         import ray
 
         if not ray.is_initialized():
-            root = str(Path(__file__).resolve().parents[1])
+            from hptvsim._paths import checkout_dir
+
+            env_vars = {"OMP_NUM_THREADS": "1"}
+            top = checkout_dir()
+            if top is not None:  # a checkout: workers import hptvsim from it (an install needs nothing)
+                env_vars["PYTHONPATH"] = str(top)
             kwargs: dict[str, Any] = {
                 "ignore_reinit_error": True,
                 "log_to_driver": False,
-                "runtime_env": {"env_vars": {"PYTHONPATH": root, "OMP_NUM_THREADS": "1"}},
+                "runtime_env": {"env_vars": env_vars},
             }
             if self.settings.ray_address:
                 kwargs["address"] = self.settings.ray_address

@@ -1,17 +1,41 @@
 """Request and response bodies of the API (pydantic v2; requests forbid unknown keys).
 
-Bounds that depend on the service's settings (the step limit, the number of agents) are
-checked by the handlers and answered with the same structured 422 as schema violations.
+:class:`EpisodeCreate` and :class:`StepIn` are the requests' shapes; :func:`request_models`
+narrows them to one service's settings and catalog (the shipped scenario and policy names, the
+step and agent limits, the inline scenario's JSON Schema) so that the OpenAPI document states
+exactly the limits the server enforces. Requests are validated strictly: a number must be a
+JSON number, not a string holding one.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from datetime import datetime
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    StrictBool,
+    StrictFloat,
+    StrictStr,
+    StringConstraints,
+    WithJsonSchema,
+    create_model,
+)
+
+from hptvsim.catalog import MAX_SEED, NAME_PATTERN, POLICY_NAME_PATTERN
+
+if TYPE_CHECKING:
+    from hptvsim.service.settings import Settings
 
 __all__ = [
+    "AGENT_PATTERN",
+    "MAX_SEED",
+    "NAME_PATTERN",
+    "POLICY_PATTERN",
     "ActionValue",
     "EpisodeCreate",
     "EpisodeList",
@@ -21,18 +45,36 @@ __all__ = [
     "Health",
     "InteractiveState",
     "PolicyOut",
+    "RequestModels",
     "ScenarioOut",
     "StepIn",
     "StepOut",
+    "request_models",
 ]
 
-NAME_PATTERN = r"^[A-Za-z0-9_\-]{1,64}$"
-POLICY_PATTERN = r"^[A-Za-z0-9_\-:\.]{1,100}$"
-MAX_SEED = 2**31 - 1
+POLICY_PATTERN = POLICY_NAME_PATTERN
+AGENT_PATTERN = r"^(pursuer|evader)_[0-9]{1,2}$"
+"""Agent names (``pursuer_0``, ``evader_0``): a role and its number within the role."""
+AgentName = Annotated[str, StringConstraints(pattern=AGENT_PATTERN)]
+
+
+def _json_number(value: Any) -> Any:
+    if isinstance(value, str | bytes | bool):
+        raise ValueError("expected a JSON number")  # pydantic's lax mode would read "3" or true
+    return value
+
+
+JsonInt = Annotated[int, BeforeValidator(_json_number)]
+"""An integer given as a JSON number (``3``, or ``3.0`` as JSON Schema allows), never a string."""
+
+
+def json_int(ge: int, le: int) -> Any:
+    """:data:`JsonInt` in ``[ge, le]`` (the bounds inside the type, so the schema states them)."""
+    return Annotated[int, Field(ge=ge, le=le), BeforeValidator(_json_number)]
 
 
 class Strict(BaseModel):
-    """Request bodies: unknown keys are errors."""
+    """Request bodies: unknown keys are errors; numbers and booleans must be JSON numbers and booleans."""
 
     model_config = ConfigDict(extra="forbid")
 
@@ -52,26 +94,25 @@ class EpisodeCreate(Strict):
         description="run: the server drives every agent to the end; interactive: the client steps "
         "the agents in `control`, the server drives the others",
     )
-    policies: dict[str, str] = Field(
+    policies: dict[AgentName, str] = Field(
         default_factory=dict,
         description="policy name per agent (GET /api/v1/policies); agents not named follow their "
         "role's default: the shipped trained policy (GET /api/v1/policies, default_for), else "
         "pure_pursuit for pursuers and potential_field for evaders",
         max_length=64,
     )
-    control: list[str] = Field(
+    control: list[AgentName] = Field(
         default_factory=list,
         description="interactive mode: the agents the client steps",
         max_length=64,
+        json_schema_extra={"uniqueItems": True},
     )
-    seed: int | None = Field(
+    seed: json_int(0, MAX_SEED) | None = Field(  # type: ignore[valid-type]  # an Annotated type
         None,
-        ge=0,
-        le=MAX_SEED,
         description="seed of spawn poses, sensor noise and random policies (default: the scenario's)",
     )
-    max_steps: int | None = Field(
-        None, ge=1, le=10_000_000, description="step limit (default: the scenario's; bounded by the service)"
+    max_steps: json_int(1, 10_000_000) | None = Field(  # type: ignore[valid-type]  # an Annotated type
+        None, description="step limit (default: the scenario's; bounded by the service)"
     )
     sensor_fidelity: Literal["geometric", "signal"] | None = Field(
         None, description="sonar model (default: the scenario's)"
@@ -79,8 +120,8 @@ class EpisodeCreate(Strict):
     backend: Literal["batched", "fmu"] = Field(
         "batched", description="batched: the compiled dynamics; fmu: one FMI 2.0 FMU instance per vehicle"
     )
-    record: bool = Field(True, description="write a rerun recording (.rrd)")
-    label: str = Field("", max_length=200, description="free text shown in the episode list")
+    record: StrictBool = Field(True, description="write a rerun recording (.rrd)")
+    label: StrictStr = Field("", max_length=200, description="free text shown in the episode list")
 
 
 class FieldError(BaseModel):
@@ -126,6 +167,7 @@ class EpisodeOut(BaseModel):
     created_at: datetime
     started_at: datetime | None
     finished_at: datetime | None
+    updated_at: datetime | None = Field(None, description="when the row last changed")
     links: dict[str, str] = Field(default_factory=dict)
 
 
@@ -160,13 +202,13 @@ class PolicyOut(BaseModel):
     description: str
 
 
-ActionValue = tuple[float, float]
+ActionValue = tuple[StrictFloat, StrictFloat]
 
 
 class StepIn(Strict):
     """Actions of the controlled agents for one step."""
 
-    actions: dict[str, ActionValue] = Field(
+    actions: dict[AgentName, ActionValue] = Field(
         default_factory=dict,
         description="[v, omega] per controlled agent (m/s, rad/s; clipped to the vehicle's limits); "
         "agents left out keep still",
@@ -210,3 +252,85 @@ class Health(BaseModel):
     queued: int
     interactive: int
     database: str
+
+
+@dataclass(frozen=True)
+class RequestModels:
+    """One service's request models (see :func:`request_models`).
+
+    Attributes:
+        episode_create: :class:`EpisodeCreate` with the service's names and limits.
+        step_in: :class:`StepIn` with the service's agent limit.
+        scenario_name: The type of a shipped scenario's name (an enum in OpenAPI).
+        scenarios: The shipped scenarios' names.
+    """
+
+    episode_create: type[EpisodeCreate]
+    step_in: type[StepIn]
+    scenario_name: Any
+    scenarios: tuple[str, ...]
+
+
+def request_models(settings: Settings) -> RequestModels:
+    """:class:`EpisodeCreate` and :class:`StepIn` narrowed to ``settings`` and the catalog.
+
+    The shipped scenario names and the policy names become enums, ``max_steps`` and the
+    number of agents get the service's limits, and an inline scenario is described by the one
+    scenario schema (:func:`hptvsim.world.scenario.scenario_json_schema`), so a request that
+    the OpenAPI document allows is one the server takes, except for rules between fields that
+    JSON Schema cannot state (an agent the scenario does not have, a policy for another role,
+    a spawn region outside the site), which are answered 422 naming the field.
+    """
+    from hptvsim.catalog import policies, scenario_names
+    from hptvsim.world.scenario import scenario_json_schema
+
+    names = tuple(scenario_names())
+    scenario_name: Any = Literal[names]  # built from the catalog
+    accepted = sorted({n for p in policies() for n in (p.name, *p.aliases)})
+    policy_name: Any = Literal[tuple(accepted)]  # built from the catalog
+    inline = Annotated[dict[str, Any], WithJsonSchema(scenario_json_schema(standalone=False))]
+    fields = EpisodeCreate.model_fields
+    episode_create = create_model(
+        "EpisodeCreate",
+        __base__=EpisodeCreate,
+        scenario=(
+            scenario_name | inline,
+            Field(
+                fields["scenario"].default, description=fields["scenario"].description, examples=["source"]
+            ),
+        ),
+        policies=(
+            dict[AgentName, policy_name],
+            Field(
+                default_factory=dict,
+                description=fields["policies"].description,
+                max_length=settings.max_agents,
+            ),
+        ),
+        control=(
+            list[AgentName],
+            Field(
+                default_factory=list,
+                description=fields["control"].description,
+                max_length=settings.max_agents,
+                json_schema_extra={"uniqueItems": True},
+            ),
+        ),
+        max_steps=(
+            json_int(1, settings.max_steps) | None,
+            Field(None, description="step limit (default: the scenario's, at most this service's limit)"),
+        ),
+    )
+    step_in = create_model(
+        "StepIn",
+        __base__=StepIn,
+        actions=(
+            dict[AgentName, ActionValue],
+            Field(
+                default_factory=dict,
+                description=StepIn.model_fields["actions"].description,
+                max_length=settings.max_agents,
+            ),
+        ),
+    )
+    return RequestModels(episode_create, step_in, scenario_name, names)

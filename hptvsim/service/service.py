@@ -21,9 +21,10 @@ from typing import Any, Protocol
 from hptvsim.service.db import ACTIVE, EpisodeRow, Store, utcnow
 from hptvsim.service.engine import JobSpec, read_result, versions
 from hptvsim.service.hub import Hub
+from hptvsim.service.prep import PrepPool
 from hptvsim.service.schemas import EpisodeCreate
 from hptvsim.service.settings import Settings
-from hptvsim.service.validation import ApiError, resolve_request
+from hptvsim.service.validation import ApiError, Resolved, resolve_request, screen_inline
 from hptvsim.service.workers import HostError, HostProcess, WorkerPool
 
 __all__ = ["Executor", "Service"]
@@ -82,6 +83,8 @@ class Service:
         self._warm: asyncio.Future[None] | None = None
         self.started_at = time.time()
         self.recovered: tuple[list[str], list[str]] = ([], [])
+        self._reserved: dict[str, int] = {"run": 0, "interactive": 0}
+        self.prep = PrepPool(settings.prep_workers, settings.prep_timeout_s)
 
     # -- lifecycle -----------------------------------------------------------------------------------
 
@@ -89,7 +92,7 @@ class Service:
         """Recover rows left active by a previous process, start the executor and the hosts."""
         self.loop = asyncio.get_running_loop()
         self.hub.bind(self.loop)
-        self.settings.episodes_dir.mkdir(parents=True, exist_ok=True)
+        check_writable(self.settings.episodes_dir)
         self.recovered = await asyncio.to_thread(self.store.recover, self._recovered_result)
         if self.recovered[0] or self.recovered[1]:
             log.warning(
@@ -109,12 +112,14 @@ class Service:
             host.on_death = self._host_died
             host.start(self.loop)
             self.hosts.append(host)
+        self.prep.start(self.loop)
         self._reaper = asyncio.create_task(self._reap_idle())
         # load the shipped scenarios in the background, so the first scenario list is quick
         self._warm = self.loop.run_in_executor(None, _warm_scenarios)
 
     async def stop(self) -> None:
         """Stop everything; active episodes become ``interrupted`` (their files are kept)."""
+        self.prep.close()  # preparation in flight is of no use any more: kill it, do not wait
         if self._reaper is not None:
             self._reaper.cancel()
             with contextlib.suppress(asyncio.CancelledError):
@@ -152,21 +157,34 @@ class Service:
     # -- creating episodes -----------------------------------------------------------------------------
 
     def _active_count(self, mode: str) -> int:
-        return sum(1 for v in self.live.values() if v.mode == mode)
+        """Episodes of ``mode`` that are live or being created."""
+        return sum(1 for v in self.live.values() if v.mode == mode) + self._reserved[mode]
 
     async def create(self, req: EpisodeCreate) -> EpisodeRow:
         """Validate a request, store the episode and start it (queued run, or open on a host).
 
+        A slot is reserved before anything is awaited and released however creation ends, so
+        concurrent requests cannot exceed the limits and a failed creation frees its slot.
+
         Raises:
-            ApiError: Invalid request (422), too many active episodes (429), host failure (500).
+            ApiError: Invalid request (422), too many active episodes (429), the database or
+                the workers unavailable (503).
         """
         s = self.settings
-        if req.mode == "run" and self._active_count("run") >= s.max_jobs:
-            raise ApiError(429, f"{s.max_jobs} episodes are queued or running; try again later")
-        if req.mode == "interactive" and self._active_count("interactive") >= s.max_interactive:
+        limit = s.max_jobs if req.mode == "run" else s.max_interactive
+        if self._active_count(req.mode) >= limit:
+            if req.mode == "run":
+                raise ApiError(429, f"{s.max_jobs} episodes are queued or running; try again later")
             raise ApiError(429, f"{s.max_interactive} interactive episodes are open; close one or try later")
-        resolved, scenario = await asyncio.to_thread(resolve_request, req, s)
-        seed = req.seed if req.seed is not None else int(scenario.simulation.seed)
+        self._reserved[req.mode] += 1
+        try:
+            return await self._create(req)
+        finally:
+            self._reserved[req.mode] -= 1
+
+    async def _create(self, req: EpisodeCreate) -> EpisodeRow:
+        s = self.settings
+        resolved, seed = await self.prepare(req)
         episode_id = uuid.uuid4().hex[:16]
         out_dir = s.episodes_dir / episode_id
         spec = JobSpec(
@@ -206,9 +224,15 @@ class Service:
             },
             versions=self.versions,
         )
+        try:
+            await asyncio.to_thread(self.store.add, row)
+        except Exception:
+            log.exception("storing the new episode %s failed", episode_id)
+            raise ApiError(
+                503, "the service cannot store episodes now (its database failed); try later"
+            ) from None
         if req.mode == "run":
             self.live[episode_id] = _Live(mode="run")
-            await asyncio.to_thread(self.store.add, row)
             assert self.executor is not None
             try:
                 self.executor.submit(spec)
@@ -227,25 +251,57 @@ class Service:
         return min(alive, key=lambda h: len(h.episodes))
 
     async def _open_interactive(self, row: EpisodeRow, spec: JobSpec) -> EpisodeRow:
-        host = self._pick_host()
+        try:
+            host = self._pick_host()
+        except ApiError as exc:
+            await asyncio.to_thread(self.store.finish, row.id, status="failed", error=exc.detail)
+            raise
         live = _Live(mode="interactive", host=host, lock=asyncio.Lock())
         self.live[row.id] = live
         host.episodes.add(row.id)
-        await asyncio.to_thread(self.store.add, row)
         try:
             answer = await host.call("open", spec.to_dict())
         except HostError as exc:
             self.live.pop(row.id, None)
             host.episodes.discard(row.id)
-            await asyncio.to_thread(self.store.finish, row.id, status="failed", error=str(exc))
+            await asyncio.to_thread(self.store.finish, row.id, status="failed", error=exc.client)
             if exc.kind == "value":
-                raise ApiError(422, f"scenario: {exc}", "scenario") from None
-            raise ApiError(500, f"opening the episode failed: {exc}") from None
+                raise ApiError(422, f"scenario: {exc.client}", "scenario") from None
+            self._log_host_error(row.id, exc)
+            raise ApiError(503, f"opening the episode failed: {exc.client}") from None
+        except BaseException:
+            self.live.pop(row.id, None)
+            host.episodes.discard(row.id)
+            raise
         updated = await asyncio.to_thread(self.store.update, row.id, status="running", started_at=utcnow())
         self._publish_status(row.id, "running")
         self.hub.publish({"type": "static", "episode": row.id, "data": answer["static"]})
         self.hub.publish({"type": "frame", "episode": row.id, "data": answer["frame"]})
         return updated or row
+
+    async def prepare(self, req: EpisodeCreate) -> tuple[Resolved, int]:
+        """Check a request against the scenario, the catalog and the limits; returns it and its seed.
+
+        A shipped scenario is known (loaded once, names only), so this is quick and runs on a
+        thread; a client's own scenario must be built to be checked, which runs in a
+        preparation process under the time limit (:class:`~hptvsim.service.prep.PrepPool`).
+
+        Raises:
+            ApiError: The first problem, naming the field.
+        """
+        if isinstance(req.scenario, str):
+            resolved, scenario = await asyncio.to_thread(resolve_request, req, self.settings)
+            default_seed = int(scenario.simulation.seed)
+        else:
+            screen_inline(req.scenario, self.settings)  # cheap checks first, here
+            resolved, default_seed = await self.prep.call(
+                "resolve", {"request": req.model_dump(mode="json"), "settings": self.settings}
+            )
+        return resolved, req.seed if req.seed is not None else default_seed
+
+    async def render_map(self, name: str, path: Path) -> None:
+        """Draw a shipped scenario's map into ``path`` (in a preparation process)."""
+        await self.prep.call("map", {"name": name, "path": str(path)}, what="name")
 
     # -- interactive stepping ----------------------------------------------------------------------
 
@@ -298,15 +354,37 @@ class Service:
         return out
 
     async def _host_call(self, host: HostProcess, op: str, args: dict[str, Any]) -> Any:
+        episode_id = str(args.get("id", ""))
         try:
             return await host.call(op, args)
         except HostError as exc:
             if exc.kind == "value":
-                field = str(exc).split(":", 1)[0] if ":" in str(exc) else "actions"
-                raise ApiError(422, str(exc), field) from None
+                field = exc.client.split(":", 1)[0] if ":" in exc.client else "actions"
+                raise ApiError(422, exc.client, field) from None
             if exc.kind == "state":
-                raise ApiError(409, str(exc)) from None
-            raise ApiError(500, f"the interactive host failed: {exc}") from None
+                raise ApiError(409, exc.client) from None
+            self._log_host_error(episode_id, exc)
+            if exc.kind in ("diverged", "failed"):  # the host closed the episode
+                self.live.pop(episode_id, None)
+                host.episodes.discard(episode_id)
+                await asyncio.to_thread(
+                    self._finish_from_result, episode_id, exc.result or {"error": exc.client}, "failed"
+                )
+                if exc.kind == "diverged":
+                    raise ApiError(
+                        422, f"scenario: {exc.client}; the episode is closed as failed", "scenario"
+                    ) from None
+                raise ApiError(
+                    500, f"the episode failed while stepping ({exc.client}); it is closed as failed"
+                ) from None
+            raise ApiError(500, f"the interactive host failed: {exc.client}") from None
+
+    @staticmethod
+    def _log_host_error(episode_id: str, exc: HostError) -> None:
+        if exc.trace:
+            log.error("episode %s: %s (%s)\n%s", episode_id, exc.client, exc.kind, exc.trace)
+        else:
+            log.error("episode %s: %s (%s)", episode_id, exc.client, exc.kind)
 
     def _host_died(self, host: HostProcess, episodes: set[str]) -> None:
         log.error("interactive host %d died; %d episodes lost", host.index, len(episodes))
@@ -391,13 +469,15 @@ class Service:
 
     @staticmethod
     def _result_columns(result: dict[str, Any]) -> dict[str, Any]:
-        return {
-            "summary": result.get("summary"),
-            "seed": int(result.get("seed", 0)),
-            "steps": int(result.get("steps", 0)),
-            "trajectory_path": result.get("trajectory_path"),
-            "recording_path": result.get("recording_path"),
-        }
+        """The columns a worker's result sets (only those it holds)."""
+        out: dict[str, Any] = {}
+        for key in ("summary", "trajectory_path", "recording_path"):
+            if key in result:
+                out[key] = result[key]
+        for key in ("seed", "steps"):
+            if key in result:
+                out[key] = int(result[key])
+        return out
 
     def _finish_from_result(self, episode_id: str, result: dict[str, Any], status: str | None) -> None:
         summary = result.get("summary") or {}
@@ -487,6 +567,19 @@ class Service:
             "interactive": self._active_count("interactive"),
             "database": self.store.engine.dialect.name,
         }
+
+
+def check_writable(folder: Path) -> None:
+    """Fail at start, naming the folder, when the service cannot write its episodes' files there."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        probe = folder / f".write-test-{uuid.uuid4().hex[:8]}"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as exc:
+        raise RuntimeError(
+            f"the data folder {folder} is not writable ({exc.strerror}); set HPTVSIM_DATA_DIR or --data-dir"
+        ) from None
 
 
 def _warm_scenarios() -> None:

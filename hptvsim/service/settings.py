@@ -12,8 +12,13 @@ variable                       meaning (default)
 ``HPTVSIM_DATA_DIR``           recordings, trajectories, the SQLite file (``hptvsim-out/service``)
 ``DATABASE_URL``               SQLAlchemy URL, e.g. ``postgresql+psycopg://...``
                                (``sqlite:///<data dir>/hptvsim.db``)
-``HPTVSIM_API_KEY``            when set, every ``/api/v1`` request needs header ``X-API-Key``
-``HPTVSIM_CORS_ORIGINS``       comma-separated allowed origins (``*``)
+``HPTVSIM_API_KEY``            when set, every ``/api/v1`` request and the live view need it
+                               (required when ``HPTVSIM_HOST`` is not a loopback address)
+``HPTVSIM_CORS_ORIGINS``       comma-separated origins of other sites' pages allowed to call the
+                               API (none: the dashboard is served by the API itself; ``*`` only
+                               with an API key)
+``HPTVSIM_INSECURE_OPEN``      ``1``: allow a non-loopback ``HPTVSIM_HOST`` without an API key
+                               (a network of your own only; off)
 ``HPTVSIM_EXECUTOR``           ``local`` (worker processes) or ``ray`` (``local``)
 ``RAY_ADDRESS``                Ray cluster address for ``HPTVSIM_EXECUTOR=ray`` (a local Ray)
 ``HPTVSIM_WORKERS``            worker processes of the local executor (CPU count, at most 4)
@@ -27,6 +32,9 @@ variable                       meaning (default)
 ``HPTVSIM_IDLE_TIMEOUT_S``     an interactive episode idle this long is cancelled (``600``)
 ``HPTVSIM_JOB_TIMEOUT_S``      a run longer than this (wall clock) is cancelled (``3600``)
 ``HPTVSIM_EVENT_HZ``           progress/frame events per second per episode (``10``)
+``HPTVSIM_EVENT_STREAM_S``     longest life of one event stream; clients reconnect (``3600``)
+``HPTVSIM_PREP_WORKERS``       processes that build clients' scenarios and maps (``1``)
+``HPTVSIM_PREP_TIMEOUT_S``     time limit of building one client's scenario (``30``)
 ``HPTVSIM_VISER``              start the viser live view (``1``; ``0`` to skip)
 ``HPTVSIM_VISER_PORT``         viser port (``8080``)
 ``HPTVSIM_VISER_URL``          address of a live view run as its own service (none)
@@ -70,7 +78,8 @@ class Settings:
         data_dir: Folder of recordings, trajectories and the default SQLite database.
         database_url: SQLAlchemy URL (``None``: SQLite in ``data_dir``).
         api_key: Required ``X-API-Key`` header value (``None``: no authentication).
-        cors_origins: Origins allowed by CORS.
+        cors_origins: Origins allowed by CORS (none by default).
+        insecure_open: Allow a non-loopback ``host`` without an API key.
         executor: ``"local"`` worker processes or ``"ray"`` tasks.
         ray_address: Ray cluster address (``None``: start or join a local Ray).
         workers: Worker processes of the local executor.
@@ -84,6 +93,9 @@ class Settings:
         idle_timeout_s: Interactive episodes idle this long are cancelled [s].
         job_timeout_s: Runs longer than this (wall clock) are cancelled [s].
         event_hz: Progress and frame events per second per episode [1/s].
+        event_stream_s: Longest life of one server-sent event stream [s] (EventSource reconnects).
+        prep_workers: Processes that build clients' scenarios and draw maps.
+        prep_timeout_s: Time limit of one such preparation [s].
         viser: Whether to start the viser live view beside the API.
         viser_port: Port of the viser live view.
         viser_url: Public address of a live view that runs as its own service (shown by the dashboard).
@@ -95,7 +107,8 @@ class Settings:
     data_dir: Path = field(default_factory=lambda: Path("hptvsim-out") / "service")
     database_url: str | None = None
     api_key: str | None = None
-    cors_origins: tuple[str, ...] = ("*",)
+    cors_origins: tuple[str, ...] = ()
+    insecure_open: bool = False
     executor: Literal["local", "ray"] = "local"
     ray_address: str | None = None
     workers: int = field(default_factory=_default_workers)
@@ -109,6 +122,9 @@ class Settings:
     idle_timeout_s: float = 600.0
     job_timeout_s: float = 3600.0
     event_hz: float = 10.0
+    event_stream_s: float = 3600.0
+    prep_workers: int = 1
+    prep_timeout_s: float = 30.0
     viser: bool = True
     viser_port: int = 8080
     viser_url: str | None = None
@@ -127,6 +143,9 @@ class Settings:
             "idle_timeout_s",
             "job_timeout_s",
             "event_hz",
+            "event_stream_s",
+            "prep_workers",
+            "prep_timeout_s",
         )
         for name in positive:
             if not getattr(self, name) > 0:
@@ -136,6 +155,31 @@ class Settings:
                 raise SettingsError(f"{name} = {getattr(self, name)!r} is invalid; valid: 0..65535")
         if self.executor not in ("local", "ray"):
             raise SettingsError(f"executor = {self.executor!r} is invalid; valid: 'local', 'ray'")
+        if self.api_key is not None and len(self.api_key) < 8:
+            raise SettingsError("api_key is too short; valid: at least 8 characters")
+        if "*" in self.cors_origins and self.api_key is None:
+            raise SettingsError(
+                "cors_origins = '*' without an API key would let any web page run and delete episodes; "
+                "list the origins, or set an API key"
+            )
+        if not self.loopback and self.api_key is None and not self.insecure_open:
+            raise SettingsError(
+                f"host = {self.host!r} is reachable from the network, and without an API key anyone "
+                "there could run episodes; set HPTVSIM_API_KEY (or HPTVSIM_INSECURE_OPEN=1 on a "
+                "network of your own)"
+            )
+
+    @property
+    def loopback(self) -> bool:
+        """Whether the service binds a loopback address only (reachable from this machine alone)."""
+        import ipaddress
+
+        if self.host == "localhost":
+            return True
+        try:
+            return ipaddress.ip_address(self.host).is_loopback
+        except ValueError:
+            return False
 
     @property
     def db_url(self) -> str:
@@ -206,11 +250,19 @@ class Settings:
         number("HPTVSIM_IDLE_TIMEOUT_S", "idle_timeout_s")
         number("HPTVSIM_JOB_TIMEOUT_S", "job_timeout_s")
         number("HPTVSIM_EVENT_HZ", "event_hz")
-        if "HPTVSIM_VISER" in e:
-            value = e["HPTVSIM_VISER"].strip().lower()
-            if value not in ("0", "1", "true", "false", "yes", "no", "on", "off"):
-                raise SettingsError(f"HPTVSIM_VISER = {value!r} is invalid; valid: 0 or 1")
-            kw["viser"] = value in ("1", "true", "yes", "on")
+        number("HPTVSIM_EVENT_STREAM_S", "event_stream_s")
+        integer("HPTVSIM_PREP_WORKERS", "prep_workers")
+        number("HPTVSIM_PREP_TIMEOUT_S", "prep_timeout_s")
+
+        def flag(var: str, name: str) -> None:
+            if var in e:
+                value = e[var].strip().lower()
+                if value not in ("0", "1", "true", "false", "yes", "no", "on", "off"):
+                    raise SettingsError(f"{var} = {value!r} is invalid; valid: 0 or 1")
+                kw[name] = value in ("1", "true", "yes", "on")
+
+        flag("HPTVSIM_VISER", "viser")
+        flag("HPTVSIM_INSECURE_OPEN", "insecure_open")
         integer("HPTVSIM_VISER_PORT", "viser_port")
         text("HPTVSIM_VISER_URL", "viser_url")
         if e.get("HPTVSIM_WEB_DIR"):

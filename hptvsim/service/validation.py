@@ -11,7 +11,6 @@ Every problem is an :class:`ApiError` naming the request field.
 from __future__ import annotations
 
 import math
-import threading
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,7 +19,7 @@ from typing import Any
 from hptvsim.service.schemas import EpisodeCreate
 from hptvsim.service.settings import Settings
 
-__all__ = ["ApiError", "Resolved", "resolve_request", "scenario_summary", "shipped_scenario"]
+__all__ = ["ApiError", "Resolved", "resolve_request", "scenario_summary", "screen_inline", "shipped_scenario"]
 
 MAX_BEAMS = 1024
 MAX_RECORD_SAMPLES = 200_000
@@ -57,31 +56,19 @@ class Resolved:
     max_steps: int
 
 
-_cache_lock = threading.Lock()
-_shipped: dict[str, tuple[float, Any]] = {}
-
-
 def shipped_scenario(name: str) -> Any:
-    """A shipped scenario by name (cached per file version).
+    """A shipped scenario by name (:func:`hptvsim.catalog.shipped_scenario`).
 
     Raises:
-        ApiError: 404-style 422 when there is no such shipped scenario (lists the valid names).
+        ApiError: 422 naming ``scenario`` when there is no such shipped scenario (lists the names).
     """
-    from hptvsim.world.scenario import list_scenarios, load_scenario, scenario_dir
+    from hptvsim.catalog import CatalogError
+    from hptvsim.catalog import shipped_scenario as load
 
-    names = list_scenarios()
-    if name not in names:
-        raise ApiError(422, f"scenario: no shipped scenario {name!r}; valid: {', '.join(names)}", "scenario")
-    path = scenario_dir() / f"{name}.toml"
-    mtime = path.stat().st_mtime
-    with _cache_lock:
-        hit = _shipped.get(name)
-        if hit is not None and hit[0] == mtime:
-            return hit[1]
-    scenario = load_scenario(name)
-    with _cache_lock:
-        _shipped[name] = (mtime, scenario)
-    return scenario
+    try:
+        return load(name)
+    except CatalogError as exc:
+        raise ApiError(422, f"scenario: {exc}", "scenario") from None
 
 
 def scenario_summary(scenario: Any) -> dict[str, Any]:
@@ -105,7 +92,7 @@ def _number(value: Any) -> float | None:
     return float(value)
 
 
-def _screen_inline(data: Mapping[str, Any], settings: Settings) -> None:
+def screen_inline(data: Mapping[str, Any], settings: Settings) -> None:
     """Checks on a client's raw scenario tables before the schema builds anything from them."""
     from hptvsim.world.scenario import TERRAIN_KINDS, scenario_dir
 
@@ -126,8 +113,12 @@ def _screen_inline(data: Mapping[str, Any], settings: Settings) -> None:
                 "named relative to the scenarios folder (e.g. data/salish_sea.tif)",
                 field,
             )
-        resolved = (root / p).resolve()
-        if not resolved.is_relative_to(root) or not resolved.is_file():
+        try:
+            resolved = (root / p).resolve()
+            shipped_file = resolved.is_relative_to(root) and resolved.is_file()
+        except OSError:  # a name too long for the file system, say
+            shipped_file = False
+        if not shipped_file:
             shipped = sorted(
                 str(f.relative_to(root))
                 for f in (root / "data").glob("*")
@@ -206,24 +197,6 @@ def _check_costs(scenario: Any, settings: Settings) -> None:
         )
 
 
-def _policy_table() -> dict[str, tuple[str, tuple[str, ...]]]:
-    """Policy name -> (canonical name, roles); scripted ones also by their bare name."""
-    from hptvsim.zoo import list_policies
-
-    table: dict[str, tuple[str, tuple[str, ...]]] = {}
-    for p in list_policies():
-        table[p.name] = (p.name, tuple(p.roles))
-        if p.kind == "scripted":
-            table[p.name.removeprefix("scripted:")] = (p.name, tuple(p.roles))
-    return table
-
-
-def _default_policy(task: str, role: str) -> str:
-    from hptvsim.zoo import default_policy
-
-    return default_policy(role, task)
-
-
 def resolve_request(req: EpisodeCreate, settings: Settings) -> tuple[Resolved, Any]:
     """Validate a request against the scenario and the settings.
 
@@ -236,29 +209,16 @@ def resolve_request(req: EpisodeCreate, settings: Settings) -> tuple[Resolved, A
     from hptvsim.world.scenario import Scenario, ScenarioError, scenario_dir
 
     if isinstance(req.scenario, str):
-        import re
-
-        from hptvsim.service.schemas import NAME_PATTERN
-
-        if not re.fullmatch(NAME_PATTERN, req.scenario):
-            raise ApiError(
-                422,
-                f"scenario: {req.scenario!r} is not a scenario name (letters, digits, '_' and '-'); "
-                "give a shipped scenario's name or the scenario as data",
-                "scenario",
-            )
         scenario = shipped_scenario(req.scenario)
         ref: str | dict[str, Any] = req.scenario
         label = req.scenario
     else:
-        _screen_inline(req.scenario, settings)
+        screen_inline(req.scenario, settings)
         try:
             scenario = Scenario.from_dict(req.scenario, source="<request>", base_dir=scenario_dir())
         except ScenarioError as exc:
             field = f"scenario.{exc.key}" if exc.key else "scenario"
             raise ApiError(422, f"{field}: {exc.problem}", field) from None
-        except (ValueError, TypeError, OverflowError) as exc:
-            raise ApiError(422, f"scenario: {exc}", "scenario") from None
         ref = scenario.to_dict()
         label = f"{scenario.name} (inline)"
     _check_costs(scenario, settings)
@@ -285,8 +245,10 @@ def resolve_request(req: EpisodeCreate, settings: Settings) -> tuple[Resolved, A
             raise ApiError(422, f"control: unknown agent {a!r}; agents: {', '.join(agents)}", "control")
     if len(set(control)) != len(control):
         raise ApiError(422, "control: an agent is named twice", "control")
-    # policies
-    table = _policy_table()
+    # policies: named ones only (hptvsim.catalog), never a checkpoint path
+    from hptvsim.catalog import CatalogError, check_policy
+    from hptvsim.zoo import default_policy
+
     policies: dict[str, str] = {}
     for agent, name in req.policies.items():
         field = f"policies.{agent}"
@@ -294,21 +256,13 @@ def resolve_request(req: EpisodeCreate, settings: Settings) -> tuple[Resolved, A
             raise ApiError(422, f"{field}: unknown agent {agent!r}; agents: {', '.join(agents)}", field)
         if agent in control:
             raise ApiError(422, f"{field}: {agent} is stepped by the client (control)", field)
-        entry = table.get(name)
-        if entry is None:
-            valid = sorted({canonical for canonical, _ in table.values()})
-            raise ApiError(422, f"{field}: unknown policy {name!r}; valid: {', '.join(valid)}", field)
-        canonical, policy_roles = entry
-        if roles[agent] not in policy_roles:
-            raise ApiError(
-                422,
-                f"{field}: {canonical} drives {', '.join(policy_roles)}; {agent} is a {roles[agent]}",
-                field,
-            )
-        policies[agent] = canonical
+        try:
+            policies[agent] = check_policy(name, roles[agent])
+        except CatalogError as exc:
+            raise ApiError(422, f"{field}: {exc}", field) from None
     for agent in agents:
         if agent not in control and agent not in policies:
-            policies[agent] = _default_policy(scenario.task.kind, roles[agent])
+            policies[agent] = default_policy(roles[agent], scenario.task.kind)
     return (
         Resolved(
             scenario_ref=ref,

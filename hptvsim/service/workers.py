@@ -45,8 +45,12 @@ Event = tuple[Any, ...]
 ``("done", id, result)``, ``("failed", id, message)``."""
 
 
-def _child_setup() -> None:
-    """Make a worker process die with its parent and leave Ctrl-C to the parent."""
+def _child_setup(preload: bool = True) -> None:
+    """Make a worker process die with its parent and leave Ctrl-C to the parent.
+
+    Args:
+        preload: Import the simulation and the recorder now, so the first episode starts at once.
+    """
     parent = os.getppid()
     if sys.platform.startswith("linux"):
         try:
@@ -66,7 +70,8 @@ def _child_setup() -> None:
     threading.Thread(target=watch, name="parent-watch", daemon=True).start()
     with contextlib.suppress(ValueError):  # not in the main thread
         signal.signal(signal.SIGINT, signal.SIG_IGN)
-    # import the simulation and the recorder now, so the first episode starts at once
+    if not preload:
+        return
     import rerun  # noqa: F401
 
     import hptvsim.viz.episode
@@ -76,7 +81,7 @@ def _child_setup() -> None:
 def _worker_main(conn: multiprocessing.connection.Connection) -> None:
     """A pool worker: run the jobs it is sent, one at a time, until told to stop."""
     _child_setup()
-    from hptvsim.service.engine import run_job
+    from hptvsim.service.engine import client_message, run_job
 
     conn.send(("ready", os.getpid()))
     stopping = False
@@ -110,7 +115,7 @@ def _worker_main(conn: multiprocessing.connection.Connection) -> None:
         try:
             result = run_job(spec, emit, should_stop)
         except Exception as exc:
-            conn.send(("failed", spec.id, f"{type(exc).__name__}: {exc}", traceback.format_exc()))
+            conn.send(("failed", spec.id, client_message(exc), traceback.format_exc()))
         else:
             conn.send(("done", spec.id, result))
 
@@ -303,17 +308,37 @@ class WorkerPool:
 
 
 class HostError(RuntimeError):
-    """A host request failed (``kind``: ``"value"`` for bad input, ``"state"``, ``"internal"``)."""
+    """A host request failed.
 
-    def __init__(self, message: str, kind: str = "internal") -> None:
-        super().__init__(message)
+    Attributes:
+        kind: ``"value"`` (bad input), ``"state"`` (a request out of order), ``"diverged"``
+            (the simulation blew up) or ``"failed"`` (anything else went wrong while stepping):
+            both close the episode, ``result`` holding what it wrote; or ``"internal"``.
+        client: A short message safe to show a client (no traceback, no server paths).
+        trace: The traceback, for the log ("" when there is none).
+        result: The closed episode's ``result.json`` data (kind ``"failed"``).
+    """
+
+    def __init__(
+        self, client: str, kind: str = "internal", trace: str = "", result: dict[str, Any] | None = None
+    ) -> None:
+        super().__init__(client)
         self.kind = kind
+        self.client = client
+        self.trace = trace
+        self.result = result
 
 
 def _host_main(conn: multiprocessing.connection.Connection) -> None:
-    """An interactive host: keep episodes and answer requests in order."""
+    """An interactive host: keep episodes and answer requests in order.
+
+    Answers are ``(req_id, "ok", payload)`` or ``(req_id, kind, (client message, traceback,
+    result))``; a step that fails (the simulation diverged, or anything unexpected) closes the
+    episode, writes its files and answers ``"failed"`` with its result.
+    """
     _child_setup()
-    from hptvsim.service.engine import InteractiveEpisode
+    from hptvsim.service.engine import InteractiveEpisode, client_message
+    from hptvsim.viz.episode import SimulationError
 
     episodes: dict[str, InteractiveEpisode] = {}
     while True:
@@ -321,6 +346,7 @@ def _host_main(conn: multiprocessing.connection.Connection) -> None:
             req_id, op, args = conn.recv()
         except (EOFError, OSError):
             return
+        episode_id = args.get("id") if isinstance(args, dict) else None
         try:
             if op == "open":
                 spec = JobSpec(**args)
@@ -336,8 +362,7 @@ def _host_main(conn: multiprocessing.connection.Connection) -> None:
                 conn.send((req_id, "ok", None))
                 return
             else:
-                episode_id = args["id"]
-                found = episodes.get(episode_id)
+                found = episodes.get(str(episode_id))
                 if found is None:
                     raise HostError(f"episode {episode_id} is not open on this host", "state")
                 episode = found
@@ -348,30 +373,57 @@ def _host_main(conn: multiprocessing.connection.Connection) -> None:
                     payload = {"step": out, "frame": episode.frame_due(), "progress": episode.progress()}
                     if out["done"]:
                         payload["result"] = episode.finish()
-                        del episodes[episode_id]
+                        del episodes[str(episode_id)]
                 elif op == "observe":
                     payload = {"state": episode.state()}
                 elif op == "close":
                     payload = {"result": episode.finish(cancel=True, error=args.get("error"))}
-                    del episodes[episode_id]
+                    del episodes[str(episode_id)]
                 else:
                     raise HostError(f"unknown request {op!r}", "internal")
             conn.send((req_id, "ok", payload))
         except HostError as exc:
-            conn.send((req_id, exc.kind, str(exc)))
+            conn.send((req_id, exc.kind, (exc.client, "", None)))
         except ValueError as exc:
-            conn.send((req_id, "value", str(exc)))
+            conn.send((req_id, "value", (client_message(exc), "", None)))
         except Exception as exc:
-            conn.send((req_id, "internal", f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}"))
+            trace = traceback.format_exc()
+            message = client_message(exc)
+            failed = op == "step" and episode_id in episodes
+            if failed or isinstance(exc, SimulationError):
+                result = None
+                with contextlib.suppress(Exception):  # the files of what ran, when they can be written
+                    result = episodes[str(episode_id)].finish(cancel=True, error=message)
+                episodes.pop(str(episode_id), None)
+                kind = "diverged" if isinstance(exc, SimulationError) else "failed"
+                conn.send((req_id, kind, (message, trace, result)))
+            else:
+                conn.send((req_id, "internal", (message, trace, None)))
 
 
 class HostProcess:
-    """One interactive host process and its request/answer channel (used from the event loop)."""
+    """One helper process and its request/answer channel (used from the event loop).
+
+    By default an interactive host (:func:`_host_main`); :mod:`hptvsim.service.prep` runs its
+    preparation processes through the same channel with another ``target``.
+
+    Args:
+        index: Its number (in its name).
+        target: The process's main function, called with its end of the pipe.
+        name: Its name prefix.
+    """
 
     _ids = itertools.count(1)
 
-    def __init__(self, index: int) -> None:
+    def __init__(
+        self,
+        index: int,
+        target: Callable[[multiprocessing.connection.Connection], None] | None = None,
+        name: str = "hptvsim-host",
+    ) -> None:
         self.index = index
+        self.target = target if target is not None else _host_main
+        self.name = name
         self._ctx = multiprocessing.get_context("spawn")
         self.episodes: set[str] = set()
         self._futures: dict[int, asyncio.Future[Any]] = {}
@@ -384,7 +436,7 @@ class HostProcess:
         """Start the process and watch its pipe from ``loop``."""
         parent, child = self._ctx.Pipe(duplex=True)
         self.process = self._ctx.Process(
-            target=_host_main, args=(child,), name=f"hptvsim-host-{self.index}", daemon=True
+            target=self.target, args=(child,), name=f"{self.name}-{self.index}", daemon=True
         )
         self.process.start()
         child.close()
@@ -407,7 +459,8 @@ class HostProcess:
                 if status == "ok":
                     fut.set_result(payload)
                 else:
-                    fut.set_exception(HostError(str(payload), status))
+                    client, trace, result = payload
+                    fut.set_exception(HostError(str(client), status, str(trace), result))
         except (EOFError, OSError):
             self._dead()
 
@@ -444,7 +497,22 @@ class HostProcess:
             return await asyncio.wait_for(fut, timeout)
         except TimeoutError:
             self._futures.pop(req_id, None)
-            raise HostError(f"the interactive host did not answer in {timeout:g} s", "internal") from None
+            raise HostError(f"no answer in {timeout:g} s", "timeout") from None
+
+    def kill(self) -> None:
+        """End the process at once (its pending requests fail; ``on_death`` is not called)."""
+        callback, self.on_death = self.on_death, None
+        if self._loop is not None and self.conn is not None:
+            with contextlib.suppress(ValueError, OSError):
+                self._loop.remove_reader(self.conn.fileno())
+        if self.process is not None and self.process.is_alive():
+            self.process.kill()
+            self.process.join(2.0)
+        for fut in self._futures.values():
+            if not fut.done():
+                fut.set_exception(HostError("the process was stopped", "internal"))
+        self._futures.clear()
+        self.on_death = callback
 
     def close(self, timeout: float = 3.0) -> None:
         """Stop the process."""

@@ -325,7 +325,7 @@ def policy_from_spec(spec: str, env: Any, agent: str) -> Policy:
         from hptvsim.zoo import load_policy
 
         try:
-            return _ActAdapter(load_policy(spec, env.core, agent))
+            return _ActAdapter(load_policy(spec, env.core, agent, allow_paths=True))
         except ValueError as exc:
             raise ValueError(
                 f"unknown policy spec {spec!r}: {exc}; also valid: run:RUN_DIR[@STAGE], zip:PATH, random"

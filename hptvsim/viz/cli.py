@@ -16,7 +16,12 @@ __all__ = ["register"]
 
 
 def _repo_web() -> Path:
-    return Path(__file__).resolve().parents[2] / "web"
+    from hptvsim._paths import checkout_dir
+
+    top = checkout_dir()
+    if top is None:
+        raise click.UsageError("this is an installed copy, not a checkout: give the output folder with --out")
+    return top / "web"
 
 
 def _policy_options(policy: tuple[str, ...]) -> dict[str, str]:

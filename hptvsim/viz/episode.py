@@ -29,6 +29,8 @@ from typing import Any, Final, Literal, Protocol
 import numpy as np
 import numpy.typing as npt
 
+from hptvsim.cosim.fmi2 import FmuError
+from hptvsim.cosim.orchestrator import SimulationFailedError
 from hptvsim.envs.core import Backend, GameCore, StepResult
 from hptvsim.train.evaluate import EpisodeMetrics
 from hptvsim.viz.frames import (
@@ -52,6 +54,7 @@ __all__ = [
     "EXTERNAL",
     "EpisodeResult",
     "EpisodeStepper",
+    "SimulationError",
     "build_static",
     "default_policy",
     "resolve_scenario",
@@ -60,6 +63,14 @@ __all__ = [
 
 F64 = npt.NDArray[np.float64]
 F32 = npt.NDArray[np.float32]
+
+
+class SimulationError(RuntimeError):
+    """The simulation failed (a vehicle's state became non-finite, an FMU failed): it cannot go on.
+
+    The message names the step and the agent; it is safe to show to a client.
+    """
+
 
 EXTERNAL: Final = "external"
 """Policy spec of an agent whose actions come from outside (:meth:`EpisodeStepper.step`)."""
@@ -349,7 +360,9 @@ class EpisodeStepper:
         options: What frames carry (:class:`~hptvsim.viz.frames.FrameOptions`).
         recording_path: Write a rerun recording (``.rrd``) here as the episode runs.
         recording_options: What the recording holds (:class:`~hptvsim.viz.recording.RecordingOptions`).
-        allow_paths: Accept scenario file paths (see :func:`resolve_scenario`).
+        allow_paths: Accept scenario file paths (see :func:`resolve_scenario`) and checkpoint
+            files as policies (``sb3:PATH``, ``dt:PATH``; see :func:`hptvsim.zoo.load_policy`).
+            Only for a local user's own commands: a service never turns it on.
 
     The episode starts at construction (as after :meth:`reset`); :attr:`frame` is the current frame.
 
@@ -387,13 +400,9 @@ class EpisodeStepper:
         self.seed = int(self.core.seed)
         self.options = options if options is not None else FrameOptions()
         self.policy_specs = _policy_specs(self.core, policies)
+        self.allow_paths = allow_paths
         self._policies: dict[str, Any] = {}
-        from hptvsim.zoo import load_policy
-
-        for i, agent in enumerate(self.core.agents):
-            spec = self.policy_specs[agent]
-            if spec != EXTERNAL:
-                self._policies[agent] = load_policy(spec, self.core, agent, seed=self.seed + i)
+        self._load_policies(self.seed)
         self.static = build_static(self.core, self.policy_specs, options=self.options, seed=self.seed)
         self._index = {a: i for i, a in enumerate(self.core.agents)}
         self._recording_path = Path(recording_path) if recording_path is not None else None
@@ -406,6 +415,16 @@ class EpisodeStepper:
         self._cancelled = False
         self._episode_start = True
         self.reset()
+
+    def _load_policies(self, seed: int) -> None:
+        from hptvsim.zoo import load_policy
+
+        for i, agent in enumerate(self.core.agents):
+            spec = self.policy_specs[agent]
+            if spec != EXTERNAL:
+                self._policies[agent] = load_policy(
+                    spec, self.core, agent, seed=seed + i, allow_paths=self.allow_paths
+                )
 
     # -- state -----------------------------------------------------------------------------------
 
@@ -449,12 +468,7 @@ class EpisodeStepper:
             self.seed = seed
             if self.static.seed != seed:
                 self.static = build_static(self.core, self.policy_specs, options=self.options, seed=seed)
-            for i, agent in enumerate(self.core.agents):
-                spec = self.policy_specs[agent]
-                if spec != EXTERNAL:
-                    from hptvsim.zoo import load_policy
-
-                    self._policies[agent] = load_policy(spec, self.core, agent, seed=seed + i)
+            self._load_policies(seed)
         self._close_recorder(None)
         self.core.reset(seed=self.seed)
         self._started = time.perf_counter()
@@ -526,7 +540,16 @@ class EpisodeStepper:
         self._episode_start = False
         applied = self.core.robots.clip(act)[0]
         applied[~active] = 0.0
-        result = self.core.step(act)
+        try:
+            result = self.core.step(act)
+        except (SimulationFailedError, FmuError) as exc:  # it cannot go on: end it, keep what ran
+            self._cancelled = True
+            self._close_recorder(None)
+            reason = str(exc).split("; reset", 1)[0]
+            raise SimulationError(
+                f"the simulation failed at step {self.frame.step + 1}: {reason} "
+                "(look at the scenario's currents, vehicle parameters and h_max)"
+            ) from None
         frame = self._make_frame(result, applied)
         self._emit(frame)
         return frame
@@ -745,7 +768,7 @@ def run_episode(
         options: What frames carry (:class:`~hptvsim.viz.frames.FrameOptions`).
         recording_options: What the recording holds (:class:`~hptvsim.viz.recording.RecordingOptions`).
         progress: Show a progress bar.
-        allow_paths: Accept scenario file paths (see :func:`resolve_scenario`).
+        allow_paths: Accept scenario and checkpoint file paths (see :class:`EpisodeStepper`).
 
     Raises:
         ValueError: Unknown agents or policies, or bad settings (the message names them).

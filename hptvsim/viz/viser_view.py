@@ -19,21 +19,25 @@ camera's far plane is raised so a 400 m site is not clipped.
 
 from __future__ import annotations
 
+import logging
 import math
 import threading
 import time
-from collections import deque
-from collections.abc import Mapping
+from collections import OrderedDict, deque
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
+from hptvsim.catalog import MAX_SEED
 from hptvsim.viz.frames import EpisodeStatic, Frame
 from hptvsim.viz.style import depth_colors, hex_rgb
 
-__all__ = ["LiveView", "SceneRenderer", "start_live_view"]
+__all__ = ["Launcher", "LiveView", "SceneRenderer", "start_live_view"]
+
+log = logging.getLogger("hptvsim.viz.live_view")
 
 F64 = npt.NDArray[np.float64]
 
@@ -236,14 +240,31 @@ class _Request:
     value: Any = None
 
 
+Launcher = Callable[[str, dict[str, str], int], str]
+"""Starts an episode elsewhere (a service): ``launcher(scenario, policies, seed) -> episode id``.
+
+Raises ``ValueError`` with a short message when the episode is refused."""
+
+SPEED_RANGE = (0.5, 64.0)  # x real time, the speed slider's range
+
+
 class LiveView:
-    """A viser server that runs and shows episodes live, with GUI controls.
+    """A viser server that shows episodes live, with GUI controls.
+
+    Standalone (``hptvsim view``) it runs its own episodes on a simulation thread with
+    play/pause, speed, reset, scenario, policy and seed pickers. Inside a service it is given a
+    ``launcher``: its "Start episode" then creates an episode on the service (worker processes,
+    the service's limits and checks) and shows it, and it never simulates in the service's
+    process. Either way, what a browser sends is checked against :mod:`hptvsim.catalog` (shipped
+    scenarios and named policies only; a seed in range), never taken as a path, and viser sits
+    behind a :class:`~hptvsim.viz.gateway.Gateway` that refuses cross-site WebSockets and, when
+    ``api_key`` is set, anyone without the key.
 
     Args:
         host: Address to listen on.
         port: Port (0: a free one; see :attr:`port`).
         scenario: Shipped scenario to start with.
-        policies: ``{agent: zoo spec}`` to start with (others: their role's default,
+        policies: ``{agent: policy name}`` to start with (others: their role's default,
             :func:`hptvsim.zoo.default_policy`).
         seed: Seed of the first episode (each automatic restart adds 1).
         speed: Simulated seconds per wall-clock second.
@@ -252,12 +273,17 @@ class LiveView:
         loop: Start a new episode (next seed) a moment after one ends.
         render_hz: Most scene updates per second.
         run_without_clients: Simulate while no browser is connected (off: an idle view costs
-            nothing, which matters inside a service process).
+            nothing).
         unfollow_delay: Seconds a followed episode's last frame stays before the view goes back
             to its own episodes.
+        launcher: Starts episodes on a service instead of here (see :data:`Launcher`).
+        api_key: Require this key of every browser (see :class:`~hptvsim.viz.gateway.Gateway`).
 
     Thread safety: GUI callbacks and the public methods only post requests; the simulation
     thread applies them between steps.
+
+    Raises:
+        ValueError: A speed that is not positive, or a scenario, policy or seed not in the catalog.
     """
 
     def __init__(
@@ -275,26 +301,34 @@ class LiveView:
         render_hz: float = 20.0,
         run_without_clients: bool = False,
         unfollow_delay: float = 3.0,
+        launcher: Launcher | None = None,
+        api_key: str | None = None,
     ) -> None:
+        from hptvsim.catalog import check_scenario, check_seed
+
         if speed <= 0 or not math.isfinite(speed):
             raise ValueError(f"speed = {speed} is invalid; valid: a positive number (x real time)")
         self.host = host
         self._port = port
-        self.scenario = scenario
+        self.scenario = check_scenario(scenario)
         self.policies = dict(policies or {})
-        self.seed = seed
+        self.seed = check_seed(seed)
         self.speed = float(speed)
         self.max_steps = max_steps
-        self.playing = autoplay
-        self.loop = loop
+        self.launcher = launcher
+        self.api_key = api_key
+        self.playing = autoplay and launcher is None
+        self.loop = loop and launcher is None
         self.render_hz = render_hz
         self.run_without_clients = run_without_clients
         self.unfollow_delay = unfollow_delay
         self.server: Any = None
+        self.gateway: Any = None
         self.renderer: SceneRenderer | None = None
         self.stepper: Any = None
         self.following: str | None = None
         self.episodes = 0
+        self.launched: list[str] = []
         self.last_frame: Frame | None = None
         self._requests: deque[_Request] = deque()
         self._stop = threading.Event()
@@ -306,14 +340,16 @@ class LiveView:
         self.follow_service = True
         self.error: str | None = None
         self._service_episode: str | None = None
+        self._wanted: str | None = None
+        self._statics: OrderedDict[str, Mapping[str, Any]] = OrderedDict()
         self._unfollow_at: float | None = None
 
     # -- life cycle ------------------------------------------------------------------------------
 
     @property
     def port(self) -> int:
-        """The port the viser server listens on."""
-        return int(self.server.get_port()) if self.server is not None else self._port
+        """The port browsers connect to (the gateway's)."""
+        return int(self.gateway.port) if self.gateway is not None else self._port
 
     @property
     def url(self) -> str:
@@ -322,17 +358,26 @@ class LiveView:
         return f"http://{host}:{self.port}"
 
     def start(self) -> LiveView:
-        """Start the viser server, the first episode and the simulation thread."""
+        """Start viser (on a private loopback port), its gateway, the first scene and the thread."""
         import viser
 
         from hptvsim.viz.episode import EpisodeStepper
+        from hptvsim.viz.gateway import Gateway
 
-        self.server = viser.ViserServer(
-            host=self.host, port=self._port, label="hptvsim live view", verbose=False
-        )
+        self.server = viser.ViserServer(host="127.0.0.1", port=0, label="hptvsim live view", verbose=False)
+        try:
+            self.gateway = Gateway(
+                int(self.server.get_port()), host=self.host, port=self._port, api_key=self.api_key
+            ).start()
+        except OSError:
+            self.server.stop()
+            raise
         self.server.gui.configure_theme(dark_mode=True, control_width="medium", show_logo=False)
         self.renderer = SceneRenderer(self.server)
-        self.stepper = EpisodeStepper(self.scenario, self.policies, seed=self.seed, max_steps=self.max_steps)
+        policies = self.policies
+        if self.launcher is not None:  # a scene to look at until an episode runs; never stepped
+            policies = {}
+        self.stepper = EpisodeStepper(self.scenario, policies, seed=self.seed, max_steps=self.max_steps)
         self.renderer.set_static(self.stepper.static)
         self.renderer.show(self.stepper.frame)
         self.last_frame = self.stepper.frame
@@ -349,7 +394,7 @@ class LiveView:
             self.renderer.aim(client)
 
     def stop(self) -> None:
-        """Stop the simulation thread and the server."""
+        """Stop the simulation thread, the gateway and the server."""
         self._stop.set()
         self._wake.set()
         if self._thread is not None:
@@ -357,6 +402,9 @@ class LiveView:
         if self.stepper is not None:
             self.stepper.close()
             self.stepper = None
+        if self.gateway is not None:
+            self.gateway.stop()
+            self.gateway = None
         if self.server is not None:
             self.server.stop()
             self.server = None
@@ -409,16 +457,23 @@ class LiveView:
     def on_event(self, event: Mapping[str, Any]) -> None:
         """Follow a service's episode events ``{"type", "episode", "data"}`` (frame schema data).
 
-        The view follows the first episode whose ``static`` event arrives while it follows
-        none, shows its ``frame`` events, and goes back to its own episodes a moment after the
-        followed one's final ``status``. Cheap: decoding happens on the view's thread.
+        The view follows an episode it launched as soon as its ``static`` event is known, and
+        otherwise (with "Follow the service's episodes" on) the first episode whose ``static``
+        event arrives while it follows none; it shows the followed episode's ``frame`` events
+        and lets go of it at its final ``status`` (standalone, going back to its own episodes a
+        moment later). Cheap: decoding happens on the view's thread.
         """
-        if not self.follow_service:
-            return
         kind, episode, data = event.get("type"), event.get("episode"), event.get("data")
-        if kind == "static" and isinstance(data, Mapping) and self._service_episode is None:
-            self._service_episode = str(episode)
-            self.follow(str(episode), data)
+        if kind == "static" and isinstance(data, Mapping):
+            with self._lock:
+                self._statics[str(episode)] = data
+                while len(self._statics) > 8:
+                    self._statics.popitem(last=False)
+                wanted = self._wanted == episode
+                if wanted or (self.follow_service and self._service_episode is None):
+                    self._wanted = None if wanted else self._wanted
+                    self._service_episode = str(episode)
+                    self.follow(str(episode), data)
         elif kind == "frame" and episode == self._service_episode and isinstance(data, Mapping):
             self.push(data, label=str(episode))
         elif (
@@ -428,11 +483,11 @@ class LiveView:
             and data.get("final")
         ):
             self._service_episode = None
-            self._post("unfollow_later")
+            if self.launcher is None:
+                self._post("unfollow_later")
 
     def push(self, frame: Frame | Mapping[str, Any], label: str | None = None) -> None:
         """Show a frame (or its plain data) of the followed episode ``label`` (call from any thread)."""
-        # only the newest pending frame matters: drop older ones still queued
         self._requests.append(_Request("frame", (label, frame)))
         self._wake.set()
 
@@ -448,6 +503,40 @@ class LiveView:
                 return True
             time.sleep(0.02)
         return False
+
+    # -- starting episodes from the controls ------------------------------------------------------
+
+    def launch(self, scenario: str, policies: Mapping[str, str], seed: int) -> None:
+        """Start an episode through the launcher and follow it (call from any thread).
+
+        Standalone (no launcher) this is :meth:`reset`. A refusal shows in the status line.
+        """
+        if self.launcher is None:
+            self.reset(scenario=scenario, policies=policies, seed=seed)
+            return
+        try:
+            episode = self.launcher(scenario, dict(policies), seed)
+        except ValueError as exc:
+            self._refuse(str(exc))
+            return
+        except Exception:
+            log.exception("the live view could not start an episode")
+            self._refuse("the service could not start the episode (see its log)")
+            return
+        self.error = None
+        self.launched.append(episode)
+        with self._lock:
+            known = self._statics.get(episode)
+            if known is not None:
+                self._service_episode = episode
+                self.follow(episode, known)
+            else:
+                self._wanted = episode
+        self._status(f"started episode **{episode}** on the service; waiting for its first frame")
+
+    def _refuse(self, message: str) -> None:
+        self.error = f"refused: {message}"
+        self._status(f"**{self.error}**")
 
     # -- the simulation thread -------------------------------------------------------------------
 
@@ -466,10 +555,15 @@ class LiveView:
             scenario = v["scenario"] or self.scenario
             policies = dict(v["policies"]) if v["policies"] is not None else self.policies
             seed = v["seed"] if v["seed"] is not None else self.seed
-            try:
+            try:  # names only (allow_paths stays off): a path is refused by the loaders
                 new = EpisodeStepper(scenario, policies, seed=seed, max_steps=self.max_steps)
-            except (ValueError, KeyError) as exc:
+            except ValueError as exc:  # ScenarioError and CatalogError are ValueErrors
                 self.error = f"cannot start: {exc}"
+                self._status(f"**{self.error}**")
+                return
+            except Exception:
+                log.exception("the live view could not start an episode")
+                self.error = "cannot start: an internal error (see the log)"
                 self._status(f"**{self.error}**")
                 return
             self.error = None
@@ -545,7 +639,8 @@ class LiveView:
                     self._apply(_Request("unfollow"))
             st = self.stepper
             idle = not self.run_without_clients and not self.server.get_clients()
-            if self.following is not None or st is None or not self.playing or idle:
+            local = self.launcher is None  # with a launcher, episodes run on the service
+            if not local or self.following is not None or st is None or not self.playing or idle:
                 self._wake.wait(0.1)
                 self._wake.clear()
                 continue
@@ -556,7 +651,7 @@ class LiveView:
                     self._show(st.frame)
                 if self.loop and now - done_at > 2.0:
                     done_at = None
-                    self.seed += 1
+                    self.seed = (self.seed + 1) % (MAX_SEED + 1)
                     self.episodes += 1
                     self._post("reset", {"scenario": None, "policies": None, "seed": self.seed})
                 self._wake.wait(0.1)
@@ -577,24 +672,29 @@ class LiveView:
     # -- GUI -------------------------------------------------------------------------------------
 
     def _build_gui(self) -> None:
-        from hptvsim.world.scenario import list_scenarios
-        from hptvsim.zoo import default_policy, list_policies
+        from hptvsim.catalog import MAX_SEED, policies, scenario_names
+        from hptvsim.zoo import default_policy
 
         gui = self.server.gui
         g = self._gui
+        local = self.launcher is None
         with gui.add_folder("Episode"):
             g["status"] = gui.add_markdown("starting ...")
             g["progress"] = gui.add_progress_bar(0.0)
-            g["play"] = gui.add_button("Pause" if self.playing else "Play", icon=None)
-            g["speed"] = gui.add_slider(
-                "Speed (x real time)", min=0.5, max=64.0, step=0.5, initial_value=self.speed
-            )
-            g["reset"] = gui.add_button("Reset")
+            if local:
+                g["play"] = gui.add_button("Pause" if self.playing else "Play", icon=None)
+                g["speed"] = gui.add_slider(
+                    "Speed (x real time)",
+                    min=SPEED_RANGE[0],
+                    max=SPEED_RANGE[1],
+                    step=0.5,
+                    initial_value=min(max(self.speed, SPEED_RANGE[0]), SPEED_RANGE[1]),
+                )
+                g["reset"] = gui.add_button("Reset")
         with gui.add_folder("Setup"):
-            g["scenario"] = gui.add_dropdown("Scenario", list_scenarios(), initial_value=self.scenario)
-            pols = list_policies()
-            pursuer = [p.name for p in pols if "pursuer" in p.roles]
-            evader = [p.name for p in pols if "evader" in p.roles]
+            g["scenario"] = gui.add_dropdown("Scenario", scenario_names(), initial_value=self.scenario)
+            pursuer = [p.name for p in policies("pursuer")]
+            evader = [p.name for p in policies("evader")]
             g["pursuer_policy"] = gui.add_dropdown(
                 "Pursuers' policy",
                 pursuer,
@@ -605,13 +705,14 @@ class LiveView:
                 evader,
                 initial_value=self.policies.get("evader_0", default_policy("evader", "pursuit")),
             )
-            g["seed"] = gui.add_number("Seed", initial_value=self.seed, min=0, step=1)
+            g["seed"] = gui.add_number("Seed", initial_value=self.seed, min=0, max=MAX_SEED, step=1)
             g["apply"] = gui.add_button("Start episode")
         with gui.add_folder("Display"):
             g["follow"] = gui.add_checkbox("Follow the service's episodes", self.follow_service)
             g["sonar"] = gui.add_checkbox("Sonar rays and hits", True)
             g["trails"] = gui.add_checkbox("Trails", True)
-            g["loop"] = gui.add_checkbox("Next episode when one ends", self.loop)
+            if local:
+                g["loop"] = gui.add_checkbox("Next episode when one ends", self.loop)
         with gui.add_folder("Distance"):
             g["plot"] = None
             try:
@@ -628,14 +729,15 @@ class LiveView:
             except Exception:  # pragma: no cover - a viser without uplot still shows everything else
                 g["plot"] = None
 
-        g["play"].on_click(self._on_play)
-        g["speed"].on_update(lambda _: self.set_speed(float(g["speed"].value)))
-        g["reset"].on_click(lambda _: self.reset())
+        if local:
+            g["play"].on_click(self._on_play)
+            g["speed"].on_update(self._on_speed)
+            g["reset"].on_click(lambda _: self.reset())
+            g["loop"].on_update(lambda _: setattr(self, "loop", bool(g["loop"].value)))
         g["apply"].on_click(self._on_apply)
         g["sonar"].on_update(lambda _: self._display(sonar=bool(g["sonar"].value)))
         g["trails"].on_update(lambda _: self._display(trails=bool(g["trails"].value)))
         g["follow"].on_update(self._on_follow)
-        g["loop"].on_update(lambda _: setattr(self, "loop", bool(g["loop"].value)))
 
     def _on_play(self, _: Any) -> None:
         if self.playing:
@@ -645,17 +747,41 @@ class LiveView:
             self.play()
             self._gui["play"].label = "Pause"
 
+    def _on_speed(self, _: Any) -> None:
+        """A speed from the slider, kept in the slider's range whatever a client sends."""
+        slider = self._gui["speed"]
+        try:
+            value = float(slider.value)
+        except (TypeError, ValueError):
+            value = self.speed
+        lo, hi = SPEED_RANGE
+        clamped = min(max(value, lo), hi) if math.isfinite(value) else self.speed
+        if clamped != value:
+            slider.value = clamped
+        self.set_speed(clamped)
+
     def _on_apply(self, _: Any) -> None:
+        """Start an episode from the controls: values checked against the catalog, never paths."""
+        from hptvsim.catalog import CatalogError, check_policy, check_scenario, check_seed, shipped_scenario
+
         g = self._gui
-        self.reset(
-            scenario=str(g["scenario"].value), policies=self._gui_policies(), seed=int(g["seed"].value)
-        )
+        try:
+            scenario = check_scenario(g["scenario"].value)
+            pursuer = check_policy(g["pursuer_policy"].value, "pursuer")
+            evader = check_policy(g["evader_policy"].value, "evader")
+            seed = check_seed(g["seed"].value)
+        except CatalogError as exc:
+            self._refuse(str(exc))
+            return
+        agents = shipped_scenario(scenario).agents
+        self.launch(scenario, {a.name: pursuer if a.role == "pursuer" else evader for a in agents}, seed)
 
     def _on_follow(self, _: Any) -> None:
         self.follow_service = bool(self._gui["follow"].value)
         if not self.follow_service:
             self._service_episode = None
-            self.unfollow()
+            if self.launcher is None:
+                self.unfollow()
 
     def _display(self, *, sonar: bool | None = None, trails: bool | None = None) -> None:
         if self.renderer is not None:
@@ -663,13 +789,6 @@ class LiveView:
                 self.renderer.show_sonar = sonar
             if trails is not None:
                 self.renderer.show_trails = trails
-
-    def _gui_policies(self) -> dict[str, str]:
-        from hptvsim.world.scenario import load_scenario
-
-        names = load_scenario(str(self._gui["scenario"].value)).agent_names
-        pp, ep = str(self._gui["pursuer_policy"].value), str(self._gui["evader_policy"].value)
-        return {n: pp if n.startswith("pursuer") else ep for n in names}
 
     def _status(self, text: str) -> None:
         if "status" in self._gui:
@@ -679,7 +798,12 @@ class LiveView:
         st = self.renderer.static if self.renderer is not None else None
         if st is None or not self._gui:
             return
-        source = f"following **{self.following}**" if self.following else f"seed {st.seed}"
+        if self.following:
+            source = f"following **{self.following}**"
+        elif self.launcher is not None:
+            source = "no episode yet: press **Start episode**, or run one from the dashboard"
+        else:
+            source = f"seed {st.seed}"
         dist = [a.distance for a, i in zip(frame.agents, st.agents, strict=True) if i.role == "pursuer"]
         lines = [
             f"**{st.scenario}** ({st.task}), {source}",
@@ -709,7 +833,7 @@ def start_live_view(
         port: Port (0: a free one).
         service: Optional object with ``hub.listeners`` (a list of callables receiving episode
             events ``{"type", "episode", "data"}``); the view then follows the service's episodes.
-        **kwargs: Passed to :class:`LiveView` (scenario, policies, seed, speed, ...).
+        **kwargs: Passed to :class:`LiveView` (scenario, policies, seed, speed, launcher, api_key, ...).
 
     Returns:
         The started view (``.url``, ``.port``, ``.stop()``).

@@ -7,25 +7,24 @@
 * :mod:`hptvsim.world.currents` -- uniform, shear, vortex and tidal current fields;
 * :mod:`hptvsim.world.grid` -- grid geometry and the obstacle map with its signed distance field.
 
-The scenario names are imported lazily (on first use) so that ``hptvsim.world.grid`` can be
-imported by the sensors without pulling in the scenario schema.
+Every name is imported lazily (on first use), so that importing one submodule pulls in only
+what it needs: the sensor settings declare their fields with :mod:`hptvsim.world._schema`
+(standard library only) without loading numpy, scipy or the scenario schema.
 """
 
 from typing import TYPE_CHECKING, Any
 
-from hptvsim.world.currents import (
-    CurrentField,
-    CurrentSum,
-    ShearCurrent,
-    TidalCurrent,
-    UniformCurrent,
-    VortexCurrent,
-    still_water,
-)
-from hptvsim.world.grid import GridGeometry, OccupancyGrid
-from hptvsim.world.terrain import FlatSeabed, HeightMap, RollingMountains
-
 if TYPE_CHECKING:
+    from hptvsim.world.currents import (
+        CurrentField,
+        CurrentSum,
+        ShearCurrent,
+        TidalCurrent,
+        UniformCurrent,
+        VortexCurrent,
+        still_water,
+    )
+    from hptvsim.world.grid import GridGeometry, OccupancyGrid
     from hptvsim.world.importers import ImportOptions, TerrainImportError, import_heightmap, import_terrain
     from hptvsim.world.scenario import (
         Scenario,
@@ -35,8 +34,21 @@ if TYPE_CHECKING:
         load_scenario,
         scenario_dir,
     )
+    from hptvsim.world.terrain import FlatSeabed, HeightMap, RollingMountains
 
 _LAZY = {
+    "CurrentField": "hptvsim.world.currents",
+    "CurrentSum": "hptvsim.world.currents",
+    "ShearCurrent": "hptvsim.world.currents",
+    "TidalCurrent": "hptvsim.world.currents",
+    "UniformCurrent": "hptvsim.world.currents",
+    "VortexCurrent": "hptvsim.world.currents",
+    "still_water": "hptvsim.world.currents",
+    "GridGeometry": "hptvsim.world.grid",
+    "OccupancyGrid": "hptvsim.world.grid",
+    "FlatSeabed": "hptvsim.world.terrain",
+    "HeightMap": "hptvsim.world.terrain",
+    "RollingMountains": "hptvsim.world.terrain",
     "Scenario": "hptvsim.world.scenario",
     "ScenarioError": "hptvsim.world.scenario",
     "World": "hptvsim.world.scenario",
@@ -56,6 +68,10 @@ def __getattr__(name: str) -> Any:
 
         return getattr(importlib.import_module(_LAZY[name]), name)
     raise AttributeError(f"module 'hptvsim.world' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *_LAZY])
 
 
 __all__ = [

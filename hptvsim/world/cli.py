@@ -101,8 +101,21 @@ def scenario_list() -> None:
 
 
 @scenario.command("schema")
-def scenario_schema() -> None:
-    """Print every key a scenario file may hold, with unit, default and meaning."""
+@click.option(
+    "--json",
+    "as_json",
+    is_flag=True,
+    help="Print the JSON Schema (draft 2020-12, as in OpenAPI 3.1) of a scenario document instead.",
+)
+def scenario_schema(as_json: bool) -> None:
+    """Print every key a scenario file may hold, with unit, valid range, default and meaning."""
+    if as_json:
+        import json
+
+        from hptvsim.world.scenario import scenario_json_schema
+
+        click.echo(json.dumps(scenario_json_schema(), indent=2))
+        return
     from hptvsim.world.schema_doc import schema_text
 
     click.echo(schema_text())

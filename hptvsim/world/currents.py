@@ -36,6 +36,9 @@ from hptvsim.world._schema import check_bounds, spec
 __all__ = [
     "CURRENT_KINDS",
     "M2_PERIOD",
+    "MAX_ANGLE",
+    "MAX_COORDINATE",
+    "MAX_SPEED",
     "CurrentField",
     "CurrentSum",
     "ShearCurrent",
@@ -48,6 +51,13 @@ __all__ = [
 F64 = npt.NDArray[np.float64]
 
 M2_PERIOD = 44714.16  # s, principal lunar semi-diurnal tide M2 (12.4206 h)
+
+MAX_SPEED = 10.0
+"""Largest current speed, amplitude or mean [m/s] a scenario may give (strong tidal races reach 5)."""
+MAX_ANGLE = 1000.0
+"""Largest magnitude of a direction or phase [rad] (about 159 turns; ``_deg`` keys: 57295.78 deg)."""
+MAX_COORDINATE = 1e7
+"""Largest magnitude of a position coordinate [m] (a centre or reference point)."""
 
 _LAMB_OSEEN_PEAK = 1.1209181  # r / r_c where a Lamb-Oseen vortex's tangential speed peaks
 _LAMB_OSEEN_FACTOR = (1.0 - math.exp(-(_LAMB_OSEEN_PEAK**2))) / _LAMB_OSEEN_PEAK  # 0.638...
@@ -111,8 +121,10 @@ class UniformCurrent(CurrentField):
 
     KIND: ClassVar[str] = "uniform"
 
-    speed: float = spec(doc="current speed", unit="m/s", ge=0.0)
-    direction: float = spec(doc="direction the water flows towards, clockwise from north", unit="rad")
+    speed: float = spec(doc="current speed", unit="m/s", ge=0.0, le=MAX_SPEED)
+    direction: float = spec(
+        doc="direction the water flows towards, clockwise from north", unit="rad", ge=-MAX_ANGLE, le=MAX_ANGLE
+    )
 
     def __post_init__(self) -> None:
         check_bounds(self)
@@ -141,11 +153,21 @@ class ShearCurrent(CurrentField):
 
     KIND: ClassVar[str] = "shear"
 
-    speed: float = spec(doc="speed on the line through the reference point", unit="m/s")
-    direction: float = spec(doc="direction the water flows towards, clockwise from north", unit="rad")
-    shear_rate: float = spec(doc="change of speed per metre to the right of the flow", unit="1/s")
+    speed: float = spec(
+        doc="speed on the line through the reference point", unit="m/s", ge=-MAX_SPEED, le=MAX_SPEED
+    )
+    direction: float = spec(
+        doc="direction the water flows towards, clockwise from north", unit="rad", ge=-MAX_ANGLE, le=MAX_ANGLE
+    )
+    shear_rate: float = spec(
+        doc="change of speed per metre to the right of the flow", unit="1/s", ge=-1.0, le=1.0
+    )
     reference: tuple[float, float] = spec(
-        (0.0, 0.0), doc="point (x north, y east) on the reference line", unit="m"
+        (0.0, 0.0),
+        doc="point (x north, y east) on the reference line",
+        unit="m",
+        ge=-MAX_COORDINATE,
+        le=MAX_COORDINATE,
     )
 
     def __post_init__(self) -> None:
@@ -178,9 +200,13 @@ class VortexCurrent(CurrentField):
 
     KIND: ClassVar[str] = "vortex"
 
-    centre: tuple[float, float] = spec(doc="vortex centre (x north, y east)", unit="m")
-    speed: float = spec(doc="largest tangential speed (at r = 1.1209 core_radius)", unit="m/s", ge=0.0)
-    core_radius: float = spec(doc="core radius r_c", unit="m", gt=0.0)
+    centre: tuple[float, float] = spec(
+        doc="vortex centre (x north, y east)", unit="m", ge=-MAX_COORDINATE, le=MAX_COORDINATE
+    )
+    speed: float = spec(
+        doc="largest tangential speed (at r = 1.1209 core_radius)", unit="m/s", ge=0.0, le=MAX_SPEED
+    )
+    core_radius: float = spec(doc="core radius r_c", unit="m", gt=0.0, le=1e5)
     clockwise: bool = spec(True, doc="sense of rotation seen from above")
 
     def __post_init__(self) -> None:
@@ -225,11 +251,15 @@ class TidalCurrent(CurrentField):
 
     KIND: ClassVar[str] = "tidal"
 
-    amplitude: float = spec(doc="amplitude of the tidal speed", unit="m/s", ge=0.0)
-    direction: float = spec(doc="flood direction, clockwise from north", unit="rad")
-    period: float = spec(M2_PERIOD, doc="tidal period (default M2, 12.42 h)", unit="s", gt=0.0)
-    phase: float = spec(0.0, doc="phase at t = 0 (0: peak flood)", unit="rad")
-    mean: float = spec(0.0, doc="residual (mean) speed along the direction", unit="m/s")
+    amplitude: float = spec(doc="amplitude of the tidal speed", unit="m/s", ge=0.0, le=MAX_SPEED)
+    direction: float = spec(
+        doc="flood direction, clockwise from north", unit="rad", ge=-MAX_ANGLE, le=MAX_ANGLE
+    )
+    period: float = spec(M2_PERIOD, doc="tidal period (default M2, 12.42 h)", unit="s", gt=0.0, le=1e7)
+    phase: float = spec(0.0, doc="phase at t = 0 (0: peak flood)", unit="rad", ge=-MAX_ANGLE, le=MAX_ANGLE)
+    mean: float = spec(
+        0.0, doc="residual (mean) speed along the direction", unit="m/s", ge=-MAX_SPEED, le=MAX_SPEED
+    )
 
     def __post_init__(self) -> None:
         check_bounds(self)

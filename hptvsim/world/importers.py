@@ -109,19 +109,28 @@ class ImportOptions:
         doc="what the source's numbers are: 'depth' (positive down), 'elevation' (positive up), "
         "'auto' (the format's default)",
     )
-    vertical_scale: float = spec(1.0, doc="multiplies the source values (PNG: metres per full scale)", gt=0.0)
-    vertical_offset: float = spec(0.0, doc="added after scaling", unit="m")
-    horizontal_scale: float = spec(1.0, doc="site metres per source metre", gt=0.0)
+    vertical_scale: float = spec(
+        1.0, doc="multiplies the source values (PNG: metres per full scale)", gt=0.0, le=1e6
+    )
+    vertical_offset: float = spec(0.0, doc="added after scaling", unit="m", ge=-1e5, le=1e5)
+    horizontal_scale: float = spec(1.0, doc="site metres per source metre", gt=0.0, le=1e6)
     anchor: tuple[float, float] | None = spec(
         None,
         doc="point of a projected source (x north, y east from its centre) put at the site centre",
         unit="m",
+        ge=-1e8,
+        le=1e8,
     )
     anchor_lonlat: tuple[float, float] | None = spec(
-        None, doc="point of a geographic source (longitude, latitude) put at the site centre", unit="deg"
+        None,
+        doc="point of a geographic source (longitude in [-180, 180], latitude in (-90, 90)) put at the "
+        "site centre",
+        unit="deg",
+        ge=-180.0,
+        le=180.0,
     )
     pixel_size: float | None = spec(
-        None, doc="PNG: metres per pixel (default: stretch the image over the site)", unit="m", gt=0.0
+        None, doc="PNG: metres per pixel (default: stretch the image over the site)", unit="m", gt=0.0, le=1e5
     )
     geographic: bool | None = spec(
         None, doc="whether coordinates are longitude/latitude (default: from the CRS or .prj; XYZ: no)"
@@ -133,7 +142,7 @@ class ImportOptions:
             raise ValueError("give either 'anchor' (metres) or 'anchor_lonlat' (degrees), not both")
         if self.anchor_lonlat is not None:
             lon, lat = self.anchor_lonlat
-            if not (-180.0 <= lon <= 360.0 and -90.0 < lat < 90.0):
+            if not (-180.0 <= lon <= 180.0 and -90.0 < lat < 90.0):
                 raise ValueError(
                     f"anchor_lonlat must be (longitude, latitude) in degrees, got {self.anchor_lonlat}"
                 )

@@ -35,7 +35,14 @@ paper's Table II values)::
     [simulation]                # Simulation: dt, max_steps, h_max, seed
 
 Angles are radians inside; a file may give any angle field ``f`` as ``f_deg`` in degrees.
-``hptvsim scenario schema`` prints every key with its unit, default and meaning.
+``hptvsim scenario schema`` prints every key with its unit, valid range, default and meaning.
+
+Every number, string and array of a scenario has a limit (generous sanity limits, the same for
+files and for a web service's clients), so no scenario asks for unbounded work or memory: e.g.
+at most 500 hills, 16 vehicle groups of up to 64 vehicles, currents up to 10 m/s, a terrain
+grid of at most :data:`MAX_GRID_CELLS` cells, seeds that fit a signed 32-bit integer. Reading
+any JSON-like data raises nothing but :class:`ScenarioError`. :func:`scenario_json_schema`
+(``hptvsim scenario schema --json``) is the same schema as JSON Schema, for API documents.
 
 Frame: NED, ``x`` north and ``y`` east [m]; the site covers ``origin .. origin + size``.
 """
@@ -46,6 +53,7 @@ import dataclasses
 import math
 import os
 import tomllib
+import typing
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from functools import cached_property, lru_cache
@@ -59,22 +67,42 @@ from hptvsim._paths import shipped_dir
 from hptvsim.dynamics import VEHICLE_RADIUS, VEHICLE_TYPES, ParameterError, VehicleParameters
 from hptvsim.sensors.config import AcousticLinkConfig, SonarConfig
 from hptvsim.world._schema import (
+    JSON_SCHEMA_DIALECT,
     Context,
     FieldValueError,
     ScenarioError,
     check_bounds,
+    check_field,
     coerce,
     did_you_mean,
+    field_schema,
     from_table,
+    json_schema,
+    show,
     spec,
+    tagged,
     to_table,
 )
-from hptvsim.world.currents import CURRENT_KINDS, CurrentField, CurrentSum
+from hptvsim.world.currents import CURRENT_KINDS, MAX_ANGLE, MAX_COORDINATE, CurrentField, CurrentSum
 from hptvsim.world.grid import GridGeometry, OccupancyGrid
-from hptvsim.world.importers import Format, ImportOptions, TerrainImportError, import_terrain
-from hptvsim.world.terrain import FlatSeabed, HeightMap, RollingMountains
+from hptvsim.world.importers import Format, ImportOptions, import_terrain
+from hptvsim.world.terrain import (
+    MAX_DEPTH,
+    MAX_RESOLUTION,
+    MAX_SEED,
+    MIN_RESOLUTION,
+    FlatSeabed,
+    HeightMap,
+    RollingMountains,
+)
 
 __all__ = [
+    "MAX_CURRENTS",
+    "MAX_GRID_CELLS",
+    "MAX_GROUPS",
+    "MAX_GROUP_SIZE",
+    "MAX_REWARD",
+    "MAX_SITE_SIZE",
     "ROLES",
     "AgentSpec",
     "CircleRegion",
@@ -93,6 +121,7 @@ __all__ = [
     "list_scenarios",
     "load_scenario",
     "scenario_dir",
+    "scenario_json_schema",
     "scenario_path",
 ]
 
@@ -101,6 +130,22 @@ Bool = npt.NDArray[np.bool_]
 
 ROLES: tuple[str, ...] = ("pursuer", "evader")
 """Vehicle roles of the pursuit-evasion game."""
+
+# Sanity limits of every scenario (files and clients alike): generous, but finite, so that no
+# scenario asks for unbounded work or memory. A service may screen tighter limits of its own.
+MAX_SITE_SIZE = 100_000.0
+"""Longest side of a site, and largest spawn-region radius [m]."""
+MAX_GROUPS = 16
+"""Most vehicle groups (``[[vehicles]]`` tables)."""
+MAX_GROUP_SIZE = 64
+"""Most vehicles in one group."""
+MAX_CURRENTS = 16
+"""Most current fields (``[[currents]]`` tables)."""
+MAX_REWARD = 1e9
+"""Largest reward weight or magnitude."""
+MAX_GRID_CELLS = 50_000_000
+"""Most cells of the terrain grid over the site (site size / terrain resolution, squared): 400 MB
+of depths; the importers refuse larger grids too."""
 
 
 # --- the site -----------------------------------------------------------------------------------
@@ -111,11 +156,19 @@ class Site:
     """The experiment site: a rectangle in the horizontal plane at one operating depth."""
 
     size: tuple[float, float] = spec(
-        (400.0, 300.0), doc="extent north x east (Table II: 400 m x 300 m)", unit="m", gt=0.0
+        (400.0, 300.0),
+        doc="extent north x east (Table II: 400 m x 300 m)",
+        unit="m",
+        gt=0.0,
+        le=MAX_SITE_SIZE,
     )
-    origin: tuple[float, float] = spec((0.0, 0.0), doc="south-west corner (x north, y east)", unit="m")
-    operating_depth: float = spec(30.0, doc="depth of the plane the vehicles move in", unit="m", gt=0.0)
-    clearance: float = spec(2.0, doc="water the vehicles keep under the keel", unit="m", ge=0.0)
+    origin: tuple[float, float] = spec(
+        (0.0, 0.0), doc="south-west corner (x north, y east)", unit="m", ge=-MAX_COORDINATE, le=MAX_COORDINATE
+    )
+    operating_depth: float = spec(
+        30.0, doc="depth of the plane the vehicles move in", unit="m", gt=0.0, le=MAX_DEPTH
+    )
+    clearance: float = spec(2.0, doc="water the vehicles keep under the keel", unit="m", ge=0.0, le=1000.0)
 
     def __post_init__(self) -> None:
         check_bounds(self)
@@ -155,8 +208,12 @@ class RectangleRegion:
 
     KIND: ClassVar[str] = "rectangle"
 
-    x: tuple[float, float] = spec(doc="north range (min, max)", unit="m")
-    y: tuple[float, float] = spec(doc="east range (min, max)", unit="m")
+    x: tuple[float, float] = spec(
+        doc="north range (min, max)", unit="m", ge=-MAX_COORDINATE, le=MAX_COORDINATE
+    )
+    y: tuple[float, float] = spec(
+        doc="east range (min, max)", unit="m", ge=-MAX_COORDINATE, le=MAX_COORDINATE
+    )
 
     def __post_init__(self) -> None:
         check_bounds(self)
@@ -200,8 +257,10 @@ class CircleRegion:
 
     KIND: ClassVar[str] = "circle"
 
-    centre: tuple[float, float] = spec(doc="centre (x north, y east)", unit="m")
-    radius: float = spec(doc="radius", unit="m", gt=0.0)
+    centre: tuple[float, float] = spec(
+        doc="centre (x north, y east)", unit="m", ge=-MAX_COORDINATE, le=MAX_COORDINATE
+    )
+    radius: float = spec(doc="radius", unit="m", gt=0.0, le=MAX_SITE_SIZE)
 
     def __post_init__(self) -> None:
         check_bounds(self)
@@ -267,8 +326,12 @@ def region_distance(a: Region, b: Region) -> float:
 class Goal:
     """A target point to reach and how close counts as reached."""
 
-    position: tuple[float, float] = spec(doc="target point (x north, y east)", unit="m")
-    radius: float = spec(10.0, doc="distance within which the point counts as reached", unit="m", gt=0.0)
+    position: tuple[float, float] = spec(
+        doc="target point (x north, y east)", unit="m", ge=-MAX_COORDINATE, le=MAX_COORDINATE
+    )
+    radius: float = spec(
+        10.0, doc="distance within which the point counts as reached", unit="m", gt=0.0, le=10000.0
+    )
 
     def __post_init__(self) -> None:
         check_bounds(self)
@@ -291,16 +354,19 @@ class Reward:
     those penalties (``delta_C collision_penalty / (1 - gamma)``) removes that incentive.
     """
 
-    delta_C: float = spec(1.0, doc="weight of the collision term r_C (Eq. 20)", ge=0.0)
-    delta_E1: float = spec(1.0, doc="weight of the approach term r_E1 (Eq. 20)", ge=0.0)
-    delta_E2: float = spec(1.0, doc="weight of the capture term r_E2 (Eq. 20)", ge=0.0)
-    collision_penalty: float = spec(400.0, doc="magnitude of r_C (Eq. 17)", ge=0.0)
-    progress_reward: float = spec(0.25, doc="magnitude of r_E1 (Eq. 18)", ge=0.0)
-    capture_reward: float = spec(900.0, doc="value of r_E2 within the target distance (Eq. 19)", ge=0.0)
+    delta_C: float = spec(1.0, doc="weight of the collision term r_C (Eq. 20)", ge=0.0, le=MAX_REWARD)
+    delta_E1: float = spec(1.0, doc="weight of the approach term r_E1 (Eq. 20)", ge=0.0, le=MAX_REWARD)
+    delta_E2: float = spec(1.0, doc="weight of the capture term r_E2 (Eq. 20)", ge=0.0, le=MAX_REWARD)
+    collision_penalty: float = spec(400.0, doc="magnitude of r_C (Eq. 17)", ge=0.0, le=MAX_REWARD)
+    progress_reward: float = spec(0.25, doc="magnitude of r_E1 (Eq. 18)", ge=0.0, le=MAX_REWARD)
+    capture_reward: float = spec(
+        900.0, doc="value of r_E2 within the target distance (Eq. 19)", ge=0.0, le=MAX_REWARD
+    )
     crash_penalty: float = spec(
         0.0,
         doc="subtracted once from an agent whose own collision or exit ends the episode (not in the paper)",
         ge=0.0,
+        le=MAX_REWARD,
     )
 
     def __post_init__(self) -> None:
@@ -318,9 +384,11 @@ class Task:
     """
 
     kind: Literal["pursuit", "goto"] = spec("pursuit", doc="'pursuit' (the UPEG game) or 'goto'")
-    safe_distance: float = spec(15.0, doc="l_min, the safe distance of Eq. 17 (Table II)", unit="m", gt=0.0)
+    safe_distance: float = spec(
+        15.0, doc="l_min, the safe distance of Eq. 17 (Table II)", unit="m", gt=0.0, le=10000.0
+    )
     target_distance: float = spec(
-        25.0, doc="l_max, the target distance of Eq. 19 (Table II)", unit="m", gt=0.0
+        25.0, doc="l_max, the target distance of Eq. 19 (Table II)", unit="m", gt=0.0, le=10000.0
     )
     reward: Reward = spec(default_factory=Reward, doc="reward weights and magnitudes")
     goal: Goal | None = spec(
@@ -347,17 +415,18 @@ class Simulation:
     about 3 cm at 0.125 s and about 0.25 m at 0.25 s (one RK4 step per control step).
     """
 
-    dt: float = spec(0.25, doc="control step Delta t (Table II)", unit="s", gt=0.0)
-    max_steps: int = spec(6000, doc="maximum steps per episode T (Table II)", ge=1)
+    dt: float = spec(0.25, doc="control step Delta t (Table II)", unit="s", gt=0.0, le=10.0)
+    max_steps: int = spec(6000, doc="maximum steps per episode T (Table II)", ge=1, le=10_000_000)
     h_max: float = spec(
         0.05,
         doc="largest internal RK4 step of the dynamics, a speed/accuracy trade-off (the FMUs "
         "default to 0.01 s; 0.05 s takes 5x fewer RK4 steps and strays < 4 mm in 120 s of "
         "random manoeuvres from a 0.001 s run; 0.25 s strays about 0.25 m)",
         unit="s",
-        gt=0.0,
+        ge=1e-5,
+        le=10.0,
     )
-    seed: int = spec(0, doc="seed of spawn positions and sensor noise", ge=0)
+    seed: int = spec(0, doc="seed of spawn positions and sensor noise", ge=0, le=MAX_SEED)
 
     def __post_init__(self) -> None:
         check_bounds(self)
@@ -388,9 +457,9 @@ class TerrainFile(ImportOptions):
 
     KIND: ClassVar[str] = "file"
 
-    path: str = spec(doc="terrain file, relative to the scenario file")
+    path: str = spec(doc="terrain file, relative to the scenario file", max_length=256)
     format: Format = spec("auto", doc="file format (auto: by suffix)")
-    resolution: float = spec(2.0, doc="grid cell size", unit="m", gt=0.0)
+    resolution: float = spec(2.0, doc="grid cell size", unit="m", ge=MIN_RESOLUTION, le=MAX_RESOLUTION)
 
     def options(self) -> ImportOptions:
         """The import options alone."""
@@ -417,15 +486,24 @@ class VehicleGroup:
     """
 
     role: Literal["pursuer", "evader"] = spec(doc="'pursuer' or 'evader'")
-    type: str = spec(doc="vehicle type: " + ", ".join(VEHICLE_TYPES))
-    count: int = spec(1, doc="number of vehicles", ge=1)
+    type: str = spec(doc="vehicle type: " + ", ".join(VEHICLE_TYPES), max_length=64)
+    count: int = spec(1, doc="number of vehicles", ge=1, le=MAX_GROUP_SIZE)
     spawn: RectangleRegion | CircleRegion = spec(doc="start region: {kind = 'rectangle' | 'circle', ...}")
     heading: float | None = spec(
-        None, doc="start heading, clockwise from north (default: random)", unit="rad"
+        None,
+        doc="start heading, clockwise from north (default: random)",
+        unit="rad",
+        ge=-MAX_ANGLE,
+        le=MAX_ANGLE,
     )
     parameters: dict[str, float] = spec(
         default_factory=dict,
-        doc="overrides of the vehicle type's parameters, e.g. v_max, omega_max (Table II)",
+        doc="overrides of the vehicle type's parameters, e.g. v_max, omega_max (Table II); each in "
+        "SI units, within the parameter's own valid range",
+        ge=-1e9,
+        le=1e9,
+        max_items=64,
+        max_length=64,
     )
     goal: Goal | None = spec(None, doc="this group's goto target point (default: task.goal)")
     sonar: SonarConfig | None = spec(None, doc="this group's sonar (default: [sensors.sonar])")
@@ -538,12 +616,14 @@ class Scenario:
     the same checks, including the ones that need the seabed (spawn regions in free water).
     """
 
-    name: str = spec(doc="scenario name")
-    description: str = spec("", doc="what the scenario is for")
+    name: str = spec(doc="scenario name", max_length=100)
+    description: str = spec("", doc="what the scenario is for", max_length=2000)
     site: Site = spec(default_factory=Site, doc="the site")
-    terrain: TerrainSpec = spec(default_factory=FlatSeabed, doc="the seabed")
-    currents: tuple[CurrentField, ...] = spec((), doc="current fields, summed")
-    vehicles: tuple[VehicleGroup, ...] = spec(doc="vehicle groups")
+    terrain: TerrainSpec = spec(default_factory=FlatSeabed, doc="the seabed (default: flat)")
+    currents: tuple[CurrentField, ...] = spec(
+        (), doc="current fields, summed (one table or an array of tables)", max_items=MAX_CURRENTS
+    )
+    vehicles: tuple[VehicleGroup, ...] = spec(doc="vehicle groups", min_items=1, max_items=MAX_GROUPS)
     sensors: Sensors = spec(default_factory=Sensors, doc="sensor settings")
     task: Task = spec(default_factory=Task, doc="the task")
     simulation: Simulation = spec(default_factory=Simulation, doc="the clock")
@@ -551,7 +631,12 @@ class Scenario:
     base_dir: Path | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
-        _validate(self, Context(self.source))
+        ctx = Context(self.source)
+        try:
+            check_bounds(self)
+        except FieldValueError as exc:
+            raise ctx.child(exc.field).error(str(exc)) from None
+        _validate(self, ctx)
 
     def __getstate__(self) -> dict[str, Any]:
         # pickles (to worker processes) carry the description, not the built seabed and world;
@@ -591,8 +676,8 @@ class Scenario:
             raise ctx.child("name").error("missing; every scenario needs a name (a string)")
         if "vehicles" not in data:
             raise ctx.child("vehicles").error("missing; give at least one [[vehicles]] group")
-        name = coerce(data["name"], str, ctx.child("name"))
-        description = coerce(data.get("description", ""), str, ctx.child("description"))
+        name = _top_value(data["name"], "name", ctx)
+        description = _top_value(data.get("description", ""), "description", ctx)
         site = from_table(Site, data.get("site", {}), ctx.child("site"))
         terrain = _tagged(data.get("terrain", {"kind": "flat"}), TERRAIN_KINDS, ctx.child("terrain"))
         raw_currents = data.get("currents", [])
@@ -600,6 +685,7 @@ class Scenario:
             raw_currents = [raw_currents]
         if not isinstance(raw_currents, list):
             raise ctx.child("currents").error("expected an array of tables ([[currents]])")
+        _check_items("currents", raw_currents, ctx)
         currents = tuple(
             _tagged(c, CURRENT_KINDS, ctx.child("currents").child(i)) for i, c in enumerate(raw_currents)
         )
@@ -608,6 +694,7 @@ class Scenario:
         raw_groups = data["vehicles"]
         if not isinstance(raw_groups, list) or not raw_groups:
             raise ctx.child("vehicles").error("expected a non-empty array of tables ([[vehicles]])")
+        _check_items("vehicles", raw_groups, ctx)
         base_sonar = sensors_raw.get("sonar", {}) if isinstance(sensors_raw, Mapping) else {}
         groups = tuple(
             _group(g, base_sonar, ctx.child("vehicles").child(i)) for i, g in enumerate(raw_groups)
@@ -633,6 +720,8 @@ class Scenario:
             raise
         except FieldValueError as exc:  # pragma: no cover - sub-tables were validated above
             raise ctx.child(exc.field).error(str(exc)) from None
+        except (ValueError, ArithmeticError) as exc:  # pragma: no cover - the world cannot be built
+            raise ctx.error(f"the world cannot be built from these values: {exc}") from None
 
     def with_overrides(self, changes: Mapping[str, Any]) -> Scenario:
         """A validated copy with some values changed.
@@ -784,16 +873,30 @@ class Scenario:
 
 
 def _tagged(table: Any, kinds: Mapping[str, type[Any]], ctx: Context) -> Any:
-    if not isinstance(table, Mapping):
-        raise ctx.error(f"expected a table with a 'kind' ({', '.join(kinds)}), got {table!r}")
-    kind = table.get("kind")
-    if kind is None:
-        raise ctx.child("kind").error(f"missing; valid kinds: {', '.join(kinds)}")
-    if kind not in kinds:
-        raise ctx.child("kind").error(
-            f"{kind!r} is not valid{did_you_mean(kind, list(kinds))}; valid kinds: {', '.join(kinds)}"
-        )
-    return from_table(kinds[kind], table, ctx, ignore=("kind",))
+    return tagged(table, kinds, ctx)
+
+
+_SCENARIO_FIELDS = {f.name: f for f in dataclasses.fields(Scenario)}
+
+
+def _top_value(raw: Any, name: str, ctx: Context) -> Any:
+    """A top-level scalar (``name``, ``description``), checked against its field's limits."""
+    sub = ctx.child(name)
+    f = _SCENARIO_FIELDS[name]
+    value = coerce(raw, str, sub, f.metadata)
+    try:
+        check_field(f, value)
+    except FieldValueError as exc:
+        raise sub.error(str(exc)) from None
+    return value
+
+
+def _check_items(name: str, raw: list[Any], ctx: Context) -> None:
+    """An array of tables read by hand (``currents``, ``vehicles``): at most ``max_items``."""
+    try:
+        check_field(_SCENARIO_FIELDS[name], raw)
+    except FieldValueError as exc:
+        raise ctx.child(name).error(str(exc)) from None
 
 
 def _merge_with_arrays(base: Mapping[str, Any], over: Mapping[str, Any]) -> dict[str, Any]:
@@ -826,18 +929,17 @@ def _merge(base: Mapping[str, Any], over: Mapping[str, Any]) -> dict[str, Any]:
 
 def _group(table: Any, base_sonar: Any, ctx: Context) -> VehicleGroup:
     if not isinstance(table, Mapping):
-        raise ctx.error(f"expected a table, got {table!r}")
-
-    def spawn(raw: Any, sub: Context) -> Any:
-        return _tagged(raw, REGION_KINDS, sub)
+        raise ctx.error(f"expected a table, got {show(table)}")
 
     def sonar(raw: Any, sub: Context) -> Any:
+        if raw is None:
+            return None
         if not isinstance(raw, Mapping):
-            raise sub.error(f"expected a table, got {raw!r}")
+            raise sub.error(f"expected a table, got {show(raw)}")
         merged = _merge(base_sonar if isinstance(base_sonar, Mapping) else {}, raw)
         return from_table(SonarConfig, merged, sub)
 
-    return from_table(VehicleGroup, table, ctx, convert={"spawn": spawn, "sonar": sonar})
+    return from_table(VehicleGroup, table, ctx, convert={"sonar": sonar})
 
 
 def _build_heightmap(s: Scenario, ctx: Context) -> HeightMap:
@@ -847,14 +949,19 @@ def _build_heightmap(s: Scenario, ctx: Context) -> HeightMap:
         path = s.terrain_path()
         assert path is not None
         key = ctx.child("terrain").child("path")
-        if not path.is_file():
-            base = s.base_dir if s.base_dir is not None else scenario_dir()
-            raise key.error(f"terrain file {path} does not exist (relative paths are resolved from {base})")
-        stat = path.stat()
+        base = s.base_dir if s.base_dir is not None else scenario_dir()
         try:
-            return _cached_heightmap(t, geometry, str(path.resolve()), stat.st_mtime_ns, stat.st_size)
-        except (TerrainImportError, ValueError) as exc:
-            raise ctx.child("terrain").error(str(exc)) from None
+            stat = path.stat() if path.is_file() else None
+            resolved = str(path.resolve())
+        except (OSError, ValueError) as exc:  # e.g. a name longer than the file system allows
+            why = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+            raise key.error(f"terrain file {show(str(path))} cannot be opened: {why}") from None
+        if stat is None:
+            raise key.error(f"terrain file {path} does not exist (relative paths are resolved from {base})")
+        try:
+            return _cached_heightmap(t, geometry, resolved, stat.st_mtime_ns, stat.st_size)
+        except Exception as exc:  # any reader's failure (rasterio, pyogrio, PIL, numpy) is the file's problem
+            raise ctx.child("terrain").error(str(exc) or exc.__class__.__name__) from None
     return _cached_heightmap(t, geometry, "", 0, 0)
 
 
@@ -952,6 +1059,17 @@ def _validate(s: Scenario, ctx: Context) -> None:
                         )
                     )
     # the seabed: spawn regions and goals in free water
+    nx, ny = s.grid_geometry().shape
+    if nx * ny > MAX_GRID_CELLS:
+        raise (
+            ctx.child("terrain")
+            .child("resolution")
+            .error(
+                f"a {s.site.size[0]:g} m x {s.site.size[1]:g} m site at {s.terrain.resolution:g} m makes "
+                f"{nx} x {ny} = {nx * ny} grid cells (valid: at most {MAX_GRID_CELLS}); coarsen the "
+                "resolution or shrink the site"
+            )
+        )
     hm = _build_heightmap(s, ctx)
     object.__setattr__(s, "heightmap", hm)  # cache for cached_property
     world = s.build_world()
@@ -1074,3 +1192,60 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     except OSError as exc:
         raise ScenarioError(f"cannot be read: {exc}", file=str(path)) from None
     return Scenario.from_dict(data, source=str(path), base_dir=path.parent)
+
+
+# --- JSON Schema ----------------------------------------------------------------------------------
+
+
+def scenario_json_schema(*, standalone: bool = True) -> dict[str, Any]:
+    """JSON Schema (draft 2020-12, as OpenAPI 3.1 uses) of a whole scenario document.
+
+    Generated from the same dataclasses and limits :meth:`Scenario.from_dict` reads with (see
+    :func:`hptvsim.world._schema.json_schema`), following its hand-written parts: ``name`` and
+    ``vehicles`` (1 to :data:`MAX_GROUPS` groups) are required; ``terrain`` is a tagged table
+    (absent: flat); ``currents`` is one tagged table or an array of up to :data:`MAX_CURRENTS`;
+    a vehicle group's ``sonar`` table is merged over ``[sensors.sonar]``, so every key in it is
+    optional.
+
+    The schema cannot state rules between values (spawn regions inside the site and in free
+    water, ``h_max <= dt``, ``safe_distance < target_distance``, the sonar's Nyquist rate, the
+    vehicle parameters' own ranges, terrain files that exist, the grid-cell limit): every
+    scenario that loads is valid against it, and a document it rejects never loads.
+
+    Args:
+        standalone: Name the dialect (``$schema``) at the top, as a schema file does; False for
+            a schema embedded in another document (an OpenAPI component), which names it itself.
+    """
+    hints = typing.get_type_hints(Scenario)
+    props: dict[str, Any] = {}
+    for name in _TOP_KEYS:
+        if name != "currents":  # CurrentField is the base of the tagged classes, not one
+            props[name] = field_schema(_SCENARIO_FIELDS[name], hints[name])
+    current = {"oneOf": [json_schema(c) for c in CURRENT_KINDS.values()]}
+    currents_meta = _SCENARIO_FIELDS["currents"].metadata
+    props["currents"] = {
+        "anyOf": [
+            current,
+            {"type": "array", "items": current, "maxItems": currents_meta["max_items"]},
+        ],
+        "description": currents_meta["doc"],
+        "default": [],
+    }
+    props = {k: props[k] for k in _TOP_KEYS}
+    group = json_schema(VehicleGroup)
+    sonar_field = next(f for f in dataclasses.fields(VehicleGroup) if f.name == "sonar")
+    group["properties"]["sonar"] = {
+        **field_schema(sonar_field, SonarConfig | None, partial=True),
+        "description": "this group's sonar: keys merged over [sensors.sonar] (default: [sensors.sonar])",
+    }
+    props["vehicles"]["items"] = group
+    head = {"$schema": JSON_SCHEMA_DIALECT} if standalone else {}
+    return {
+        **head,
+        "title": "hptvsim scenario",
+        "description": " ".join((__doc__ or "").strip().split("\n\n")[0].split()),
+        "type": "object",
+        "properties": props,
+        "additionalProperties": False,
+        "required": ["name", "vehicles"],
+    }

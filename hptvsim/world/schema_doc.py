@@ -1,7 +1,8 @@
-"""The scenario schema as text: every key, its type, unit, default and meaning.
+"""The scenario schema as text: every key, its type, unit, valid range, default and meaning.
 
 Generated from the config dataclasses themselves (the single source of truth), for
-``hptvsim scenario schema`` and the documentation.
+``hptvsim scenario schema`` and the documentation. The same schema as JSON Schema:
+:func:`hptvsim.world.scenario.scenario_json_schema` (``hptvsim scenario schema --json``).
 """
 
 from __future__ import annotations
@@ -32,6 +33,28 @@ def _default(f: dataclasses.Field[Any]) -> str:
     return "= " + json.dumps(to_table(value))
 
 
+def _limits(f: dataclasses.Field[Any]) -> str:
+    """The valid range a field's metadata states (``in (0, 100000]``, ``<= 64 chars``), or ""."""
+    from hptvsim.world._schema import describe_bounds
+
+    meta = f.metadata
+    parts = []
+    if any(k in meta for k in ("gt", "ge", "lt", "le")):
+        parts.append(describe_bounds(meta))
+    if "max_length" in meta:
+        keys = "keys " if "dict" in str(f.type) else ""
+        parts.append(f"{keys}<= {meta['max_length']} chars")
+    if "min_items" in meta:
+        parts.append(f">= {meta['min_items']} items")
+    if "max_items" in meta:
+        parts.append(f"<= {meta['max_items']} items")
+    return ", ".join(parts)
+
+
+def _line(key: str, what: str, unit: str, limits: str, default: str, doc: str) -> str:
+    return f"  {key:<28} {what:<34} {unit:<6} {limits:<24} {default:<16} {doc}"
+
+
 def _lines(cls: type, prefix: str, out: list[str], seen: set[type]) -> None:
     from hptvsim.world._schema import _describe_type
 
@@ -44,7 +67,7 @@ def _lines(cls: type, prefix: str, out: list[str], seen: set[type]) -> None:
         unit = f.metadata.get("unit", "")
         doc = f.metadata.get("doc", "")
         key = f.name + (f" | {f.name}_deg" if unit == "rad" else "")
-        out.append(f"  {prefix}{key:<28} {_describe_type(tp):<34} {unit:<6} {_default(f):<16} {doc}")
+        out.append(_line(prefix + key, _describe_type(tp), unit, _limits(f), _default(f), doc))
         if dataclasses.is_dataclass(tp) and isinstance(tp, type) and tp not in seen:
             nested.append((f"{prefix}{f.name}.", tp))
     for sub_prefix, tp in nested:
@@ -59,6 +82,7 @@ def schema_text() -> str:
     from hptvsim.world.scenario import (
         REGION_KINDS,
         TERRAIN_KINDS,
+        Scenario,
         Sensors,
         Simulation,
         Site,
@@ -66,11 +90,14 @@ def schema_text() -> str:
         VehicleGroup,
     )
 
+    top = {f.name: f for f in dataclasses.fields(Scenario)}
     out = [
         "Scenario files (TOML). Units SI; angles in rad, or in degrees under '<key>_deg'.",
-        f"  {'key':<28} {'type':<34} {'unit':<6} {'default':<16} meaning",
-        f"  {'name':<28} {'a string':<34} {'':<6} {'required':<16} scenario name",
-        f"  {'description':<28} {'a string':<34} {'':<6} {EMPTY:<16} what it is for",
+        _line("key", "type", "unit", "valid", "default", "meaning"),
+        _line("name", "a string", "", _limits(top["name"]), "required", "scenario name"),
+        _line("description", "a string", "", _limits(top["description"]), EMPTY, "what it is for"),
+        _line("currents", "a table or an array of tables", "", _limits(top["currents"]), "= []", "summed"),
+        _line("vehicles", "an array of tables", "", _limits(top["vehicles"]), "required", "vehicle groups"),
     ]
     sections: list[tuple[str, type]] = [("site", Site)]
     for title, cls in sections:

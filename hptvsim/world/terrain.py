@@ -31,12 +31,31 @@ import numpy.typing as npt
 from hptvsim.world._schema import FieldValueError, check_bounds, spec
 from hptvsim.world.grid import GridGeometry, OccupancyGrid
 
-__all__ = ["HEIGHTMAP_FORMAT", "FlatSeabed", "HeightMap", "RollingMountains", "bilinear"]
+__all__ = [
+    "HEIGHTMAP_FORMAT",
+    "MAX_DEPTH",
+    "MAX_RESOLUTION",
+    "MAX_SEED",
+    "MIN_RESOLUTION",
+    "FlatSeabed",
+    "HeightMap",
+    "RollingMountains",
+    "bilinear",
+]
 
 F64 = npt.NDArray[np.float64]
 
 HEIGHTMAP_FORMAT = "hptvsim-heightmap-1"
 """Value of the ``format`` entry of a height-map ``.npz`` file (see :meth:`HeightMap.save`)."""
+
+MAX_DEPTH = 11000.0
+"""Deepest seabed [m] a scenario may describe (the Challenger Deep is about 10.9 km)."""
+MIN_RESOLUTION = 0.05
+"""Finest terrain grid cell [m] a scenario may ask for."""
+MAX_RESOLUTION = 10000.0
+"""Coarsest terrain grid cell [m] a scenario may ask for."""
+MAX_SEED = 2**31 - 1
+"""Largest random seed (a signed 32-bit integer, so it fits any database column)."""
 
 
 def bilinear(values: F64, geometry: GridGeometry, xy: npt.ArrayLike) -> F64:
@@ -186,8 +205,8 @@ class FlatSeabed:
 
     KIND: ClassVar[str] = "flat"
 
-    depth: float = spec(60.0, doc="seabed depth", unit="m", gt=0.0)
-    resolution: float = spec(2.0, doc="grid cell size", unit="m", gt=0.0)
+    depth: float = spec(60.0, doc="seabed depth", unit="m", gt=0.0, le=MAX_DEPTH)
+    resolution: float = spec(2.0, doc="grid cell size", unit="m", ge=MIN_RESOLUTION, le=MAX_RESOLUTION)
 
     def __post_init__(self) -> None:
         check_bounds(self)
@@ -210,14 +229,20 @@ class RollingMountains:
 
     KIND: ClassVar[str] = "rolling_mountains"
 
-    depth: float = spec(60.0, doc="depth of the seabed between the hills", unit="m", gt=0.0)
-    seed: int = spec(0, doc="random seed: the same seed gives the same seabed")
-    count: int = spec(14, doc="number of hills", ge=0)
-    height: tuple[float, float] = spec((20.0, 45.0), doc="range of hill heights", unit="m", ge=0.0)
-    radius: tuple[float, float] = spec((15.0, 40.0), doc="range of hill radii (1-sigma)", unit="m", gt=0.0)
-    roughness: float = spec(1.5, doc="RMS of the fractal roughness", unit="m", ge=0.0)
-    roughness_wavelength: float = spec(20.0, doc="shortest wavelength of the roughness", unit="m", gt=0.0)
-    resolution: float = spec(1.0, doc="grid cell size", unit="m", gt=0.0)
+    depth: float = spec(60.0, doc="depth of the seabed between the hills", unit="m", gt=0.0, le=MAX_DEPTH)
+    seed: int = spec(0, doc="random seed: the same seed gives the same seabed", ge=0, le=MAX_SEED)
+    count: int = spec(14, doc="number of hills", ge=0, le=500)
+    height: tuple[float, float] = spec(
+        (20.0, 45.0), doc="range of hill heights", unit="m", ge=0.0, le=10000.0
+    )
+    radius: tuple[float, float] = spec(
+        (15.0, 40.0), doc="range of hill radii (1-sigma)", unit="m", gt=0.0, le=10000.0
+    )
+    roughness: float = spec(1.5, doc="RMS of the fractal roughness", unit="m", ge=0.0, le=100.0)
+    roughness_wavelength: float = spec(
+        20.0, doc="shortest wavelength of the roughness", unit="m", gt=0.0, le=100000.0
+    )
+    resolution: float = spec(1.0, doc="grid cell size", unit="m", ge=MIN_RESOLUTION, le=MAX_RESOLUTION)
 
     def __post_init__(self) -> None:
         check_bounds(self)

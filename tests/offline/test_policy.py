@@ -30,7 +30,7 @@ def core() -> Iterator[GameCore]:
 def test_zoo_gives_each_pursuer_its_own_model(tiny_run: Path, core: GameCore, tmp_path: Path) -> None:
     payload = load_policy_file(tiny_run / "dt.pt")
     for i in range(3):
-        pol = load_policy(f"dt:{tiny_run / 'dt.pt'}", core, f"pursuer_{i}")
+        pol = load_policy(f"dt:{tiny_run / 'dt.pt'}", core, f"pursuer_{i}", allow_paths=True)
         assert isinstance(pol, DTPolicy)
         assert payload["models"][i]["agents"] == [f"pursuer_{i}"]
         torch.testing.assert_close(
@@ -38,19 +38,19 @@ def test_zoo_gives_each_pursuer_its_own_model(tiny_run: Path, core: GameCore, tm
         )
         assert pol.target_return == pytest.approx(payload["models"][i]["returns"]["q50"])  # the default
     with pytest.raises(ValueError, match="no model for evader_0"):
-        load_policy(f"dt:{tiny_run / 'dt.pt'}", core, "evader_0")
+        load_policy(f"dt:{tiny_run / 'dt.pt'}", core, "evader_0", allow_paths=True)
     with pytest.raises(ValueError, match="not found"):
-        load_policy(f"dt:{tiny_run / 'missing.pt'}", core, "pursuer_0")
+        load_policy(f"dt:{tiny_run / 'missing.pt'}", core, "pursuer_0", allow_paths=True)
     wide = GameCore("target", num_envs=1, extended_obs=True)
     try:
         with pytest.raises(ValueError, match="observes 26"):
-            load_policy(f"dt:{tiny_run / 'dt.pt'}", wide, "pursuer_0")
+            load_policy(f"dt:{tiny_run / 'dt.pt'}", wide, "pursuer_0", allow_paths=True)
     finally:
         wide.close()
     bad = tmp_path / "bad.pt"
     torch.save({"x": torch.zeros(1)}, bad)
     with pytest.raises(ValueError, match="not a DT policy file"):
-        load_policy(f"dt:{bad}", core, "pursuer_0")
+        load_policy(f"dt:{bad}", core, "pursuer_0", allow_paths=True)
 
 
 def test_rows_keep_their_own_context(tiny_run: Path, core: GameCore) -> None:
@@ -115,7 +115,7 @@ def test_hidden_actions_stay_hidden(tiny_run: Path, core: GameCore) -> None:
 
 
 def test_actions_within_the_box_and_any_leading_shape(tiny_run: Path, core: GameCore) -> None:
-    pol = load_policy(f"dt:{tiny_run / 'dt.pt'}", core, "pursuer_1")
+    pol = load_policy(f"dt:{tiny_run / 'dt.pt'}", core, "pursuer_1", allow_paths=True)
     a = pol.act(np.random.default_rng(1).random((2, 3, 20)).astype(np.float32))
     assert a.shape == (2, 3, 2)
     assert np.all(a[..., 0] >= 0.0) and np.all(a[..., 0] <= 3.0) and np.all(np.abs(a[..., 1]) <= 1.5)
@@ -162,7 +162,7 @@ def test_dt_pursuers_in_the_pettingzoo_env(tiny_run: Path) -> None:
     try:
         obs, _ = env.reset(seed=0)
         pols = {
-            a: load_policy(f"dt:{tiny_run / 'dt.pt'}", env.core, a)
+            a: load_policy(f"dt:{tiny_run / 'dt.pt'}", env.core, a, allow_paths=True)
             for a in env.agents
             if a.startswith("pursuer")
         }

@@ -56,7 +56,12 @@ class Server:
         return self.log.read_text(errors="replace") if self.log.exists() else ""
 
 
-def start_server(data_dir: Path, extra_env: dict[str, str] | None = None, timeout: float = 60.0) -> Server:
+def start_server(
+    data_dir: Path,
+    extra_env: dict[str, str] | None = None,
+    timeout: float = 60.0,
+    log_level: str = "warning",
+) -> Server:
     """Start the service on a free port and wait until ``/healthz`` answers."""
     env = dict(os.environ)
     env.update(TEST_ENV)
@@ -66,7 +71,7 @@ def start_server(data_dir: Path, extra_env: dict[str, str] | None = None, timeou
     log = data_dir / f"server-{time.monotonic_ns()}.log"
     fh = log.open("w")
     proc = subprocess.Popen(
-        [sys.executable, "-m", "hptvsim.service", "--port", "0", "--log-level", "warning"],
+        [sys.executable, "-m", "hptvsim.service", "--port", "0", "--log-level", log_level],
         cwd=ROOT,
         env=env,
         stdout=fh,

@@ -47,7 +47,8 @@ def test_request_errors_name_the_field(api: httpx.Client) -> None:
     )
     _bad(api, {"scenario": "source", "control": ["evader_0"]}, "control")  # run mode
     _bad(api, {"scenario": "source", "mode": "interactive"}, "control")
-    _bad(api, {"scenario": "source", "mode": "interactive", "control": ["nobody"]}, "control")
+    _bad(api, {"scenario": "source", "mode": "interactive", "control": ["nobody"]}, "control[0]")
+    _bad(api, {"scenario": "source", "mode": "interactive", "control": ["pursuer_7"]}, "control")
     _bad(api, {"scenario": "source", "label": "x" * 201}, "label")
     _bad(api, None, "body", content=b'{"scenario": "source"', headers={"content-type": "application/json"})
     _bad(api, None, "body", content=b"[1, 2]", headers={"content-type": "application/json"})
@@ -101,8 +102,10 @@ def test_oversized_bodies_are_refused(api: httpx.Client) -> None:
 def test_unknown_things_are_404_and_wrong_states_409(server: Server, api: httpx.Client) -> None:
     r = api.get("/episodes/0123456789abcdef")
     assert r.status_code == 404 and "0123456789abcdef" in r.json()["detail"]
-    assert api.get("/episodes/not-an-id").status_code == 404
-    assert api.get("/scenarios/atlantis").status_code == 404
+    # ids and scenario names outside their schema (a hex pattern, the shipped names): 422
+    bad_id = api.get("/episodes/not-an-id")
+    assert bad_id.status_code == 422 and bad_id.json()["errors"][0]["field"] == "episode_id"
+    assert api.get("/scenarios/atlantis").status_code == 422
     r = httpx.get(f"{server.url}/api/v2/episodes")
     assert r.status_code == 404 and "/api/v1" in r.json()["detail"]
     assert api.get("/episodes", params={"limit": 0}).json()["errors"][0]["field"] == "limit"
@@ -114,7 +117,7 @@ def test_unknown_things_are_404_and_wrong_states_409(server: Server, api: httpx.
 
 def test_api_key_job_limits_timeouts_and_idle_episodes(tmp_path: Path) -> None:
     env = {
-        "HPTVSIM_API_KEY": "s3cret",
+        "HPTVSIM_API_KEY": "s3cret-key",
         "HPTVSIM_WORKERS": "1",
         "HPTVSIM_MAX_JOBS": "1",
         "HPTVSIM_MAX_INTERACTIVE": "1",
@@ -124,7 +127,7 @@ def test_api_key_job_limits_timeouts_and_idle_episodes(tmp_path: Path) -> None:
         "HPTVSIM_CORS_ORIGINS": "http://dashboard.example",
     }
     srv = start_server(tmp_path / "keyed", env)
-    key = {"X-API-Key": "s3cret"}
+    key = {"X-API-Key": "s3cret-key"}
     try:
         # the key: header, or query parameter (for links and EventSource); health stays open for probes
         assert httpx.get(f"{srv.url}/healthz").status_code == 200
@@ -134,7 +137,7 @@ def test_api_key_job_limits_timeouts_and_idle_episodes(tmp_path: Path) -> None:
         assert wrong.status_code == 401
         assert httpx.get(f"{srv.url}/api/v1/config", timeout=60.0, headers=key).status_code == 200
         assert (
-            httpx.get(f"{srv.url}/api/v1/config", timeout=60.0, params={"api_key": "s3cret"}).status_code
+            httpx.get(f"{srv.url}/api/v1/config", timeout=60.0, params={"api_key": "s3cret-key"}).status_code
             == 200
         )
         # CORS: the configured origin may call, others get no allow header

@@ -1,5 +1,6 @@
 """Load: many episode runs submitted at once all complete, none lost, and the API stays responsive
-(the p95 latency of /healthz under that load is printed; no timing assertion, machines are shared)."""
+(the p95 latency of /healthz under that load is printed; no timing assertion, machines are shared).
+Once on SQLite and once on PostgreSQL."""
 
 from __future__ import annotations
 
@@ -75,8 +76,10 @@ def _load(url: str, n: int, max_steps: int) -> dict[str, float]:
     return stats
 
 
-def test_50_concurrent_runs_all_complete_and_healthz_stays_responsive(tmp_path: Path) -> None:
-    srv = start_server(tmp_path / "load", {"HPTVSIM_EVENT_HZ": "5"})
+def test_50_concurrent_runs_all_complete_and_healthz_stays_responsive(
+    tmp_path: Path, database_url: str
+) -> None:
+    srv = start_server(tmp_path / "load", {"HPTVSIM_EVENT_HZ": "5", "DATABASE_URL": database_url})
     try:
         stats = _load(srv.url, 50, 100)
         assert stats["healthz_requests"] > 10
@@ -85,8 +88,8 @@ def test_50_concurrent_runs_all_complete_and_healthz_stays_responsive(tmp_path: 
 
 
 @pytest.mark.slow
-def test_200_concurrent_runs_of_400_steps(tmp_path: Path) -> None:
-    srv = start_server(tmp_path / "load-slow", {"HPTVSIM_EVENT_HZ": "5"})
+def test_200_concurrent_runs_of_400_steps(tmp_path: Path, database_url: str) -> None:
+    srv = start_server(tmp_path / "load-slow", {"HPTVSIM_EVENT_HZ": "5", "DATABASE_URL": database_url})
     try:
         _load(srv.url, 200, 400)
     finally:

@@ -60,6 +60,17 @@ def test_settings_from_the_environment() -> None:
         Settings.from_env({"HPTVSIM_EXECUTOR": "dask"})
     with pytest.raises(SettingsError, match="max_steps"):
         Settings.from_env({"HPTVSIM_MAX_STEPS": "0"})
+    # nothing unauthenticated reachable from the network, no CORS for every site without a key
+    with pytest.raises(SettingsError, match="HPTVSIM_API_KEY"):
+        Settings.from_env({"HPTVSIM_HOST": "0.0.0.0"})
+    assert Settings.from_env({"HPTVSIM_HOST": "0.0.0.0", "HPTVSIM_API_KEY": "long-enough"}).api_key
+    assert Settings.from_env({"HPTVSIM_HOST": "0.0.0.0", "HPTVSIM_INSECURE_OPEN": "1"}).insecure_open
+    with pytest.raises(SettingsError, match="any web page"):
+        Settings.from_env({"HPTVSIM_CORS_ORIGINS": "*"})
+    with pytest.raises(SettingsError, match="too short"):
+        Settings.from_env({"HPTVSIM_API_KEY": "short"})
+    assert Settings.from_env({}).cors_origins == ()
+    assert Settings.from_env({"HPTVSIM_HOST": "::1"}).loopback
 
 
 def test_docker_compose_is_valid_against_the_compose_schema() -> None:
@@ -86,6 +97,18 @@ def test_docker_compose_is_valid_against_the_compose_schema() -> None:
     # the commands the containers run exist
     assert services["api"]["command"][:2] == ["hptvsim", "serve"]
     assert services["viser"]["command"][:3] == ["hptvsim", "serve", "view"]
+    # no unauthenticated control surface is published: every service with published ports
+    # requires the API key (compose refuses to start without it); the database and the Ray
+    # cluster (whose dashboard runs jobs) publish nothing
+    anchors = doc.get("x-env", {})
+    for name, svc in services.items():
+        env = (
+            {**anchors, **(svc.get("environment") or {})} if isinstance(svc.get("environment"), dict) else {}
+        )
+        if svc.get("ports"):
+            assert str(env.get("HPTVSIM_API_KEY", "")).startswith("${HPTVSIM_API_KEY:?"), name
+        if name in ("db", "ray-head", "ray-worker"):
+            assert not svc.get("ports"), name
 
 
 def test_a_broken_compose_file_is_caught(tmp_path: Path) -> None:

@@ -1,5 +1,6 @@
 """Persistence: a service killed (SIGKILL) mid-run and restarted keeps every finished episode and marks
-the ones it was running, queuing or hosting as interrupted; its worker processes die with it."""
+the ones it was running, queuing or hosting as interrupted; its worker processes die with it. Once
+on SQLite and once on PostgreSQL (the restarted service points at the same ``DATABASE_URL``)."""
 
 from __future__ import annotations
 
@@ -36,10 +37,10 @@ def _alive(pid: int) -> bool:
 
 
 def test_killed_service_restarts_with_finished_episodes_and_marks_the_rest_interrupted(
-    tmp_path: Path,
+    tmp_path: Path, database_url: str
 ) -> None:
     data = tmp_path / "data"
-    env = {"HPTVSIM_MAX_STEPS": "20000", "HPTVSIM_WORKERS": "2"}
+    env = {"HPTVSIM_MAX_STEPS": "20000", "HPTVSIM_WORKERS": "2", "DATABASE_URL": database_url}
     a = start_server(data, env)
     api = httpx.Client(base_url=f"{a.url}/api/v1", timeout=60.0)
     workers: list[int] = []

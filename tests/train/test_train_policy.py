@@ -34,8 +34,8 @@ def test_an_extended_obs_model_drives_a_plain_game_with_the_same_actions(tmp_pat
     file = _save_untrained_sac(
         tmp_path / "evader", ext.layout.size, np.array([lim[0], -lim[2]]), np.array([lim[1], lim[2]])
     )
-    p_plain = load_policy(f"sb3:{file}", plain, "evader_0")
-    p_ext = load_policy(f"sb3:{file}", ext, "evader_0")
+    p_plain = load_policy(f"sb3:{file}", plain, "evader_0", allow_paths=True)
+    p_ext = load_policy(f"sb3:{file}", ext, "evader_0", allow_paths=True)
     op, oe = plain.reset(seed=5), ext.reset(seed=5)
     for _ in range(20):
         a_plain = p_plain.act(op[:, 3])
@@ -52,4 +52,4 @@ def test_a_model_of_another_layout_is_refused_with_the_reason(tmp_path: Path) ->
     core = GameCore("source", seed=0)
     file = _save_untrained_sac(tmp_path / "odd", 7, np.array([0.0, -1.0]), np.array([1.0, 1.0]))
     with pytest.raises(ValueError, match="trained on another layout"):
-        load_policy(f"sb3:{file}", core, "pursuer_0")
+        load_policy(f"sb3:{file}", core, "pursuer_0", allow_paths=True)

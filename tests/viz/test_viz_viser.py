@@ -118,3 +118,51 @@ def test_live_view_follows_a_services_episode_events() -> None:
         assert view.renderer is not None and view.renderer.static == view.stepper.static
     finally:
         view.stop()
+
+
+def test_live_view_inputs_are_checked_and_cross_site_sockets_refused() -> None:
+    """What a browser sends is clamped or refused (viser checks neither ranges nor options), and
+    the gateway in front of viser refuses a WebSocket opened by another site's page."""
+    import viser
+    from viser_protocol import ViserClient
+    from websockets.exceptions import InvalidStatus
+    from websockets.sync.client import connect
+
+    view = LiveView(port=0, scenario="goto_tiny", speed=4.0, run_without_clients=True).start()
+    try:
+        client = ViserClient(view.url)
+        try:
+            client.update("Speed (x real time)", value=-1e308)
+            assert view.wait_for(lambda v: v.speed == 0.5, 10)  # clamped to the slider's range
+            client.update("Speed (x real time)", value=1e308)
+            assert view.wait_for(lambda v: v.speed == 64.0, 10)
+            stepper = view.stepper
+            for label, value in (
+                ("Seed", 1e300),
+                ("Scenario", "/etc/passwd"),
+                ("Evaders' policy", "sb3:/x.zip"),
+            ):
+                client.update(label, value=value)
+                client.click("Start episode")
+                assert view.wait_for(lambda v: v.error is not None and "refused" in v.error, 10), label
+                client.update("Seed", value=1)
+                client.update("Scenario", value="goto_tiny")
+                client.update("Evaders' policy", value="scripted:potential_field")
+                view.error = None
+            assert view.stepper is stepper  # nothing was started
+            client.click("Start episode")  # the legitimate use
+            assert view.wait_for(lambda v: v.stepper is not stepper and v.stepper.static.seed == 1, 30)
+        finally:
+            client.close()
+        port = view.port
+        with pytest.raises(InvalidStatus) as exc:
+            connect(
+                f"ws://127.0.0.1:{port}/",
+                origin="http://evil.example",  # type: ignore[arg-type]  # an Origin str
+                subprotocols=[f"viser-v{viser.__version__}"],  # type: ignore[list-item]
+                open_timeout=10,
+            )
+        assert exc.value.response.status_code == 403
+        assert view.gateway is not None and view.gateway.refused >= 1
+    finally:
+        view.stop()

@@ -25,7 +25,10 @@ def test_validate_reports_ok_and_fails_with_the_clear_error(tmp_path: Path) -> N
     bad.write_text((scenario_dir() / "source.toml").read_text().replace("radius = 30.0", "radius = -30.0"))
     res = run("scenario", "validate", "source", str(bad))
     assert res.exit_code == 1
-    assert f"error: {bad}: vehicles[1].spawn.radius: -30.0 m is out of range (valid: > 0)" in res.output
+    assert (
+        f"error: {bad}: vehicles[1].spawn.radius: -30.0 m is out of range (valid: in (0, 100000])"
+        in res.output
+    )
 
 
 def test_show_renders_a_north_up_map(tmp_path: Path) -> None:

@@ -88,7 +88,7 @@ async function loadConfig() {
     $("service-state").className = "pill ok";
     $("key-box").hidden = !state.config.auth;
     if (state.config.viser_url) {
-      $("link-viser").href = state.config.viser_url;
+      $("link-viser").href = withKey(state.config.viser_url); // the live view asks for the key too
       $("link-viser").hidden = false;
     }
     if (state.config.limits?.max_steps) $("f-max-steps").max = state.config.limits.max_steps;
@@ -379,7 +379,7 @@ function showLinks(ep) {
     box.append(link(`${API}/episodes/${ep.id}/trajectory?format=json`, "trajectory (JSON)"));
   }
   if (state.config?.viser_url) {
-    const a = link(state.config.viser_url, "live 3D view");
+    const a = link(withKey(state.config.viser_url), "live 3D view");
     a.target = "_blank";
     box.append(a);
   }
