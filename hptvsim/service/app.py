@@ -53,6 +53,14 @@ def _error(status: int, detail: str, errors: list[dict[str, Any]] | None = None)
     return JSONResponse({"status": status, "detail": detail, "errors": errors or []}, status_code=status)
 
 
+async def send_error(send: Send, status: int, detail: str, errors: list[dict[str, Any]]) -> None:
+    """Answer an :class:`~hptvsim.service.schemas.ErrorBody` from ASGI middleware (before any route)."""
+    body = json.dumps({"status": status, "detail": detail, "errors": errors}).encode()
+    headers = [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode())]
+    await send({"type": "http.response.start", "status": status, "headers": headers})
+    await send({"type": "http.response.body", "body": body})
+
+
 def _field(loc: tuple[Any, ...] | list[Any]) -> str:
     parts = list(loc)
     if parts and parts[0] in ("body", "query", "path", "header"):
@@ -192,24 +200,12 @@ class OriginCheck:
         if kind == "websocket":
             await send({"type": "websocket.close", "code": 4403, "reason": "cross-site connection refused"})
             return
-        body = json.dumps(
-            {
-                "status": 403,
-                "detail": f"Origin: requests from {origin[:100]} are refused (another site's page)",
-                "errors": [{"field": "Origin", "message": "another site", "type": "cross_site"}],
-            }
-        ).encode()
-        await send(
-            {
-                "type": "http.response.start",
-                "status": 403,
-                "headers": [
-                    (b"content-type", b"application/json"),
-                    (b"content-length", str(len(body)).encode()),
-                ],
-            }
+        await send_error(
+            send,
+            403,
+            f"Origin: requests from {origin[:100]} are refused (another site's page)",
+            [{"field": "Origin", "message": "another site", "type": "cross_site"}],
         )
-        await send({"type": "http.response.body", "body": body})
 
 
 class HideApiKey(logging.Filter):
@@ -244,26 +240,12 @@ class BodyLimit:
         self.limit = limit
 
     async def _refuse(self, send: Send, size: str) -> None:
-        body = json.dumps(
-            {
-                "status": 413,
-                "detail": f"body: {size} exceeds this service's limit of {self.limit} bytes",
-                "errors": [
-                    {"field": "body", "message": f"larger than {self.limit} bytes", "type": "too_large"}
-                ],
-            }
-        ).encode()
-        await send(
-            {
-                "type": "http.response.start",
-                "status": 413,
-                "headers": [
-                    (b"content-type", b"application/json"),
-                    (b"content-length", str(len(body)).encode()),
-                ],
-            }
+        await send_error(
+            send,
+            413,
+            f"body: {size} exceeds this service's limit of {self.limit} bytes",
+            [{"field": "body", "message": f"larger than {self.limit} bytes", "type": "too_large"}],
         )
-        await send({"type": "http.response.body", "body": body})
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] != "http":

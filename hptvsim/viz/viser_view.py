@@ -375,8 +375,11 @@ class LiveView:
         self.server.gui.configure_theme(dark_mode=True, control_width="medium", show_logo=False)
         self.renderer = SceneRenderer(self.server)
         policies = self.policies
-        if self.launcher is not None:  # a scene to look at until an episode runs; never stepped
-            policies = {}
+        if self.launcher is not None:  # a scene to look at until an episode runs: never stepped,
+            # so scripted placeholders (no trained model loaded into the service's process)
+            from hptvsim.catalog import shipped_scenario
+
+            policies = dict.fromkeys(shipped_scenario(self.scenario).agent_names, "scripted:stationary")
         self.stepper = EpisodeStepper(self.scenario, policies, seed=self.seed, max_steps=self.max_steps)
         self.renderer.set_static(self.stepper.static)
         self.renderer.show(self.stepper.frame)
