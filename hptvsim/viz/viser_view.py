@@ -382,9 +382,8 @@ class LiveView:
             policies = dict.fromkeys(shipped_scenario(self.scenario).agent_names, "scripted:stationary")
         self.stepper = EpisodeStepper(self.scenario, policies, seed=self.seed, max_steps=self.max_steps)
         self.renderer.set_static(self.stepper.static)
-        self.renderer.show(self.stepper.frame)
-        self.last_frame = self.stepper.frame
         self._build_gui()
+        self._show(self.stepper.frame)  # the scene, and the status line saying what it shows
 
         self.server.on_client_connect(self._on_connect)
 
