@@ -1,13 +1,16 @@
 """``hptvsim bench service``: what the service costs over doing the same work in process.
 
-Two tables, each with a floor measured in the same run (machines are shared and noisy: compare
+Three tables, each with a floor measured in the same run (machines are shared and noisy: compare
 the ratios):
 
 * **interactive steps**: one agent-step through :class:`hptvsim.client.RemoteEnv` over a
   WebSocket and over HTTP, against :class:`hptvsim.envs.UPEGSingleAgentEnv` stepped in process;
 * **episode runs**: episodes submitted to the API at once and run by its workers (wall time per
   episode, i.e. throughput), against :func:`hptvsim.viz.episode.run_episode` in process, one after
-  another; the ``/healthz`` latency while they run is given in the notes.
+  another; the ``/healthz`` latency while they run is given in the notes;
+* **creating episodes**: ``POST /api/v1/episodes`` naming a shipped scenario, and giving a
+  scenario as data (built and checked in a preparation process, off the API's threads), against
+  :meth:`hptvsim.world.scenario.Scenario.from_dict` of the same data in process.
 
 Without ``--url`` the benchmark starts its own service (``hptvsim serve`` on a free port,
 a temporary data folder) and stops it afterwards.
@@ -185,6 +188,36 @@ def _bench_episodes(url: str, quick: bool) -> BenchResult:
     return result
 
 
+def _bench_create(url: str, quick: bool) -> BenchResult:
+    import httpx
+
+    from hptvsim.world.scenario import Scenario
+
+    n = 10 if quick else 60
+    with httpx.Client(base_url=f"{url}/api/v1", timeout=120.0) as api:
+        tables = api.get("/scenarios/source").json()
+        Scenario.from_dict(tables)  # warm: the seabed is built once per process
+        t0 = time.perf_counter()
+        for _ in range(n):
+            Scenario.from_dict(tables)
+        floor = (time.perf_counter() - t0) / n
+        result = BenchResult(
+            title="service: creating an episode (POST /api/v1/episodes, source scenario, 1 step)",
+            unit="request",
+            floor="Scenario.from_dict of the same data in process",
+        )
+        result.rows.append(Row(result.floor, floor))
+        for label, scenario in (("a shipped scenario's name", "source"), ("the scenario as data", tables)):
+            body = {"scenario": scenario, "max_steps": 1, "record": False}
+            api.post("/episodes", json=body).raise_for_status()  # warm
+            t0 = time.perf_counter()
+            for _ in range(n):
+                api.post("/episodes", json=body).raise_for_status()
+            note = "built in a preparation process" if label.endswith("data") else "loaded once, by name"
+            result.rows.append(Row(f"POST naming {label}", (time.perf_counter() - t0) / n, note))
+    return result
+
+
 def bench_service(*, url: str | None = None, quick: bool = False, workers: int = 2) -> list[BenchResult]:
     """Measure the service against in-process floors (see the module docstring).
 
@@ -193,7 +226,8 @@ def bench_service(*, url: str | None = None, quick: bool = False, workers: int =
         quick: Seconds instead of a minute.
         workers: Worker processes of the service this starts.
     """
+    benches = (_bench_steps, _bench_episodes, _bench_create)
     if url is not None:
-        return [_bench_steps(url, quick), _bench_episodes(url, quick)]
+        return [b(url, quick) for b in benches]
     with running_service(workers) as started:
-        return [_bench_steps(started, quick), _bench_episodes(started, quick)]
+        return [b(started, quick) for b in benches]

@@ -125,13 +125,17 @@ def test_a_broken_compose_file_is_caught(tmp_path: Path) -> None:
 def test_bench_quick_against_a_running_service(server: Server) -> None:
     from hptvsim.service.bench import bench_service
 
-    steps, episodes = bench_service(url=server.url, quick=True)
+    steps, episodes, create = bench_service(url=server.url, quick=True)
     assert [r.name for r in steps.rows] == [
         "UPEGSingleAgentEnv.step in process",
         "RemoteEnv.step over a WebSocket",
         "RemoteEnv.step over HTTP",
     ]
-    assert all(r.per_unit_s > 0 for r in steps.rows + episodes.rows)
+    assert all(r.per_unit_s > 0 for r in steps.rows + episodes.rows + create.rows)
+    assert [r.name for r in create.rows][1:] == [
+        "POST naming a shipped scenario's name",
+        "POST naming the scenario as data",
+    ]
     assert "p95" in episodes.rows[1].note
     assert (
         "x floor" in steps.table()
