@@ -8,7 +8,7 @@ STAMP  := $(VENV)/.installed-stamp
 # pytest workers: the machines this runs on have 2 cores
 WORKERS ?= 2
 
-.PHONY: run test test-slow lint typecheck unit bench bench-quick fmus dt-pipeline setup system-deps clean
+.PHONY: run test test-slow lint typecheck unit bench bench-quick fmus dt-pipeline reproduce setup system-deps clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -47,6 +47,12 @@ unit: setup system-deps
 	HPTVSIM_REQUIRE_POSTGRES=1 $(BIN)/pytest -n $(WORKERS)
 
 test: lint typecheck unit
+
+# The paper's section V on the pursuit game (configs/reproduce/section5.toml): 24 runs of up to
+# 150k env steps, two side by side, then docs/reproduction.md. Many hours on 2 cores: stop it any
+# time and run it again to go on (finished runs are kept, killed ones resume).
+reproduce: setup
+	$(BIN)/hptvsim reproduce
 
 test-slow: setup system-deps
 	HPTVSIM_REQUIRE_POSTGRES=1 $(BIN)/pytest -n $(WORKERS) -m slow

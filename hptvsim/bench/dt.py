@@ -26,6 +26,14 @@ from hptvsim.bench.common import BenchResult, Row, best_of
 
 __all__ = ["bench_dt"]
 
+
+def _bf16_kind() -> str:
+    """Whether this CPU runs bfloat16 natively (else PyTorch emulates it, far slower)."""
+    from hptvsim.train.fast import native_bfloat16
+
+    return "native" if native_bfloat16() else "emulated here"
+
+
 STATE_DIM = 20  # Eq. 14 with 16 sonar beams
 ACT_DIM = 2
 
@@ -116,7 +124,9 @@ def _training(quick: bool) -> BenchResult:
         )
     )
     _, bf16 = dt_updater(1, "bfloat16")
-    res.rows.append(Row("DT, one model, bfloat16 autocast", best_of(bf16, repeats=reps, units=n)))
+    res.rows.append(
+        Row(f"DT, one model, bfloat16 autocast ({_bf16_kind()})", best_of(bf16, repeats=reps, units=n))
+    )
     return res
 
 
@@ -163,7 +173,7 @@ def _inference(quick: bool) -> BenchResult:
     res.rows.append(Row("DTPolicy.act, 1 row", best_of(runner(1, "float32"), repeats=reps, units=n)))
     res.rows.append(
         Row(
-            f"DTPolicy.act, {rows_batched} rows, bfloat16",
+            f"DTPolicy.act, {rows_batched} rows, bfloat16 ({_bf16_kind()})",
             best_of(runner(rows_batched, "bfloat16"), repeats=reps, units=n * rows_batched),
         )
     )

@@ -4,8 +4,10 @@ Every row runs the same joint loop (act, env step, store, update) of 3 pursuers 
 each with Table II's SAC (2 x 256 hidden units, batch 256), for the same number of env steps in
 the same process; only the update backend differs. The floor is plain stable-baselines3 (each
 agent's ``SAC.train``); the other rows are the batched path of :mod:`hptvsim.train.fast` with
-float32 (SB3's numbers exactly), bfloat16 matmuls, and the shipped fast preset (bfloat16 and an
-update-to-data ratio of 0.5). Costs are per env step; the ratio column is cost / floor, so 0.25
+float32 (SB3's numbers exactly), bfloat16 matmuls, and the shipped fast preset (precision
+``"auto"``: bfloat16 where the CPU has bf16 units, else float32; an update-to-data ratio of 0.5).
+On a CPU without bf16 units the bfloat16 row is emulated and far slower than the floor; the row's
+name says which. Costs are per env step; the ratio column is cost / floor, so 0.25
 means 4x the env steps per second. Target: the fast preset at >= 3x (ratio <= 0.333).
 """
 
@@ -82,17 +84,22 @@ def bench_train(*, quick: bool = False, env_kind: str = "auto") -> BenchResult:
     import torch
 
     from hptvsim.train.config import SACConfig
-    from hptvsim.train.fast import FAST_PRESET
+    from hptvsim.train.fast import FAST_PRESET, native_bfloat16, resolve_precision
 
     torch.set_num_threads(1)
     factory, env_name = _env_factory(env_kind)
+    bf16_kind = "native" if native_bfloat16() else "emulated here"
     base = SACConfig(buffer_size=20_000, learning_starts=256)
     variants = [
         (FLOOR, dataclasses.replace(base, backend="sb3")),
         ("batched float32, utd 1 (same numbers as SB3)", dataclasses.replace(base, backend="batched")),
-        ("batched bfloat16, utd 1", dataclasses.replace(base, backend="batched", precision="bfloat16")),
         (
-            f"fast preset: batched {FAST_PRESET['precision']}, utd {FAST_PRESET['utd']:g}",
+            f"batched bfloat16, utd 1 ({bf16_kind})",
+            dataclasses.replace(base, backend="batched", precision="bfloat16"),
+        ),
+        (
+            f"fast preset: batched {FAST_PRESET['precision']} = "
+            f"{resolve_precision(FAST_PRESET['precision'])}, utd {FAST_PRESET['utd']:g}",
             dataclasses.replace(base, **FAST_PRESET),
         ),
     ]

@@ -322,6 +322,95 @@ def register(main: click.Group, bench: click.Group) -> None:
         if failed:
             sys.exit(1)
 
+    @main.command("reproduce")
+    @click.option(
+        "--plan",
+        "plan_file",
+        default="section5",
+        show_default=True,
+        help="A plan file, or the name of a shipped one (configs/reproduce/<name>.toml).",
+    )
+    @click.option(
+        "--out",
+        "out_dir",
+        type=click.Path(file_okay=False, path_type=Path),
+        default=None,
+        help="Folder of the runs (default: hptvsim-out/reproduce/<plan name>).",
+    )
+    @click.option(
+        "--report",
+        type=click.Path(dir_okay=False, path_type=Path),
+        default=Path("docs/reproduction.md"),
+        show_default=True,
+        help="The Markdown report; its figures go to a folder of the same stem beside it.",
+    )
+    @click.option(
+        "--workers", type=click.IntRange(1, 64), default=None, help="Runs side by side (default: the plan's)."
+    )
+    @click.option(
+        "--experiment", "experiments", multiple=True, help="Only this experiment's runs (repeatable)."
+    )
+    @click.option("--seed", "seeds", type=int, multiple=True, help="Only this training seed (repeatable).")
+    @click.option("--report-only", is_flag=True, help="Write the report from the runs found; train nothing.")
+    @click.option("--no-figures", is_flag=True, help="Write the report without figures.")
+    def reproduce_cmd(
+        plan_file: str,
+        out_dir: Path | None,
+        report: Path,
+        workers: int | None,
+        experiments: tuple[str, ...],
+        seeds: tuple[int, ...],
+        report_only: bool,
+        no_figures: bool,
+    ) -> None:
+        """The paper's section-V experiments on the pursuit game, with seeds, intervals and verdicts.
+
+        Trains every (setting, seed) the plan needs (resuming killed runs, skipping finished
+        ones), evaluates every stage on fixed seeds, and writes the report with its figures and
+        the verdict on each of the paper's claims. Ctrl-C (or a kill) loses at most the episode
+        in progress: run the same command again to go on.
+        """
+        from hptvsim.train.config import ConfigError
+        from hptvsim.train.reproduce import load_plan, plan_jobs, reproduce, resolve_plan_path, write_report
+
+        try:
+            plan = load_plan(resolve_plan_path(plan_file))
+            for e in experiments:
+                plan.experiment(e)
+            bad = [s for s in seeds if s not in plan.seeds]
+            if bad:
+                raise ConfigError(
+                    f"--seed {bad[0]} is not a seed of the plan; valid: {', '.join(map(str, plan.seeds))}"
+                )
+        except ConfigError as exc:
+            raise click.ClickException(str(exc)) from None
+        except KeyError as exc:
+            raise click.ClickException(
+                f"--experiment {exc.args[0]!r} is unknown; valid: {', '.join(e.id for e in plan.experiments)}"
+            ) from None
+        out = out_dir if out_dir is not None else Path("hptvsim-out") / "reproduce" / plan.name
+        if report_only:
+            click.echo(str(write_report(plan, out, report, figures=not no_figures)))
+            return
+        n = len(plan_jobs(plan, experiments=experiments or None, seeds=seeds or None))
+        click.echo(f"{n} runs in {out} ({workers or plan.workers} side by side); report: {report}")
+        try:
+            statuses = reproduce(
+                plan,
+                out,
+                report,
+                workers=workers,
+                experiments=experiments or None,
+                seeds=seeds or None,
+                figures=not no_figures,
+                log=click.echo,
+            )
+        except KeyboardInterrupt:
+            click.echo("interrupted; run the same command to go on", err=True)
+            sys.exit(130)
+        if any(st.get("status") == "failed" for st in statuses.values()):
+            sys.exit(1)
+
     @bench.command("train")
     @click.option("--quick", is_flag=True, help="Seconds instead of minutes.")
     @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of a table.")

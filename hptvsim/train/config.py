@@ -55,12 +55,13 @@ __all__ = [
     "config_to_dict",
     "dump_toml",
     "load_config",
+    "raw_config",
     "resolve_config_path",
 ]
 
 Algo = Literal["maisac", "ippo"]
 Backend = Literal["sb3", "batched"]
-Precision = Literal["float32", "bfloat16"]
+Precision = Literal["float32", "bfloat16", "auto"]
 
 
 class ConfigError(ValueError):
@@ -91,8 +92,9 @@ class SACConfig:
         backend: ``"sb3"`` calls each agent's ``SAC.train``; ``"batched"`` updates all agents
             with identical network shapes in one batched call (:mod:`hptvsim.train.fast`).
         precision: Matmul precision of the hidden layers on the batched backend: ``"float32"``
-            (the same numbers as SB3) or ``"bfloat16"`` (faster on CPUs with bf16 units; master
-            weights, optimiser state and output layers stay float32).
+            (the same numbers as SB3), ``"bfloat16"`` (faster only on CPUs with bf16 units, about
+            50x slower elsewhere; master weights, optimiser state and output layers stay float32)
+            or ``"auto"`` (bfloat16 where the CPU has the units, else float32).
     """
 
     learning_rate: float = 3e-4
@@ -249,6 +251,9 @@ class TrainConfig:
             spec they act with (see :func:`hptvsim.train.evaluate.policy_from_spec`, e.g.
             ``{ evader = "toy:greedy" }`` or ``{ evader_0 = "zip:evader.zip" }``).
         checkpoint_every: Env steps between resumable checkpoints.
+        checkpoint_at_episode_end: Take a due checkpoint only when an episode ends (at most one
+            episode later), so that a resumed run is bit-identical to one never killed; else a
+            checkpoint may fall mid-episode, whose episode is replayed on resume.
         log_every: Env steps between rows of the update log (losses, entropy coefficient).
     """
 
@@ -260,6 +265,7 @@ class TrainConfig:
     stages: tuple[StageConfig, ...] = ()
     fixed: Mapping[str, str] = field(default_factory=lambda: MappingProxyType({}))
     checkpoint_every: int = 10_000
+    checkpoint_at_episode_end: bool = False
     log_every: int = 1000
 
     def __post_init__(self) -> None:
@@ -404,6 +410,15 @@ def _read_toml(path: Path) -> dict[str, Any]:
             return tomllib.load(f)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+
+
+def raw_config(name_or_path: str | Path) -> dict[str, Any]:
+    """A config file's raw mapping (``curriculum = FILE`` inlined as ``stage``), before checks.
+
+    Raises:
+        ConfigError: The file is missing, not TOML, or its curriculum file is.
+    """
+    return _raw_config(resolve_config_path(name_or_path))
 
 
 def _raw_config(path: Path) -> dict[str, Any]:

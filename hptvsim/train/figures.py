@@ -2,9 +2,9 @@
 
 * :func:`reward_curves`: average total reward per episode of each role (pursuers averaged,
   evaders) through the curriculum's stages, one line per group of runs (MAISAC vs IPPO, or the
-  settings of a sweep), mean over seeds with a ± std band: the paper's Figs. 7-10.
-* :func:`final_reward_bars`: mean and variance of the final rewards per setting (Fig. 11, the
-  entropy coefficient study).
+  settings of a sweep), mean over seeds with a 95 % t band: the paper's Figs. 7-10.
+* :func:`final_reward_bars`: mean and variance of the final rewards per setting, with 95 %
+  intervals over seeds (Fig. 11, the entropy coefficient study).
 * :func:`trajectories`: one evaluation episode per stage, every vehicle's track (Figs. 12-13),
   from the ``position`` (north, east) the agents report in ``infos``.
 
@@ -23,7 +23,14 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["final_reward_bars", "make_figures", "reward_curves", "run_label", "trajectories"]
+__all__ = [
+    "episode_returns",
+    "final_reward_bars",
+    "make_figures",
+    "reward_curves",
+    "run_label",
+    "trajectories",
+]
 
 
 def run_label(run_dir: Path) -> str:
@@ -35,8 +42,8 @@ def run_label(run_dir: Path) -> str:
     return str(info.get("algo", "run")).upper()
 
 
-def _episode_returns(run_dir: Path) -> dict[tuple[int, str], dict[str, list[float]]]:
-    """(stage index, stage) -> role -> per-episode mean return of the role's agents."""
+def episode_returns(run_dir: Path) -> dict[tuple[int, str], dict[str, list[float]]]:
+    """(stage index, stage) -> role -> per-episode mean total reward of the role's agents, in order."""
     per: dict[tuple[int, str], dict[int, dict[str, list[float]]]] = defaultdict(lambda: defaultdict(dict))
     with (run_dir / "episodes.csv").open(newline="") as f:
         for row in csv.DictReader(f):
@@ -62,8 +69,45 @@ def _smooth(y: np.ndarray, window: int) -> np.ndarray:
     return np.convolve(padded, kernel, mode="valid")
 
 
-def reward_curves(run_dirs: Sequence[Path], out: Path, *, smooth: int = 5) -> list[Path]:
-    """Average total reward per episode through the stages, one figure per role.
+def _t_half(arr: np.ndarray) -> np.ndarray:
+    """Half-width of the 95 % t interval of the mean over axis 0 (seeds)."""
+    from scipy import stats
+
+    n = arr.shape[0]
+    if n < 2:
+        return np.zeros(arr.shape[1:])
+    half: np.ndarray = float(stats.t.ppf(0.975, n - 1)) * arr.std(0, ddof=1) / np.sqrt(n)
+    return half
+
+
+def _caption(fig: Any, text: str) -> None:
+    fig.text(0.01, 0.005, text, fontsize=7, color="#555555", ha="left", va="bottom")
+
+
+def _labels(run_dirs: Sequence[Path], labels: Sequence[str] | None) -> list[str]:
+    return list(labels) if labels is not None else [run_label(r) for r in run_dirs]
+
+
+def reward_curves(
+    run_dirs: Sequence[Path],
+    out: Path,
+    *,
+    smooth: int = 5,
+    labels: Sequence[str] | None = None,
+    stages: Sequence[str] | None = None,
+    caption: str = "",
+) -> list[Path]:
+    """Average total reward per episode through the stages, one figure per role (Figs. 7-10).
+
+    Each group of runs (same label) is drawn as its mean over seeds with a 95 % t band.
+
+    Args:
+        run_dirs: Training runs.
+        out: Folder of the PNGs.
+        smooth: Moving-average window (episodes).
+        labels: The group of each run (default: :func:`run_label`).
+        stages: Only these stages (default: all).
+        caption: A line under the figure naming the runs.
 
     Returns:
         The written PNG files (``reward_<role>.png``).
@@ -74,18 +118,23 @@ def reward_curves(run_dirs: Sequence[Path], out: Path, *, smooth: int = 5) -> li
     import matplotlib.pyplot as plt
 
     groups: dict[str, list[dict[tuple[int, str], dict[str, list[float]]]]] = defaultdict(list)
-    for run in run_dirs:
-        groups[run_label(run)].append(_episode_returns(run))
-    stages = sorted({k for runs in groups.values() for r in runs for k in r})
-    roles = sorted({role for runs in groups.values() for r in runs for v in r.values() for role in v})
+    for run, label in zip(run_dirs, _labels(run_dirs, labels), strict=True):
+        groups[label].append(episode_returns(run))
+    all_stages = sorted({k for runs in groups.values() for r in runs for k in r})
+    if stages is not None:
+        all_stages = [k for k in all_stages if k[1] in stages]
+    roles = sorted(
+        {role for runs in groups.values() for r in runs for k in all_stages for role in r.get(k, {})}
+    )
+    names = {"pursuer": "UUVs (pursuers)", "evader": "spherical robot (evader)"}
     out.mkdir(parents=True, exist_ok=True)
     written = []
     for role in roles:
-        fig, ax = plt.subplots(figsize=(8, 4.2))
+        fig, ax = plt.subplots(figsize=(8, 4.4))
         offset = 0
-        for s_idx, (stage_index, stage) in enumerate(stages):
+        for s_idx, (stage_index, stage) in enumerate(all_stages):
             n_max = 0
-            for g_idx, (label, runs) in enumerate(sorted(groups.items())):
+            for g_idx, (label, runs) in enumerate(groups.items()):
                 series = [
                     r[(stage_index, stage)][role] for r in runs if role in r.get((stage_index, stage), {})
                 ]
@@ -95,7 +144,7 @@ def reward_curves(run_dirs: Sequence[Path], out: Path, *, smooth: int = 5) -> li
                 n_max = max(n_max, n)
                 arr = np.stack([_smooth(np.asarray(s[:n]), smooth) for s in series])
                 x = offset + np.arange(1, n + 1)
-                mean, std = arr.mean(0), arr.std(0)
+                mean, half = arr.mean(0), _t_half(arr)
                 color = f"C{g_idx}"
                 ax.plot(
                     x,
@@ -104,25 +153,27 @@ def reward_curves(run_dirs: Sequence[Path], out: Path, *, smooth: int = 5) -> li
                     label=f"{label} ({len(series)} seed{'s' * (len(series) > 1)})" if s_idx == 0 else None,
                 )
                 if len(series) > 1:
-                    ax.fill_between(x, mean - std, mean + std, color=color, alpha=0.2, linewidth=0)
+                    ax.fill_between(x, mean - half, mean + half, color=color, alpha=0.2, linewidth=0)
             if s_idx > 0:
                 ax.axvline(offset + 0.5, color="grey", linestyle="--", linewidth=0.8)
             ax.text(
                 offset + max(n_max, 1) / 2,
                 1.01,
-                f"STT {s_idx + 1}: {stage}",
+                f"STT {s_idx + 1}: {stage}" if len(all_stages) > 1 else stage,
                 transform=ax.get_xaxis_transform(),
                 ha="center",
                 va="bottom",
                 fontsize=8,
             )
             offset += n_max
-        ax.set_xlabel("episode")
-        ax.set_ylabel("average total reward")
-        ax.set_title(f"{role}s: average total reward per episode", pad=16)
+        ax.set_xlabel("training episode (all stages in order)")
+        ax.set_ylabel("average total reward per episode (dimensionless)")
+        ax.set_title(f"{names.get(role, role)}: mean over seeds, 95 % band", pad=16)
         ax.legend(loc="best", fontsize=8)
         ax.grid(alpha=0.3)
-        fig.tight_layout()
+        fig.tight_layout(rect=(0, 0.03, 1, 1))
+        if caption:
+            _caption(fig, caption)
         path = out / f"reward_{role}.png"
         fig.savefig(path, dpi=120)
         plt.close(fig)
@@ -130,37 +181,58 @@ def reward_curves(run_dirs: Sequence[Path], out: Path, *, smooth: int = 5) -> li
     return written
 
 
-def final_reward_bars(run_dirs: Sequence[Path], out: Path, *, last: int = 10) -> Path:
-    """Mean and variance of the last episodes' rewards per group and role (Fig. 11)."""
+def final_reward_bars(
+    run_dirs: Sequence[Path],
+    out: Path,
+    *,
+    last: int = 20,
+    labels: Sequence[str] | None = None,
+    stage: str | None = None,
+    caption: str = "",
+) -> Path:
+    """Mean and variance of the final rewards per group and role, with 95 % intervals (Fig. 11).
+
+    Per run: the mean and the variance of the per-episode total reward over the last ``last``
+    episodes of ``stage`` (default: each run's last stage); bars are the means of those over
+    seeds, error bars their 95 % t intervals. One row per role, so each has its own scale.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    values: dict[str, dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
-    for run in run_dirs:
-        returns = _episode_returns(run)
-        if not returns:
+    per: dict[str, dict[str, list[tuple[float, float]]]] = defaultdict(lambda: defaultdict(list))
+    for run, label in zip(run_dirs, _labels(run_dirs, labels), strict=True):
+        returns = episode_returns(run)
+        keys = [k for k in returns if stage is None or k[1] == stage]
+        if not keys:
             continue
-        last_stage = max(returns)
-        for role, series in returns[last_stage].items():
-            values[run_label(run)][role].extend(series[-last:])
-    labels = sorted(values)
-    roles = sorted({r for v in values.values() for r in v})
-    fig, axes = plt.subplots(1, 2, figsize=(9, 3.8))
-    width = 0.8 / max(len(roles), 1)
-    for k, role in enumerate(roles):
-        x = np.arange(len(labels)) + (k - (len(roles) - 1) / 2) * width
-        means = [np.mean(values[lb][role]) if values[lb][role] else np.nan for lb in labels]
-        variances = [np.var(values[lb][role]) if values[lb][role] else np.nan for lb in labels]
-        axes[0].bar(x, means, width, label=role)
-        axes[1].bar(x, variances, width, label=role)
-    for ax, title in zip(axes, ("mean of total reward", "variance of total reward"), strict=True):
-        ax.set_xticks(np.arange(len(labels)), labels, rotation=20, fontsize=8)
-        ax.set_title(title)
-        ax.grid(alpha=0.3, axis="y")
-    axes[0].legend(fontsize=8)
-    fig.tight_layout()
+        for role, series in returns[max(keys)].items():
+            tail = np.asarray(series[-last:], dtype=np.float64)
+            per[label][role].append((float(tail.mean()), float(tail.var(ddof=1)) if tail.size > 1 else 0.0))
+    groups = list(per)
+    roles = sorted({r for v in per.values() for r in v}, key=lambda r: (r != "pursuer", r))
+    where = f"last {last} episodes" + (f" of {stage}" if stage else "")
+    short = {"pursuer": "UUVs", "evader": "sphere (evader)"}
+    fig, axes = plt.subplots(
+        max(len(roles), 1), 2, figsize=(9, 2.9 * max(len(roles), 1) + 0.4), squeeze=False
+    )
+    x = np.arange(len(groups))
+    colors = [f"C{i}" for i in range(len(groups))]
+    for r_idx, role in enumerate(roles):
+        for c_idx, what in enumerate(("mean", "variance")):
+            ax = axes[r_idx, c_idx]
+            vals = [np.asarray([v[c_idx] for v in per[g][role]]) for g in groups]
+            heights = [v.mean() if v.size else np.nan for v in vals]
+            errs = [_t_half(v[:, None])[0] if v.size > 1 else 0.0 for v in vals]
+            ax.bar(x, heights, 0.6, yerr=errs, capsize=4, color=colors, edgecolor="black", linewidth=0.5)
+            ax.set_xticks(x, groups, rotation=15, fontsize=8)
+            ax.set_ylabel(f"{what} of total reward (dimensionless)", fontsize=8)
+            ax.set_title(f"{short.get(role, role)}: {what}, {where}", fontsize=9)
+            ax.grid(alpha=0.3, axis="y")
+            ax.axhline(0, color="black", linewidth=0.6)
+    fig.tight_layout(rect=(0, 0.04, 1, 1))
+    _caption(fig, (caption + "; " if caption else "") + "bars: mean over seeds, error bars: 95 % t interval")
     out.mkdir(parents=True, exist_ok=True)
     path = out / "final_reward_mean_variance.png"
     fig.savefig(path, dpi=120)
@@ -229,27 +301,59 @@ def trajectories(run_dir: Path, out: Path, *, seed: int = 0) -> list[Path]:
     return written
 
 
-def _expand(paths: Sequence[Path]) -> list[Path]:
-    """Run folders from run folders and sweep folders (which hold ``sweep.json``)."""
+def _expand(paths: Sequence[Path]) -> tuple[list[Path], list[str], list[str] | None, str]:
+    """Run folders, their labels, the stages to draw and a caption, from runs and sweep folders.
+
+    A sweep folder holds ``sweep.json``; its jobs may carry a ``label`` (else the run's own) and
+    it may name the ``stages`` to draw.
+    """
     runs: list[Path] = []
+    labels: list[str] = []
+    stages: list[str] | None = None
+    names: list[str] = []
     for p in paths:
         if (p / "sweep.json").is_file():
-            jobs: list[dict[str, Any]] = json.loads((p / "sweep.json").read_text())["jobs"]
-            runs += [p / j["run_dir"] for j in jobs if (p / j["run_dir"] / "episodes.csv").is_file()]
+            manifest: dict[str, Any] = json.loads((p / "sweep.json").read_text())
+            names.append(str(manifest.get("name", p.name)))
+            if manifest.get("stages"):
+                stages = list(manifest["stages"])
+            for j in manifest["jobs"]:
+                run = p / j["run_dir"]
+                if (run / "episodes.csv").is_file():
+                    runs.append(run)
+                    labels.append(str(j.get("label") or run_label(run)))
         elif (p / "episodes.csv").is_file():
             runs.append(p)
+            labels.append(run_label(p))
+            names.append(p.name)
         else:
             raise FileNotFoundError(f"{p} is neither a training run (episodes.csv) nor a sweep (sweep.json)")
-    return runs
+    seeds = len(runs)
+    caption = f"{', '.join(names)}: {seeds} run{'s' * (seeds != 1)}"
+    return runs, labels, stages, caption
 
 
-def make_figures(paths: Sequence[Path], out: Path, *, with_trajectories: bool = True) -> list[Path]:
-    """All figures for runs and sweeps; returns the written files."""
-    runs = _expand(paths)
+def make_figures(
+    paths: Sequence[Path], out: Path, *, with_trajectories: bool = True, stages: Sequence[str] | None = None
+) -> list[Path]:
+    """All figures for runs and sweeps; returns the written files.
+
+    Args:
+        paths: Run folders and sweep folders.
+        out: Folder of the PNGs.
+        with_trajectories: Also run one episode per stage and draw the tracks.
+        stages: Only these stages (default: a sweep's ``stages``, else all).
+
+    Raises:
+        FileNotFoundError: No finished episodes in the given folders.
+    """
+    runs, labels, sweep_stages, caption = _expand(paths)
     if not runs:
         raise FileNotFoundError("no finished episodes in the given folders")
-    written = reward_curves(runs, out)
-    written.append(final_reward_bars(runs, out))
+    chosen = list(stages) if stages is not None else sweep_stages
+    written = reward_curves(runs, out, labels=labels, stages=chosen, caption=caption)
+    last_stage = chosen[-1] if chosen else None
+    written.append(final_reward_bars(runs, out, labels=labels, stage=last_stage, caption=caption))
     if with_trajectories:
         for run in runs[:1] if len(runs) > 1 else runs:
             written += trajectories(run, out)

@@ -86,6 +86,15 @@ def _env_versions() -> dict[str, str]:
     return out
 
 
+def _precision_in_use(cfg: TrainConfig) -> str:
+    """The SAC matmul precision this machine runs (``"auto"`` resolved), for ``run.json``."""
+    if cfg.algo != "maisac" or cfg.sac.backend != "batched":
+        return "float32"
+    from hptvsim.train.fast import resolve_precision
+
+    return resolve_precision(cfg.sac.precision)
+
+
 def _start_run(cfg: TrainConfig, run_dir: Path, resume: bool, label: str | None) -> TrainConfig:
     if resume:
         if not has_checkpoint(run_dir):
@@ -111,6 +120,7 @@ def _start_run(cfg: TrainConfig, run_dir: Path, resume: bool, label: str | None)
             "command": sys.argv,
             "started_at": time.strftime("%Y-%m-%dT%H:%M:%S"),
             "versions": _env_versions(),
+            "precision": _precision_in_use(cfg),
         },
     )
     return cfg
@@ -365,6 +375,8 @@ def _run_stage(
                     log_updates()
                     last_log = state.global_step
                 due = state.global_step - state.last_checkpoint_step >= cfg.checkpoint_every
+                if cfg.checkpoint_at_episode_end and not episode_over:
+                    due = False
                 stop = stop_after is not None and state.global_step >= stop_after
                 if (due or stop) and not _stage_done(stage, state):
                     checkpoint(at_boundary=episode_over)

@@ -89,6 +89,7 @@ def test_agents_do_not_influence_each_other() -> None:
     assert all(changed)
 
 
+@pytest.mark.filterwarnings("ignore:precision .bfloat16. on a CPU without")
 def test_checkpoints_are_plain_sb3_files(tmp_path: Path) -> None:
     models = [_model(i) for i in range(2)]
     batched = BatchedSAC(models, precision="bfloat16")
@@ -106,6 +107,7 @@ def test_checkpoints_are_plain_sb3_files(tmp_path: Path) -> None:
     torch.testing.assert_close(again.actor_opt.exp_avg[0][0], batched.actor_opt.exp_avg[0][1])
 
 
+@pytest.mark.filterwarnings("ignore:precision .bfloat16. on a CPU without")
 def test_bfloat16_update_tracks_float32() -> None:
     lo, hi = _model(0), _model(0)
     b_lo, b_hi = BatchedSAC([lo], precision="bfloat16"), BatchedSAC([hi])
@@ -123,3 +125,34 @@ def test_mismatched_models_are_refused() -> None:
     big = build_sac(AgentSpaces(OBS, ACT), other_cfg)
     with pytest.raises(ValueError, match="model 1: network shapes differ"):
         BatchedSAC([small, big])
+
+
+def test_cpu_flags_decide_native_bfloat16(monkeypatch: pytest.MonkeyPatch) -> None:
+    from hptvsim.train import fast
+
+    epyc = "processor\t: 0\nflags\t\t: fpu sse2 avx avx2 fma\n"
+    sapphire = "processor\t: 0\nflags\t\t: avx2 avx512f avx512_bf16 amx_bf16\n"
+    graviton = "processor\t: 0\nFeatures\t: fp asimd bf16 i8mm\n"
+    assert "avx512_bf16" not in fast._cpu_flags(epyc)
+    assert {"avx512_bf16", "amx_bf16"} <= fast._cpu_flags(sapphire)
+    assert "bf16" in fast._cpu_flags(graviton)
+    monkeypatch.setattr(fast, "native_bfloat16", lambda: False)
+    assert fast.resolve_precision("auto") == "float32"
+    monkeypatch.setattr(fast, "_warned_emulated", False)
+    with pytest.warns(RuntimeWarning, match="emulates"):
+        assert fast.resolve_precision("bfloat16") == "bfloat16"
+    monkeypatch.setattr(fast, "native_bfloat16", lambda: True)
+    assert fast.resolve_precision("auto") == "bfloat16"
+    with pytest.raises(ValueError, match="'auto', 'float32' or 'bfloat16'"):
+        fast.resolve_precision("fp16")
+
+
+def test_auto_precision_is_what_the_batched_update_runs(monkeypatch: pytest.MonkeyPatch) -> None:
+    from hptvsim.train import fast
+
+    monkeypatch.setattr(fast, "native_bfloat16", lambda: False)
+    b = BatchedSAC([_model(0, fill=0)], precision="auto")
+    assert b.precision == "float32" and b.lowp is None
+    monkeypatch.setattr(fast, "native_bfloat16", lambda: True)
+    b = BatchedSAC([_model(0, fill=0)], precision="auto")
+    assert b.precision == "bfloat16" and b.lowp is torch.bfloat16

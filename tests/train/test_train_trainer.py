@@ -258,3 +258,24 @@ def test_transitions_land_in_each_agents_own_buffer_scaled(backend: str) -> None
         np.testing.assert_allclose(
             m.policy.unscale_action(buf.actions[0, 0]), actions[a], rtol=1e-5, atol=1e-5
         )
+
+
+def test_checkpoint_at_episode_end_defers_every_checkpoint_to_an_episode_boundary(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import hptvsim.train.trainer as trainer_mod
+
+    cfg = toy_config(checkpoint_every=7, checkpoint_at_episode_end=True)
+    seen: list[dict[str, Any]] = []
+    from hptvsim.train.checkpoint import save_checkpoint as real
+
+    def spy(run_dir: Path, state: Any, learner: Any) -> Path:
+        seen.append(dataclasses.asdict(state))
+        return real(run_dir, state, learner)
+
+    monkeypatch.setattr(trainer_mod, "save_checkpoint", spy)
+    train(cfg, tmp_path / "run", progress=False, tensorboard=False)
+    assert len(seen) > 3
+    assert all(s["at_boundary"] for s in seen)
+    ends = {int(r["env_step"]) for r in _rows(tmp_path / "run" / "episodes.csv")}
+    assert {s["global_step"] for s in seen if s["stage_step"]} <= ends

@@ -1,0 +1,1148 @@
+"""``hptvsim reproduce``: the paper's section-V experiments on the pursuit game, as one resumable job.
+
+A *plan* (``configs/reproduce/section5.toml``) names a base training config, the training
+seeds, the *settings* (a base config with overrides: the algorithm, the curriculum, v_max,
+omega_max, the entropy coefficient), the *experiments* (which settings each compares, under
+which labels, at which stages; each named with the paper's figure) and the *claims* (the
+paper's statements, each a comparison or a trend of one metric). :func:`reproduce`:
+
+1. plans one training run per (setting, seed) that some experiment uses, deduplicated (the
+   base run serves several experiments), seed-major, so that a partial sweep has every setting
+   at the first seeds before any at the later ones;
+2. trains them, ``workers`` at a time in separate processes (one torch thread each); a run
+   killed at any point resumes from its last checkpoint, which the plan's configs take at
+   episode ends (``checkpoint_at_episode_end``), so a resumed run is bit-identical to an
+   uninterrupted one;
+3. evaluates every finished stage of every run on fixed seeds (``hptvsim.offline.rollout.play``:
+   the same spawn poses and noise for every run): the run's agents against each other, the
+   run's pursuers against a scripted evader, and the run's evader against scripted pursuers;
+4. writes the report (Markdown, with figures drawn by :func:`hptvsim.train.figures.make_figures`
+   from each experiment's folder, i.e. ``hptvsim figures OUT/experiments/<id>``) from whatever
+   results exist, naming what is missing.
+
+Folders::
+
+    OUT/plan.json                    the resolved plan and every job
+    OUT/runs/<setting>-seed<k>/      a training run (hptvsim.train.trainer) plus eval/<stage>.json
+    OUT/experiments/<id>/sweep.json  the runs of one experiment with their labels (for figures)
+
+Metrics (per run; then mean and 95 % interval over seeds, :mod:`hptvsim.train.stats`):
+
+``train_final.<role>``
+    Mean total reward per episode of the role's agents over the last ``last_episodes``
+    training episodes of the stage (the end of the paper's reward curves).
+``train_mean.<role>``
+    The same over every episode of the stage: the area under the curve, which rewards learning
+    early (the paper's "converges with greater rapidity").
+``train_var.<role>``
+    Variance of the per-episode total reward over the last ``last_episodes`` episodes (Fig. 11).
+``eval.<matchup>.<name>``
+    From the evaluation: ``capture_rate``, ``collision_rate``, ``time_to_capture_s`` (captured
+    episodes only), ``return_pursuer``, ``return_evader``; matchups ``self``, ``vs_scripted_evader``
+    (the run's pursuers) and ``vs_scripted_pursuers`` (the run's evader).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import dataclasses
+import fcntl
+import json
+import math
+import os
+import signal
+import sys
+import time
+import tomllib
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from contextlib import contextmanager, suppress
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from hptvsim.train.config import (
+    ConfigError,
+    TrainConfig,
+    apply_overrides,
+    config_from_dict,
+    raw_config,
+    resolve_config_path,
+)
+from hptvsim.train.stats import Interval, difference, mean_interval, slope, verdict
+
+__all__ = [
+    "Claim",
+    "Entry",
+    "EvalSpec",
+    "Experiment",
+    "Plan",
+    "ReproJob",
+    "Setting",
+    "build_config",
+    "collect",
+    "load_plan",
+    "plan_dir",
+    "plan_jobs",
+    "reproduce",
+    "resolve_plan_path",
+    "run_job",
+    "write_report",
+]
+
+ROLES = ("pursuer", "evader")
+MATCHUPS = ("self", "vs_scripted_evader", "vs_scripted_pursuers")
+EVAL_METRICS = ("capture_rate", "collision_rate", "time_to_capture_s", "return_pursuer", "return_evader")
+TRAIN_METRICS = ("train_final", "train_mean", "train_var")
+PAPER_BUDGET_STEPS = 100 * 6000  # env steps per stage in the paper: 100 episodes x T = 6000
+
+
+# --- the plan -----------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Setting:
+    """A training configuration: a base config, the stages kept and overrides.
+
+    Attributes:
+        id: Name (a folder name).
+        label: Default label in tables and figures.
+        config: Path of the base training config.
+        stages: Names of the base config's stages to keep, in order (empty: all). The first kept
+            stage starts fresh (its ``carry`` is dropped).
+        overrides: Dotted-key overrides (``hptvsim.train.config.apply_overrides``), applied after
+            the stages are chosen.
+    """
+
+    id: str
+    label: str
+    config: Path
+    stages: tuple[str, ...] = ()
+    overrides: Mapping[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Entry:
+    """One line of an experiment: a setting under a label, with an x value for trends."""
+
+    label: str
+    setting: str
+    x: float | None = None
+
+
+@dataclass(frozen=True)
+class Experiment:
+    """A comparison of settings, named with the paper's figure.
+
+    Attributes:
+        id: Name (a folder name).
+        figure: The paper's figure(s), e.g. ``"Figs. 7-8"``.
+        title: What it studies.
+        entries: The settings compared, with their labels.
+        stages: Stages reported (empty: every stage of the first entry's run).
+    """
+
+    id: str
+    figure: str
+    title: str
+    entries: tuple[Entry, ...]
+    stages: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class Claim:
+    """One statement of the paper and how it is tested.
+
+    Attributes:
+        id: Name.
+        experiment: The experiment whose runs test it.
+        statement: The paper's statement (quoted or paraphrased, with its figure).
+        metric: The metric (see the module docstring), e.g. ``"train_final.pursuer"``.
+        stage: The stage whose results are used.
+        compare: ``(a, b)`` labels: the claim is ``a`` > ``b`` (``direction = "greater"``) or
+            ``a`` < ``b`` (``"less"``).
+        trend: ``"increasing"`` or ``"decreasing"`` in the entries' ``x``.
+        direction: For comparisons, ``"greater"`` or ``"less"``.
+    """
+
+    id: str
+    experiment: str
+    statement: str
+    metric: str
+    stage: str
+    compare: tuple[str, str] | None = None
+    trend: Literal["increasing", "decreasing"] | None = None
+    direction: Literal["greater", "less"] = "greater"
+
+
+@dataclass(frozen=True)
+class EvalSpec:
+    """How every finished stage is evaluated.
+
+    Attributes:
+        episodes: Seeded episodes per matchup (>= 100 for reported numbers).
+        num_envs: Environments per batch.
+        seed: Seed of the first batch (batch j is reset with ``seed + j``).
+        scripted_evader: The evader the run's pursuers meet (``vs_scripted_evader``).
+        scripted_pursuer: The pursuers the run's evader meets (``vs_scripted_pursuers``).
+        last_episodes: Training episodes at a stage's end behind ``train_final``/``train_var``.
+    """
+
+    episodes: int = 100
+    num_envs: int = 50
+    seed: int = 0
+    scripted_evader: str = "scripted:potential_field"
+    scripted_pursuer: str = "scripted:pure_pursuit"
+    last_episodes: int = 20
+
+
+@dataclass(frozen=True)
+class Plan:
+    """A reproduction plan (see the module docstring)."""
+
+    name: str
+    path: Path
+    seeds: tuple[int, ...]
+    workers: int
+    settings: Mapping[str, Setting]
+    experiments: tuple[Experiment, ...]
+    claims: tuple[Claim, ...]
+    evaluation: EvalSpec
+    budget_note: str = ""
+    fixed: Mapping[str, Any] = field(default_factory=dict)
+
+    def experiment(self, exp_id: str) -> Experiment:
+        """The experiment named ``exp_id``."""
+        for e in self.experiments:
+            if e.id == exp_id:
+                return e
+        raise KeyError(exp_id)
+
+
+def plan_dir() -> Path:
+    """The folder of the shipped plans (``configs/reproduce``)."""
+    from hptvsim._paths import shipped_dir
+
+    return shipped_dir("configs", "reproduce")
+
+
+def resolve_plan_path(name_or_path: str | Path) -> Path:
+    """A plan file from a path or a shipped plan's name (``"section5"``).
+
+    Raises:
+        ConfigError: Neither (the message lists the shipped plans).
+    """
+    path = Path(name_or_path)
+    if path.is_file():
+        return path
+    shipped = plan_dir() / f"{name_or_path}.toml"
+    if shipped.is_file():
+        return shipped
+    names = sorted(
+        p.stem for p in plan_dir().glob("*.toml") if "[[experiment]]" in p.read_text(encoding="utf-8")
+    )
+    raise ConfigError(
+        f"plan {str(name_or_path)!r} is neither a file nor a shipped plan; shipped: {', '.join(names)}"
+    )
+
+
+def _err(path: Path, msg: str) -> ConfigError:
+    return ConfigError(f"{path}: {msg}")
+
+
+def _keys(path: Path, where: str, data: Mapping[str, Any], valid: set[str]) -> None:
+    unknown = sorted(set(data) - valid)
+    if unknown:
+        raise _err(
+            path, f"{where}: unknown key(s) {', '.join(unknown)}; valid keys: {', '.join(sorted(valid))}"
+        )
+
+
+def _name_ok(name: str) -> bool:
+    return bool(name) and all(c.isalnum() or c in "-_" for c in name)
+
+
+def load_plan(path: Path | str) -> Plan:
+    """Read and check a plan file; every setting's config is built once, so errors come now.
+
+    Raises:
+        ConfigError: Unknown keys, unknown settings or labels, or a setting whose config is
+            invalid; the message names the file and the key.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"plan file {path} does not exist")
+    try:
+        with path.open("rb") as f:
+            data = tomllib.load(f)
+    except tomllib.TOMLDecodeError as exc:
+        raise _err(path, f"not valid TOML: {exc}") from None
+    _keys(
+        path,
+        "plan",
+        data,
+        {"name", "config", "seeds", "workers", "evaluation", "setting", "experiment", "claim"}
+        | {"budget_note", "set"},
+    )
+    if "config" not in data:
+        raise _err(path, "'config' (the base training config) is required")
+
+    def config_path(value: Any, where: str) -> Path:
+        p = path.parent / str(value)
+        if p.is_file():
+            return p.resolve()
+        try:
+            return resolve_config_path(str(value))
+        except ConfigError:
+            raise _err(
+                path, f"{where}: config {value!r} not found (relative to the plan or a shipped name)"
+            ) from None
+
+    base = config_path(data["config"], "config")
+    seeds = data.get("seeds", [0])
+    if (
+        not isinstance(seeds, list)
+        or not seeds
+        or not all(isinstance(s, int) and not isinstance(s, bool) and s >= 0 for s in seeds)
+    ):
+        raise _err(path, f"seeds must be a non-empty list of integers >= 0, got {seeds!r}")
+    workers = data.get("workers", 2)
+    if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
+        raise _err(path, f"workers must be an integer >= 1, got {workers!r}")
+    ev_raw = data.get("evaluation", {})
+    _keys(path, "[evaluation]", ev_raw, {f.name for f in dataclasses.fields(EvalSpec)})
+    try:
+        evaluation = EvalSpec(**ev_raw)
+    except TypeError as exc:
+        raise _err(path, f"[evaluation]: {exc}") from None
+    if evaluation.episodes < 1 or evaluation.num_envs < 1 or evaluation.last_episodes < 1:
+        raise _err(path, "[evaluation]: episodes, num_envs and last_episodes must be >= 1")
+
+    settings: dict[str, Setting] = {}
+    for sid, raw in data.get("setting", {}).items():
+        if not _name_ok(sid):
+            raise _err(path, f"setting {sid!r}: a name is letters, digits, '-' or '_'")
+        _keys(path, f"[setting.{sid}]", raw, {"label", "config", "stages", "overrides"})
+        settings[sid] = Setting(
+            id=sid,
+            label=str(raw.get("label", sid)),
+            config=config_path(raw["config"], f"[setting.{sid}]") if "config" in raw else base,
+            stages=tuple(str(s) for s in raw.get("stages", [])),
+            overrides=dict(raw.get("overrides", {})),
+        )
+    if not settings:
+        raise _err(path, "no [setting.<id>] tables")
+
+    experiments: list[Experiment] = []
+    for raw in data.get("experiment", []):
+        _keys(path, "[[experiment]]", raw, {"id", "figure", "title", "entries", "stages"})
+        eid = str(raw.get("id", ""))
+        if not _name_ok(eid):
+            raise _err(path, f"[[experiment]] id {eid!r}: a name is letters, digits, '-' or '_'")
+        entries = []
+        for e in raw.get("entries", []):
+            _keys(path, f"experiment {eid} entry", e, {"label", "setting", "x"})
+            if e.get("setting") not in settings:
+                raise _err(
+                    path,
+                    f"experiment {eid}: unknown setting {e.get('setting')!r}; valid: {', '.join(settings)}",
+                )
+            s = settings[e["setting"]]
+            entries.append(
+                Entry(
+                    label=str(e.get("label", s.label)),
+                    setting=s.id,
+                    x=None if "x" not in e else float(e["x"]),
+                )
+            )
+        if len(entries) < 2:
+            raise _err(path, f"experiment {eid}: needs at least two entries to compare")
+        experiments.append(
+            Experiment(
+                id=eid,
+                figure=str(raw.get("figure", "")),
+                title=str(raw.get("title", eid)),
+                entries=tuple(entries),
+                stages=tuple(str(s) for s in raw.get("stages", [])),
+            )
+        )
+    ids = [e.id for e in experiments]
+    if len(set(ids)) != len(ids):
+        raise _err(path, "experiment ids must be unique")
+
+    claims: list[Claim] = []
+    for raw in data.get("claim", []):
+        _keys(
+            path,
+            "[[claim]]",
+            raw,
+            {"id", "experiment", "statement", "metric", "stage", "compare", "trend", "direction"},
+        )
+        cid = str(raw.get("id", ""))
+        if raw.get("experiment") not in ids:
+            raise _err(
+                path, f"claim {cid!r}: unknown experiment {raw.get('experiment')!r}; valid: {', '.join(ids)}"
+            )
+        exp = experiments[ids.index(raw["experiment"])]
+        labels = [e.label for e in exp.entries]
+        compare = raw.get("compare")
+        trend = raw.get("trend")
+        if (compare is None) == (trend is None):
+            raise _err(path, f"claim {cid!r}: give exactly one of 'compare' and 'trend'")
+        if compare is not None and (len(compare) != 2 or not all(c in labels for c in compare)):
+            raise _err(
+                path, f"claim {cid!r}: compare must be two of the experiment's labels ({', '.join(labels)})"
+            )
+        if trend is not None and trend not in ("increasing", "decreasing"):
+            raise _err(path, f"claim {cid!r}: trend must be 'increasing' or 'decreasing', got {trend!r}")
+        if trend is not None and any(e.x is None for e in exp.entries):
+            raise _err(path, f"claim {cid!r}: a trend needs an x value on every entry of {exp.id}")
+        metric = str(raw.get("metric", ""))
+        _check_metric(path, cid, metric)
+        direction = raw.get("direction", "greater")
+        if direction not in ("greater", "less"):
+            raise _err(path, f"claim {cid!r}: direction must be 'greater' or 'less', got {direction!r}")
+        claims.append(
+            Claim(
+                id=cid,
+                experiment=exp.id,
+                statement=str(raw.get("statement", "")),
+                metric=metric,
+                stage=str(raw.get("stage", "")),
+                compare=None if compare is None else (str(compare[0]), str(compare[1])),
+                trend=trend,
+                direction=direction,
+            )
+        )
+    plan = Plan(
+        name=str(data.get("name", path.stem)),
+        path=path.resolve(),
+        seeds=tuple(seeds),
+        workers=workers,
+        settings=settings,
+        experiments=tuple(experiments),
+        claims=tuple(claims),
+        evaluation=evaluation,
+        budget_note=str(data.get("budget_note", "")),
+        fixed=dict(data.get("set", {})),
+    )
+    for s in settings.values():  # fail now, not in a worker an hour later
+        cfg = build_config(s, plan.seeds[0], plan.fixed)
+        names = [st.name for st in cfg.stages]
+        for e in plan.experiments:
+            for st in e.stages:
+                if any(en.setting == s.id for en in e.entries) and st not in names:
+                    raise _err(
+                        path,
+                        f"experiment {e.id}: stage {st!r} is not a stage of setting {s.id} "
+                        f"({', '.join(names)})",
+                    )
+    for c in plan.claims:
+        exp = plan.experiment(c.experiment)
+        first = build_config(plan.settings[exp.entries[0].setting], plan.seeds[0], plan.fixed)
+        if c.stage not in [st.name for st in first.stages]:
+            raise _err(path, f"claim {c.id!r}: stage {c.stage!r} is not a stage of {exp.entries[0].setting}")
+    return plan
+
+
+def _check_metric(path: Path, cid: str, metric: str) -> None:
+    parts = metric.split(".")
+    ok = (len(parts) == 2 and parts[0] in TRAIN_METRICS and parts[1] in ROLES) or (
+        len(parts) == 3 and parts[0] == "eval" and parts[1] in MATCHUPS and parts[2] in EVAL_METRICS
+    )
+    if not ok:
+        raise _err(
+            path,
+            f"claim {cid!r}: metric {metric!r} is invalid; valid: "
+            f"<{'|'.join(TRAIN_METRICS)}>.<{'|'.join(ROLES)}> "
+            f"or eval.<{'|'.join(MATCHUPS)}>.<{'|'.join(EVAL_METRICS)}>",
+        )
+
+
+def build_config(setting: Setting, seed: int, fixed: Mapping[str, Any] | None = None) -> TrainConfig:
+    """The training config of ``setting`` at ``seed`` (checkpoints at episode ends).
+
+    Order: the base config, the plan's ``[set]`` overrides (``fixed``), the setting's stage
+    choice, the setting's overrides.
+
+    Raises:
+        ConfigError: A kept stage the base config does not have, or an invalid result.
+    """
+    data = raw_config(setting.config)
+    if fixed:
+        data = apply_overrides(data, fixed)
+    if setting.stages:
+        stages = {s.get("name"): s for s in data.get("stage", [])}
+        missing = [s for s in setting.stages if s not in stages]
+        if missing:
+            raise ConfigError(
+                f"setting {setting.id}: stage(s) {', '.join(missing)} not in {setting.config} "
+                f"({', '.join(map(str, stages))})"
+            )
+        data["stage"] = [dict(stages[s]) for s in setting.stages]
+        data["stage"][0].pop("carry", None)
+    data = apply_overrides(data, {**setting.overrides, "seed": seed, "checkpoint_at_episode_end": True})
+    data["name"] = f"{setting.id}-seed{seed}"
+    return config_from_dict(data, f"setting {setting.id} ({setting.config})")
+
+
+@dataclass(frozen=True)
+class ReproJob:
+    """One training run of a plan: a setting at a seed."""
+
+    setting: str
+    seed: int
+    run_dir: str
+
+
+def plan_jobs(
+    plan: Plan, *, experiments: Sequence[str] | None = None, seeds: Sequence[int] | None = None
+) -> list[ReproJob]:
+    """The runs the plan's experiments need, deduplicated, seed-major (see the module docstring).
+
+    Args:
+        plan: The plan.
+        experiments: Only these experiments' runs (default: all).
+        seeds: Only these seeds (default: the plan's).
+    """
+    exps = [plan.experiment(e) for e in experiments] if experiments else list(plan.experiments)
+    order: list[str] = []
+    for e in exps:
+        for en in e.entries:
+            if en.setting not in order:
+                order.append(en.setting)
+    return [ReproJob(s, seed, f"runs/{s}-seed{seed}") for seed in (seeds or plan.seeds) for s in order]
+
+
+# --- one job: train, then evaluate -------------------------------------------------------------
+
+
+def _die_with_parent() -> None:
+    """Worker initializer: one torch thread; on Linux, end when the parent process ends."""
+    import torch
+
+    torch.set_num_threads(1)
+    if sys.platform.startswith("linux"):
+        with suppress(OSError):
+            ctypes.CDLL("libc.so.6").prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+    signal.signal(signal.SIGTERM, lambda *_: os._exit(143))
+
+
+@contextmanager
+def _run_lock(run_dir: Path, wait_s: float = 120.0) -> Iterator[None]:
+    """Hold ``RUN/.lock`` so two processes never train one run.
+
+    A worker of a killed sweep ends with its parent (``PR_SET_PDEATHSIG``) but may take a moment;
+    the lock is waited for up to ``wait_s`` seconds before giving up.
+
+    Raises:
+        RuntimeError: Another process still holds the run after ``wait_s``.
+    """
+    run_dir.mkdir(parents=True, exist_ok=True)
+    with (run_dir / ".lock").open("a+") as f:
+        deadline = time.monotonic() + wait_s
+        while True:
+            try:
+                fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                break
+            except BlockingIOError:
+                if time.monotonic() > deadline:
+                    raise RuntimeError(f"{run_dir} is being trained by another process") from None
+                time.sleep(0.5)
+        try:
+            yield
+        finally:
+            fcntl.flock(f, fcntl.LOCK_UN)
+
+
+def run_job(plan_path: str, job: ReproJob, out: str) -> dict[str, Any]:
+    """Train one run (resuming a killed one, skipping a finished one) and evaluate its stages.
+
+    Runs in a worker process; returns a status dict.
+    """
+    from hptvsim.train.checkpoint import has_checkpoint
+    from hptvsim.train.trainer import train
+
+    plan = load_plan(plan_path)
+    run_dir = Path(out) / job.run_dir
+    setting = plan.settings[job.setting]
+    t0 = time.perf_counter()
+    with _run_lock(run_dir):
+        status = "done before"
+        if not (run_dir / "summary.json").is_file():
+            cfg = build_config(setting, job.seed, plan.fixed)
+            status = "resumed" if has_checkpoint(run_dir) else "trained"
+            train(
+                cfg,
+                run_dir,
+                resume=has_checkpoint(run_dir),
+                progress=False,
+                tensorboard=False,
+                label=setting.label,
+            )
+        evaluated = evaluate_run(run_dir, plan.evaluation)
+    return {
+        "run_dir": job.run_dir,
+        "status": status,
+        "evaluated": evaluated,
+        "seconds": time.perf_counter() - t0,
+    }
+
+
+def _saved_config(run_dir: Path) -> TrainConfig:
+    from hptvsim.train.trainer import load_run_config
+
+    return load_run_config(run_dir)
+
+
+def evaluate_run(run_dir: Path, spec: EvalSpec) -> list[str]:
+    """Evaluate every finished stage of a run without an ``eval/<stage>.json`` yet; returns them."""
+    cfg = _saved_config(run_dir)
+    done = []
+    for stage in cfg.stages:
+        models = run_dir / "stages" / stage.name
+        out = run_dir / "eval" / f"{stage.name}.json"
+        if out.is_file() or not models.is_dir():
+            continue
+        result = evaluate_stage(models, stage, spec)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        tmp = out.with_suffix(".tmp")
+        tmp.write_text(json.dumps(result, indent=2) + "\n")
+        tmp.replace(out)
+        done.append(stage.name)
+    return done
+
+
+def evaluate_stage(models: Path, stage: Any, spec: EvalSpec) -> dict[str, Any]:
+    """The three matchups of one stage's saved models in that stage's game (see the module docstring)."""
+    from hptvsim.envs.core import GameCore
+    from hptvsim.offline.rollout import episode_metrics, play
+    from hptvsim.train.evaluate import summarize
+    from hptvsim.zoo import load_policy
+
+    env = stage.env
+    if env.kind != "hptvsim":
+        raise ConfigError(
+            f"stage {stage.name}: only the underwater game (kind 'hptvsim') is evaluated, not {env.kind!r}"
+        )
+    options = dict(env.options)
+    core = GameCore(
+        env.scenario,
+        num_envs=min(spec.num_envs, spec.episodes),
+        task=env.task,
+        seed=spec.seed,
+        threads=1,
+        **options,
+    )
+    try:
+        pursuers = [a for a, p in zip(core.agents, core.pursuer, strict=True) if p]
+        own = {a: f"sb3:{models / f'{a}.zip'}" for a in core.agents}
+        matchups = {
+            "self": own,
+            "vs_scripted_evader": {a: own[a] if a in pursuers else spec.scripted_evader for a in core.agents},
+            "vs_scripted_pursuers": {
+                a: spec.scripted_pursuer if a in pursuers else own[a] for a in core.agents
+            },
+        }
+        result: dict[str, Any] = {
+            "stage": stage.name,
+            "scenario": env.scenario,
+            "episodes": spec.episodes,
+            "seed": spec.seed,
+        }
+        for name, specs in matchups.items():
+            policies = [
+                load_policy(specs[a], core, a, seed=spec.seed + i, allow_paths=True)
+                for i, a in enumerate(core.agents)
+            ]
+            eps = play(core, policies, episodes=spec.episodes, seed=spec.seed, record=False)
+            metrics = [episode_metrics(e, core.dt) for e in eps]
+            summary = summarize(metrics)
+            ttc = [m.time_to_capture_s for m in metrics if m.time_to_capture_s is not None]
+            result[name] = {
+                "specs": {a: specs[a].replace(str(models), "<stage>") for a in core.agents},
+                "capture_rate": float(np.mean([m.captured for m in metrics])),
+                "collision_rate": float(np.mean([m.collision for m in metrics])),
+                "time_to_capture_s": float(np.mean(ttc)) if ttc else None,
+                "return_pursuer": float(
+                    np.mean([np.mean([m.returns[a] for a in pursuers]) for m in metrics])
+                ),
+                "return_evader": float(
+                    np.mean(
+                        [np.mean([m.returns[a] for a in core.agents if a not in pursuers]) for m in metrics]
+                    )
+                ),
+                "summary": summary,
+            }
+        return result
+    finally:
+        core.close()
+
+
+# --- collecting results -------------------------------------------------------------------------
+
+
+def _training_metrics(run_dir: Path, last: int) -> dict[str, dict[str, float]]:
+    """Stage -> metric -> value from ``episodes.csv`` (finished stages only)."""
+    from hptvsim.train.figures import episode_returns
+
+    out: dict[str, dict[str, float]] = {}
+    if not (run_dir / "episodes.csv").is_file():
+        return out
+    for (_, stage), roles in episode_returns(run_dir).items():
+        if not (run_dir / "stages" / stage).is_dir():
+            continue
+        m: dict[str, float] = {}
+        for role, values in roles.items():
+            v = np.asarray(values, dtype=np.float64)
+            tail = v[-last:]
+            m[f"train_final.{role}"] = float(tail.mean())
+            m[f"train_mean.{role}"] = float(v.mean())
+            m[f"train_var.{role}"] = float(tail.var(ddof=1)) if tail.size > 1 else math.nan
+        out[stage] = m
+    return out
+
+
+def _eval_metrics(run_dir: Path) -> dict[str, dict[str, float]]:
+    out: dict[str, dict[str, float]] = {}
+    for f in sorted((run_dir / "eval").glob("*.json")) if (run_dir / "eval").is_dir() else []:
+        data = json.loads(f.read_text())
+        m: dict[str, float] = {}
+        for mu in MATCHUPS:
+            for name in EVAL_METRICS:
+                v = data.get(mu, {}).get(name)
+                m[f"eval.{mu}.{name}"] = math.nan if v is None else float(v)
+        out[data["stage"]] = m
+    return out
+
+
+@dataclass
+class Results:
+    """Per-run metrics found on disk.
+
+    Attributes:
+        values: (setting, seed) -> stage -> metric -> value.
+        progress: (setting, seed) -> "finished", "evaluated", "training (<step>/<total>)" or "not started".
+    """
+
+    values: dict[tuple[str, int], dict[str, dict[str, float]]]
+    progress: dict[tuple[str, int], str]
+
+    def series(self, setting: str, seeds: Sequence[int], stage: str, metric: str) -> list[float]:
+        """The metric of every seed of a setting that has it."""
+        out = []
+        for s in seeds:
+            v = self.values.get((setting, s), {}).get(stage, {}).get(metric)
+            if v is not None and math.isfinite(v):
+                out.append(v)
+        return out
+
+
+def _progress_of(run_dir: Path, cfg: TrainConfig) -> str:
+    total = sum(s.budget_steps or 0 for s in cfg.stages)
+    if (run_dir / "summary.json").is_file():
+        n_eval = len(list((run_dir / "eval").glob("*.json"))) if (run_dir / "eval").is_dir() else 0
+        return (
+            "finished"
+            if n_eval >= len(cfg.stages)
+            else f"trained, {n_eval}/{len(cfg.stages)} stages evaluated"
+        )
+    state = run_dir / "checkpoint" / "state.json"
+    if state.is_file():
+        step = json.loads(state.read_text()).get("global_step", 0)
+        return f"training ({step:,}/{total:,} env steps at the last checkpoint)"
+    return "not started"
+
+
+def collect(plan: Plan, out: Path) -> Results:
+    """Read every run's metrics and progress under ``out``."""
+    values: dict[tuple[str, int], dict[str, dict[str, float]]] = {}
+    progress: dict[tuple[str, int], str] = {}
+    for job in plan_jobs(plan):
+        run_dir = out / job.run_dir
+        key = (job.setting, job.seed)
+        progress[key] = _progress_of(run_dir, build_config(plan.settings[job.setting], job.seed, plan.fixed))
+        per: dict[str, dict[str, float]] = {}
+        for stage, m in _training_metrics(run_dir, plan.evaluation.last_episodes).items():
+            per.setdefault(stage, {}).update(m)
+        for stage, m in _eval_metrics(run_dir).items():
+            per.setdefault(stage, {}).update(m)
+        if per:
+            values[key] = per
+    return Results(values, progress)
+
+
+def claim_result(plan: Plan, results: Results, claim: Claim) -> tuple[Interval, str]:
+    """The claim's interval (difference or slope) and verdict."""
+    exp = plan.experiment(claim.experiment)
+    if claim.compare is not None:
+        by_label = {e.label: e for e in exp.entries}
+        a, b = (by_label[c] for c in claim.compare)
+        iv = difference(
+            results.series(a.setting, plan.seeds, claim.stage, claim.metric),
+            results.series(b.setting, plan.seeds, claim.stage, claim.metric),
+        )
+        v = verdict(iv, claim.direction)
+    else:
+        xs: list[float] = []
+        ys: list[float] = []
+        for e in exp.entries:
+            ser = results.series(e.setting, plan.seeds, claim.stage, claim.metric)
+            xs += [float(e.x or 0.0)] * len(ser)
+            ys += ser
+        iv = slope(xs, ys)
+        v = verdict(iv, "greater" if claim.trend == "increasing" else "less")
+    return iv, v
+
+
+# --- the report ---------------------------------------------------------------------------------
+
+_METRIC_TEXT = {
+    "train_final": "final training reward",
+    "train_mean": "mean training reward over the stage",
+    "train_var": "variance of the final training reward",
+}
+_EVAL_TEXT = {
+    "capture_rate": "capture rate",
+    "collision_rate": "collision rate",
+    "time_to_capture_s": "time to capture (s)",
+    "return_pursuer": "pursuers' return",
+    "return_evader": "evader's return",
+}
+_MATCHUP_TEXT = {
+    "self": "own agents against each other",
+    "vs_scripted_evader": "run's pursuers vs scripted evader",
+    "vs_scripted_pursuers": "run's evader vs scripted pursuers",
+}
+
+
+def metric_text(metric: str) -> str:
+    """A metric's name in words."""
+    parts = metric.split(".")
+    if parts[0] == "eval":
+        return f"{_EVAL_TEXT[parts[2]]}, {_MATCHUP_TEXT[parts[1]]}"
+    role = "UUVs (pursuers)" if parts[1] == "pursuer" else "spherical robot (evader)"
+    return f"{_METRIC_TEXT[parts[0]]}, {role}"
+
+
+def _stage_names(plan: Plan, exp: Experiment) -> list[str]:
+    if exp.stages:
+        return list(exp.stages)
+    first = build_config(plan.settings[exp.entries[0].setting], plan.seeds[0], plan.fixed)
+    return [s.name for s in first.stages]
+
+
+def _write_experiment_sweep(plan: Plan, exp: Experiment, out: Path) -> Path:
+    folder = out / "experiments" / exp.id
+    folder.mkdir(parents=True, exist_ok=True)
+    jobs = [
+        {
+            "label": e.label,
+            "seed": s,
+            "setting": e.setting,
+            "run_dir": os.path.relpath(out / f"runs/{e.setting}-seed{s}", folder),
+        }
+        for e in exp.entries
+        for s in plan.seeds
+    ]
+    manifest = {
+        "name": f"{plan.name}/{exp.id}",
+        "figure": exp.figure,
+        "title": exp.title,
+        "stages": _stage_names(plan, exp),
+        "jobs": jobs,
+    }
+    (folder / "sweep.json").write_text(json.dumps(manifest, indent=2) + "\n")
+    return folder
+
+
+def _machine() -> str:
+    import platform
+
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}"
+
+
+def write_report(
+    plan: Plan, out: Path, report: Path, *, figures: bool = True, command: str | None = None
+) -> Path:
+    """Write the Markdown report (and its figures beside it) from the results under ``out``.
+
+    Figures go to ``<report stem>/<experiment>/`` next to the report. A partial set of results
+    gives a partial report that lists what is missing.
+    """
+    results = collect(plan, out)
+    report.parent.mkdir(parents=True, exist_ok=True)
+    fig_root = report.parent / report.stem
+    cmd = command or f"hptvsim reproduce --plan {_rel(plan.path)} --out {_rel(out)} --report {_rel(report)}"
+    jobs = plan_jobs(plan)
+    n_done = sum(1 for j in jobs if results.progress[(j.setting, j.seed)] == "finished")
+    lines: list[str] = []
+    w = lines.append
+    w(f"# Reproducing the paper's section V on the pursuit game ({plan.name})")
+    w("")
+    w("Generated by `hptvsim reproduce` from the run folders; do not edit by hand. Regenerate with:")
+    w("")
+    w("```")
+    w(cmd)
+    w("```")
+    w("")
+    w(
+        f"- Plan: `{_rel(plan.path)}`; runs in `{_rel(out)}/runs/<setting>-seed<k>/` "
+        "(each holds its `config.toml` and `run.json`)."
+    )
+    w(
+        f"- Training seeds: {', '.join(map(str, plan.seeds))}. Evaluation: {plan.evaluation.episodes} "
+        f"episodes per matchup on fixed seeds (batch j reset with seed {plan.evaluation.seed} + j, "
+        f"{plan.evaluation.num_envs} environments per batch), the same for every run."
+    )
+    w(
+        f"- Runs finished: {n_done} of {len(jobs)}. Machine: {_machine()}. "
+        f"Written {time.strftime('%Y-%m-%d %H:%M')}."
+    )
+    w(
+        "- Statistics: every number is a mean over training seeds with its 95 % Student-t interval "
+        "`[low, high]`; differences use Welch's interval, trends the least-squares slope's t interval "
+        "(`hptvsim.train.stats`). A claim **holds** only when the whole interval lies on the claimed "
+        "side of zero, **does not hold** when it lies wholly on the other side, and is **not "
+        "resolved** otherwise."
+    )
+    w("")
+    w("## Budget")
+    w("")
+    w(_budget_text(plan))
+    w("")
+    w("## Verdicts")
+    w("")
+    w("| claim | the paper says | metric (stage) | we measure (95 % interval) | verdict |")
+    w("|---|---|---|---|---|")
+    for c in plan.claims:
+        iv, v = claim_result(plan, results, c)
+        what = (
+            f"difference {c.compare[0]} - {c.compare[1]}"
+            if c.compare
+            else f"slope per unit of x ({c.trend} claimed)"
+        )
+        bold = f"**{v}**"
+        if v == "not resolved" and not iv.resolved:
+            bold += " (no finished runs)" if iv.n == 0 else f" (n = {iv.n}: too few seeds)"
+        w(
+            f"| {c.id} | {c.statement} | {metric_text(c.metric)} ({c.stage}) | {what}: {iv.format()} "
+            f"| {bold} |"
+        )
+    w("")
+    w(f"Each verdict regenerates with `{cmd} --report-only`.")
+    w("")
+    for exp in plan.experiments:
+        _experiment_section(plan, exp, results, out, fig_root, figures, w)
+    w("## Runs")
+    w("")
+    w("| run folder | setting | seed | config | state |")
+    w("|---|---|---|---|---|")
+    for j in jobs:
+        s = plan.settings[j.setting]
+        extra = (", stages " + "/".join(s.stages)) if s.stages else ""
+        ov = ", ".join(f"`{k} = {v}`" for k, v in s.overrides.items())
+        w(
+            f"| `{j.run_dir}` | {s.label} | {j.seed} | `{_rel(s.config)}`{extra}{(', ' + ov) if ov else ''} "
+            f"| {results.progress[(j.setting, j.seed)]} |"
+        )
+    w("")
+    missing = [j for j in jobs if results.progress[(j.setting, j.seed)] != "finished"]
+    if missing:
+        w(
+            f"**Missing:** {len(missing)} run(s) not finished: "
+            f"{', '.join(f'`{j.run_dir}`' for j in missing)}. `hptvsim reproduce` resumes them; "
+            "numbers above use the finished stages only."
+        )
+        w("")
+    report.write_text("\n".join(lines).rstrip() + "\n")
+    return report
+
+
+def _rel(p: Path) -> str:
+    try:
+        return str(Path(p).resolve().relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return str(p)
+
+
+def _budget_text(plan: Plan) -> str:
+    rows = []
+    for s in plan.settings.values():
+        cfg = build_config(s, plan.seeds[0], plan.fixed)
+        parts = [
+            f"{st.name} {st.budget_steps:,}"
+            if st.budget_steps
+            else f"{st.name} {st.budget_episodes} episodes"
+            for st in cfg.stages
+        ]
+        total = sum(st.budget_steps or 0 for st in cfg.stages)
+        rows.append(
+            f"| {s.label} | {cfg.algo.upper()} | {' + '.join(parts)} | {total:,} "
+            f"| {total / (PAPER_BUDGET_STEPS * len(cfg.stages)):.2%} |"
+        )
+    head = (
+        f"The paper trains 100 episodes x 6000 steps = {PAPER_BUDGET_STEPS:,} env steps per stage. "
+        "Ours, per run "
+        "(one env step moves all four agents):\n\n"
+        "| setting | algorithm | env steps per stage | total | of the paper's for these stages |\n"
+        "|---|---|---|---|---|\n"
+    )
+    return head + "\n".join(rows) + ("\n\n" + plan.budget_note if plan.budget_note else "")
+
+
+def _experiment_section(
+    plan: Plan,
+    exp: Experiment,
+    results: Results,
+    out: Path,
+    fig_root: Path,
+    figures: bool,
+    w: Callable[[str], None],
+) -> None:
+    from hptvsim.train.figures import make_figures
+
+    w(f"## {exp.title} ({exp.figure})")
+    w("")
+    stages = _stage_names(plan, exp)
+    folder = _write_experiment_sweep(plan, exp, out)
+    if figures:
+        fig_dir = fig_root / exp.id
+        try:
+            written = make_figures([folder], fig_dir, with_trajectories=False, stages=stages)
+        except FileNotFoundError:
+            written = []
+        if written:
+            w(f"Figures: `hptvsim figures {_rel(folder)} --out {_rel(fig_dir)}`.")
+            w("")
+            for p in written:
+                w(f"![{p.stem}]({os.path.relpath(p, fig_root.parent)})")
+            w("")
+        else:
+            w("No finished episodes yet: no figures.")
+            w("")
+    metrics = [f"{m}.{r}" for m in ("train_final", "train_mean", "train_var") for r in ROLES] + [
+        "eval.vs_scripted_evader.capture_rate",
+        "eval.vs_scripted_evader.collision_rate",
+        "eval.vs_scripted_evader.time_to_capture_s",
+        "eval.vs_scripted_pursuers.capture_rate",
+        "eval.self.capture_rate",
+        "eval.self.collision_rate",
+        "eval.self.time_to_capture_s",
+    ]
+    for stage in stages:
+        w(f"### {exp.title}: end of stage `{stage}`")
+        w("")
+        w("| metric | " + " | ".join(f"{e.label}" for e in exp.entries) + " |")
+        w("|---|" + "---|" * len(exp.entries))
+        for m in metrics:
+            cells = [
+                mean_interval(results.series(e.setting, plan.seeds, stage, m)).format() for e in exp.entries
+            ]
+            w(f"| {metric_text(m)} | " + " | ".join(cells) + " |")
+        w("")
+
+
+# --- the driver ---------------------------------------------------------------------------------
+
+
+def reproduce(
+    plan: Plan,
+    out: Path,
+    report: Path,
+    *,
+    workers: int | None = None,
+    experiments: Sequence[str] | None = None,
+    seeds: Sequence[int] | None = None,
+    progress: bool = True,
+    figures: bool = True,
+    log: Callable[[str], None] = print,
+) -> dict[str, Any]:
+    """Train, evaluate and report (see the module docstring); returns the job statuses.
+
+    Runs already finished are skipped; killed ones resume. The report is written at the end, and
+    also when the sweep is interrupted (Ctrl-C), from whatever is finished.
+
+    Args:
+        plan: The plan.
+        out: Folder of the runs.
+        report: The Markdown report to write.
+        workers: Processes training side by side (default: the plan's).
+        experiments: Only these experiments' runs (the report still covers all).
+        seeds: Only these seeds.
+        progress: A progress bar over runs.
+        figures: Draw the figures.
+        log: Where status lines go.
+    """
+    out.mkdir(parents=True, exist_ok=True)
+    jobs = plan_jobs(plan, experiments=experiments, seeds=seeds)
+    (out / "plan.json").write_text(
+        json.dumps(
+            {
+                "plan": str(plan.path),
+                "name": plan.name,
+                "seeds": list(plan.seeds),
+                "jobs": [dataclasses.asdict(j) for j in jobs],
+            },
+            indent=2,
+        )
+        + "\n"
+    )
+    n = workers or plan.workers
+    statuses: dict[str, dict[str, Any]] = {}
+    bar: Any = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=len(jobs), desc=f"reproduce {plan.name}", unit="run", dynamic_ncols=True)
+    import multiprocessing
+
+    pool = ProcessPoolExecutor(
+        max_workers=n, mp_context=multiprocessing.get_context("spawn"), initializer=_die_with_parent
+    )
+    try:
+        pending: dict[Future[dict[str, Any]], ReproJob] = {}
+        queue = list(jobs)
+        while queue or pending:
+            while queue and len(pending) < n:
+                job = queue.pop(0)
+                log(f"[{time.strftime('%H:%M:%S')}] start {job.run_dir}")
+                pending[pool.submit(run_job, str(plan.path), job, str(out))] = job
+            done, _ = wait(list(pending), return_when=FIRST_COMPLETED)
+            for fut in done:
+                job = pending.pop(fut)
+                try:
+                    st = fut.result()
+                except Exception as exc:  # a failed run is reported; the others go on
+                    st = {"run_dir": job.run_dir, "status": "failed", "error": f"{type(exc).__name__}: {exc}"}
+                statuses[job.run_dir] = st
+                log(
+                    f"[{time.strftime('%H:%M:%S')}] {st['status']} {job.run_dir}"
+                    + (f" ({st['error']})" if "error" in st else f" in {st['seconds'] / 60:.1f} min")
+                )
+                if bar is not None:
+                    bar.update(1)
+    except KeyboardInterrupt:
+        log("interrupted: writing the report from the finished runs; run the same command to go on")
+        for p in multiprocessing.active_children():
+            p.terminate()
+        pool.shutdown(wait=False, cancel_futures=True)
+        write_report(plan, out, report, figures=figures)
+        raise
+    finally:
+        if bar is not None:
+            bar.close()
+        pool.shutdown(wait=True, cancel_futures=True)
+    write_report(plan, out, report, figures=figures)
+    log(f"report: {report}")
+    return statuses

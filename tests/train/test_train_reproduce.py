@@ -1,0 +1,251 @@
+"""``hptvsim reproduce``: the plan, its checks, the report from partial results, and (slow) the
+whole toy-size plan end to end, killed and resumed."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from train_helpers import ROOT
+
+from hptvsim.train.config import ConfigError
+from hptvsim.train.reproduce import build_config, load_plan, plan_jobs, write_report
+
+PLANS = ROOT / "configs" / "reproduce"
+HPTVSIM = [sys.executable, "-m", "hptvsim.cli"]
+
+
+def test_the_shipped_plan_runs_every_experiment_on_the_pursuit_game_with_three_seeds() -> None:
+    plan = load_plan(PLANS / "section5.toml")
+    assert plan.seeds == (0, 1, 2) and plan.evaluation.episodes >= 100
+    assert {e.id for e in plan.experiments} == {"algo", "stt", "vmax", "omega", "ent_coef"}
+    jobs = plan_jobs(plan)
+    # deduplicated: the base run serves four experiments once per seed; seed-major order
+    assert [j.run_dir for j in jobs].count("runs/base-seed0") == 1
+    assert [j.seed for j in jobs] == sorted(j.seed for j in jobs)
+    assert len(jobs) == 8 * 3
+    base = build_config(plan.settings["base"], 0, plan.fixed)
+    assert [s.name for s in base.stages] == ["source", "transition", "target"]
+    assert all(s.env.task == "pursuit" for s in base.stages)
+    assert sum(s.budget_steps or 0 for s in base.stages) >= 150_000
+    assert base.checkpoint_at_episode_end
+    ippo = build_config(plan.settings["ippo"], 0, plan.fixed)
+    assert ippo.algo == "ippo" and [s.budget_steps for s in ippo.stages] == [
+        s.budget_steps for s in base.stages
+    ]
+    only = build_config(plan.settings["target_only"], 1, plan.fixed)
+    assert [s.name for s in only.stages] == ["target"] and only.seed == 1
+    assert only.stages[0].budget_steps == sum(s.budget_steps or 0 for s in base.stages)
+    ent = build_config(plan.settings["ent04"], 2, plan.fixed)
+    assert [s.name for s in ent.stages] == ["source"] and ent.sac.ent_coef == "auto_0.4"
+    vmax = build_config(plan.settings["vmax35"], 0, plan.fixed)
+    assert all(s.env.options["vehicle_parameters"]["pursuer"]["v_max"] == 3.5 for s in vmax.stages)
+
+
+def _claim(metric: str, stage: str, compare: str) -> str:
+    head = '[[claim]]\nid = "C9"\nexperiment = "algo"\n'
+    return head + f'metric = "{metric}"\nstage = "{stage}"\ncompare = {compare}'
+
+
+def _plan(tmp_path: Path, text: str) -> Path:
+    base = (
+        (PLANS / "toy.toml")
+        .read_text()
+        .replace('config = "pursuit-stt.toml"', f'config = "{PLANS / "pursuit-stt.toml"}"')
+    )
+    p = tmp_path / "plan.toml"
+    p.write_text(base + "\n" + text)
+    return p
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        ("bogus = 1", "unknown key(s) bogus"),
+        (
+            '[[experiment]]\nid = "x"\nentries = [{ setting = "base" }, { setting = "nope" }]',
+            "unknown setting 'nope'; valid: base",
+        ),
+        (
+            _claim("train_final.shark", "target", '["MAISAC", "IPPO"]'),
+            "metric 'train_final.shark' is invalid",
+        ),
+        (
+            _claim("train_final.evader", "target", '["MAISAC", "SAC"]'),
+            "compare must be two of the experiment's labels (MAISAC, IPPO)",
+        ),
+        (
+            _claim("train_final.evader", "harbour", '["MAISAC", "IPPO"]'),
+            "stage 'harbour' is not a stage",
+        ),
+        ('[setting.bad]\nstages = ["harbour"]', "stage(s) harbour not in"),
+    ],
+)
+def test_a_bad_plan_is_refused_with_the_key_and_the_valid_values(
+    tmp_path: Path, extra: str, message: str
+) -> None:
+    with pytest.raises(ConfigError) as err:
+        load_plan(_plan(tmp_path, extra))
+    assert message in str(err.value)
+
+
+def test_a_report_without_runs_says_what_is_missing(tmp_path: Path) -> None:
+    plan = load_plan(PLANS / "toy.toml")
+    report = write_report(plan, tmp_path / "out", tmp_path / "report.md")
+    text = report.read_text()
+    assert "Runs finished: 0 of 16" in text
+    assert "**Missing:** 16 run(s)" in text
+    assert text.count("**not resolved** (no finished runs)") == len(plan.claims)
+    for exp in plan.experiments:
+        assert f"({exp.figure})" in text
+
+
+def test_cli_user_errors_are_one_line(tmp_path: Path) -> None:
+    for args, needle in (
+        (["--plan", "nope"], "neither a file nor a shipped plan; shipped: section5, toy"),
+        (["--plan", "toy", "--experiment", "fig99"], "--experiment 'fig99' is unknown; valid: algo, stt"),
+        (["--plan", "toy", "--seed", "7"], "--seed 7 is not a seed of the plan; valid: 0, 1"),
+    ):
+        r = subprocess.run(
+            [*HPTVSIM, "reproduce", *args, "--out", str(tmp_path)], capture_output=True, text=True, cwd=ROOT
+        )
+        assert r.returncode == 1, r.stderr
+        assert needle in r.stderr and "Traceback" not in r.stderr
+        assert len(r.stderr.strip().splitlines()) == 1
+
+
+# --- slow: the whole plan at toy size ---------------------------------------------------------------
+
+
+def _env() -> dict[str, str]:
+    return {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONUNBUFFERED": "1"}
+
+
+def _reproduce(out: Path, *extra: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [
+            *HPTVSIM,
+            "reproduce",
+            "--plan",
+            "toy",
+            "--out",
+            str(out / "runs-root"),
+            "--report",
+            str(out / "report.md"),
+            *extra,
+        ],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        env=_env(),
+        timeout=1800,
+    )
+
+
+@pytest.mark.slow
+def test_reproduce_end_to_end_at_toy_size(tmp_path: Path) -> None:
+    r = _reproduce(tmp_path)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    plan = load_plan(PLANS / "toy.toml")
+    text = (tmp_path / "report.md").read_text()
+    assert "Runs finished: 16 of 16" in text and "**Missing:**" not in text
+    assert "## Budget" in text and "## Verdicts" in text and "## Runs" in text
+    for exp in plan.experiments:
+        assert f"## {exp.title} ({exp.figure})" in text
+    rows = [line for line in text.splitlines() if re.match(r"\| C\d", line)]
+    assert [r.split("|")[1].strip() for r in rows] == [c.id for c in plan.claims]
+    for row in rows:
+        assert re.search(r"\*\*(holds|does not hold|not resolved)\*\*", row), row
+        assert re.search(r"\[-?[\d.e+-]+, -?[\d.e+-]+\]", row), (
+            f"no interval: {row}"
+        )  # 2 seeds: intervals exist
+    figs = sorted((tmp_path / "report").rglob("*.png"))
+    assert {p.parent.name for p in figs} == {e.id for e in plan.experiments}
+    for p in figs:
+        assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+        assert f"]({p.relative_to(tmp_path)})" in text
+    # every run evaluated each of its stages with 3 matchups on the same episodes
+    for job in plan_jobs(plan):
+        cfg = build_config(plan.settings[job.setting], job.seed, plan.fixed)
+        for st in cfg.stages:
+            data = json.loads((tmp_path / "runs-root" / job.run_dir / "eval" / f"{st.name}.json").read_text())
+            assert data["episodes"] == plan.evaluation.episodes
+            assert {"self", "vs_scripted_evader", "vs_scripted_pursuers"} <= set(data)
+    # the figures come from the experiment folders as `hptvsim figures` draws them
+    again = subprocess.run(
+        [
+            *HPTVSIM,
+            "figures",
+            str(tmp_path / "runs-root/experiments/ent_coef"),
+            "--out",
+            str(tmp_path / "f"),
+            "--no-trajectories",
+        ],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+    )
+    assert again.returncode == 0, again.stderr
+    assert {Path(p).name for p in again.stdout.split()} == {
+        p.name for p in figs if p.parent.name == "ent_coef"
+    }
+
+
+def _snapshot(root: Path) -> dict[str, str]:
+    out = {}
+    for p in sorted((root / "runs").rglob("*")):
+        if p.name == "episodes.csv" or (p.parent.name == "eval" and p.suffix == ".json"):
+            out[str(p.relative_to(root))] = p.read_text()
+    return out
+
+
+@pytest.mark.slow
+def test_killed_mid_sweep_it_resumes_to_the_same_results(tmp_path: Path) -> None:
+    args = ("--experiment", "stt", "--seed", "0", "--no-figures")
+    clean = _reproduce(tmp_path / "clean", *args)
+    assert clean.returncode == 0, clean.stderr[-3000:]
+    cut = tmp_path / "cut"
+    cut.mkdir()
+    proc = subprocess.Popen(
+        [
+            *HPTVSIM,
+            "reproduce",
+            "--plan",
+            "toy",
+            "--out",
+            str(cut / "runs-root"),
+            "--report",
+            str(cut / "report.md"),
+            *args,
+        ],
+        cwd=ROOT,
+        env=_env(),
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    state = cut / "runs-root" / "runs" / "target_only-seed0" / "checkpoint" / "state.json"
+    deadline = time.monotonic() + 600
+    while time.monotonic() < deadline:
+        if state.is_file() and json.loads(state.read_text())["global_step"] >= 100:
+            break
+        time.sleep(0.2)
+    else:
+        proc.kill()
+        pytest.fail("no checkpoint within 10 minutes")
+    assert not (cut / "runs-root" / "runs" / "target_only-seed0" / "summary.json").exists()
+    proc.send_signal(signal.SIGKILL)  # the parent only: its workers must end with it
+    proc.wait()
+    resumed = _reproduce(cut, *args)
+    assert resumed.returncode == 0, resumed.stderr[-3000:]
+    assert "resumed runs/target_only-seed0" in resumed.stdout
+    a, b = _snapshot(tmp_path / "clean" / "runs-root"), _snapshot(cut / "runs-root")
+    assert a.keys() == b.keys() and len(a) == 2 + 4  # 2 runs' episodes.csv, 4 stage evaluations
+    for k in a:
+        assert a[k] == b[k], k
