@@ -275,10 +275,12 @@ def register(main: click.Group, bench: click.Group) -> None:
     )
     @click.option("--no-trajectories", is_flag=True, help="Skip the trajectory plots (they run episodes).")
     def figures_cmd(paths: tuple[Path, ...], out_dir: Path | None, no_trajectories: bool) -> None:
-        """The paper's figures from training runs or sweeps (PATHS), as PNG files.
+        """The paper's figures from training runs, sweeps or DT runs (PATHS), as PNG files.
 
-        Reward curves per stage and role (MAISAC vs IPPO, or per sweep setting), the final
-        rewards' mean and variance per setting, and one episode's trajectories per stage.
+        Training runs and sweeps: reward curves per stage and role with 95 % bands over seeds
+        (Figs. 7-10: MAISAC vs IPPO, or per sweep setting), each agent's own reward curve, the
+        final rewards' mean and variance per setting (Fig. 11) and one episode's trajectories
+        per stage (Figs. 12-13). DT runs (a folder with dt.pt): Figs. 14-17.
         """
         from hptvsim.train.figures import make_figures
 

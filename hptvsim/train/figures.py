@@ -60,6 +60,23 @@ def episode_returns(run_dir: Path) -> dict[tuple[int, str], dict[str, list[float
     return out
 
 
+def agent_returns(run_dir: Path) -> dict[tuple[int, str], dict[str, list[float]]]:
+    """(stage index, stage) -> agent -> its total reward per episode, in order."""
+    per: dict[tuple[int, str], dict[str, dict[int, float]]] = defaultdict(lambda: defaultdict(dict))
+    with (run_dir / "episodes.csv").open(newline="") as f:
+        for row in csv.DictReader(f):
+            per[(int(row["stage_index"]), row["stage"])][row["agent"]][int(row["episode"])] = float(
+                row["return"]
+            )
+    return {k: {a: [v[e] for e in sorted(v)] for a, v in agents.items()} for k, agents in per.items()}
+
+
+def agent_color(agent: str, agents: Sequence[str]) -> str:
+    """The colour of ``agent`` among ``agents`` (matplotlib's default cycle, in agent order)."""
+    ordered = sorted(agents, key=lambda a: (not a.startswith("pursuer"), a))
+    return f"C{ordered.index(agent) % 10}"
+
+
 def _smooth(y: np.ndarray, window: int) -> np.ndarray:
     if window <= 1 or len(y) < 2:
         return y
@@ -168,7 +185,8 @@ def reward_curves(
             offset += n_max
         ax.set_xlabel("training episode (all stages in order)")
         ax.set_ylabel("average total reward per episode (dimensionless)")
-        ax.set_title(f"{names.get(role, role)}: mean over seeds, 95 % band", pad=16)
+        fig_no = {"pursuer": "Figs. 7, 9", "evader": "Figs. 8, 10"}.get(role, "")
+        ax.set_title(f"{names.get(role, role)}: mean over seeds, 95 % band (paper {fig_no})", pad=16)
         ax.legend(loc="best", fontsize=8)
         ax.grid(alpha=0.3)
         fig.tight_layout(rect=(0, 0.03, 1, 1))
@@ -179,6 +197,87 @@ def reward_curves(
         plt.close(fig)
         written.append(path)
     return written
+
+
+def reward_agents_figure(
+    run_dirs: Sequence[Path],
+    *,
+    smooth: int = 5,
+    labels: Sequence[str] | None = None,
+    stages: Sequence[str] | None = None,
+    caption: str = "",
+    max_groups: int = 4,
+) -> Any:
+    """Each agent's own total reward per episode through the stages, one panel per group.
+
+    Returns:
+        The matplotlib figure (one line per agent, each in its own colour; mean over seeds with
+        a 95 % band).
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    groups: dict[str, list[dict[tuple[int, str], dict[str, list[float]]]]] = defaultdict(list)
+    for run, label in zip(run_dirs, _labels(run_dirs, labels), strict=True):
+        groups[label].append(agent_returns(run))
+    shown = list(groups)[:max_groups]
+    fig, axes = plt.subplots(1, len(shown), figsize=(5.2 * len(shown), 4.2), squeeze=False, sharey=True)
+    for ax, label in zip(axes[0], shown, strict=True):
+        runs = groups[label]
+        keys = sorted({k for r in runs for k in r if stages is None or k[1] in stages})
+        agents = sorted({a for r in runs for k in keys for a in r.get(k, {})})
+        offset = 0
+        for s_idx, key in enumerate(keys):
+            n_max = 0
+            for agent in agents:
+                series = [r[key][agent] for r in runs if agent in r.get(key, {})]
+                if not series:
+                    continue
+                n = min(len(v) for v in series)
+                n_max = max(n_max, n)
+                arr = np.stack([_smooth(np.asarray(v[:n]), smooth) for v in series])
+                x = offset + np.arange(1, n + 1)
+                color = agent_color(agent, agents)
+                ax.plot(x, arr.mean(0), color=color, linewidth=1.2, label=agent if s_idx == 0 else None)
+                if len(series) > 1:
+                    half = _t_half(arr)
+                    ax.fill_between(
+                        x, arr.mean(0) - half, arr.mean(0) + half, color=color, alpha=0.15, linewidth=0
+                    )
+            if s_idx > 0:
+                ax.axvline(offset + 0.5, color="grey", linestyle="--", linewidth=0.8)
+            ax.text(
+                offset + max(n_max, 1) / 2,
+                1.01,
+                key[1],
+                transform=ax.get_xaxis_transform(),
+                ha="center",
+                fontsize=8,
+            )
+            offset += n_max
+        n_seeds = len(runs)
+        ax.set_title(f"{label} ({n_seeds} seed{'s' * (n_seeds > 1)})", fontsize=9, pad=14)
+        ax.set_xlabel("training episode (all stages in order)")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="best")
+    axes[0][0].set_ylabel("total reward per episode (dimensionless)")
+    fig.tight_layout(rect=(0, 0.04, 1, 1))
+    _caption(fig, (caption + "; " if caption else "") + "each agent's own reward, mean over seeds, 95 % band")
+    return fig
+
+
+def reward_agents(run_dirs: Sequence[Path], out: Path, **kwargs: Any) -> Path:
+    """:func:`reward_agents_figure` as ``reward_agents.png`` in ``out``."""
+    import matplotlib.pyplot as plt
+
+    fig = reward_agents_figure(run_dirs, **kwargs)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / "reward_agents.png"
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
 
 
 def final_reward_bars(
@@ -231,7 +330,8 @@ def final_reward_bars(
             ax.set_title(f"{short.get(role, role)}: {what}, {where}", fontsize=9)
             ax.grid(alpha=0.3, axis="y")
             ax.axhline(0, color="black", linewidth=0.6)
-    fig.tight_layout(rect=(0, 0.04, 1, 1))
+    fig.tight_layout(rect=(0, 0.04, 1, 0.95))
+    fig.suptitle("Mean and variance of the final total reward (paper Fig. 11)", fontsize=10)
     _caption(fig, (caption + "; " if caption else "") + "bars: mean over seeds, error bars: 95 % t interval")
     out.mkdir(parents=True, exist_ok=True)
     path = out / "final_reward_mean_variance.png"
@@ -279,18 +379,19 @@ def trajectories(run_dir: Path, out: Path, *, seed: int = 0) -> list[Path]:
         if not tracks:
             continue
         fig, ax = plt.subplots(figsize=(6, 5))
-        for k, (agent, pts) in enumerate(sorted(tracks.items())):
+        for agent, pts in sorted(tracks.items()):
             arr = np.asarray(pts)
-            ax.plot(arr[:, 1], arr[:, 0], color=f"C{k}", label=agent, linewidth=1.2)  # east right, north up
-            ax.plot(arr[0, 1], arr[0, 0], "o", color=f"C{k}", markersize=4)
-            ax.plot(arr[-1, 1], arr[-1, 0], "x", color=f"C{k}", markersize=6)
+            color = agent_color(agent, list(tracks))
+            ax.plot(arr[:, 1], arr[:, 0], color=color, label=agent, linewidth=1.2)  # east right, north up
+            ax.plot(arr[0, 1], arr[0, 0], "o", color=color, markersize=4)
+            ax.plot(arr[-1, 1], arr[-1, 0], "x", color=color, markersize=6)
             if agent in goals:
-                ax.plot(goals[agent][1], goals[agent][0], "*", color=f"C{k}", markersize=10)
+                ax.plot(goals[agent][1], goals[agent][0], "*", color=color, markersize=10)
         ax.set_xlabel("east (m)")
         ax.set_ylabel("north (m)")
         ax.set_aspect("equal", adjustable="datalim")
         marks = "o start, x end" + (", * goal" if goals else "")
-        ax.set_title(f"{stage.name}: {stage.env.label()} ({marks})", fontsize=9)
+        ax.set_title(f"{stage.name}: {stage.env.label()} ({marks}; paper Figs. 12-13)", fontsize=9)
         ax.legend(fontsize=7)
         ax.grid(alpha=0.3)
         fig.tight_layout()
@@ -327,7 +428,9 @@ def _expand(paths: Sequence[Path]) -> tuple[list[Path], list[str], list[str] | N
             labels.append(run_label(p))
             names.append(p.name)
         else:
-            raise FileNotFoundError(f"{p} is neither a training run (episodes.csv) nor a sweep (sweep.json)")
+            raise FileNotFoundError(
+                f"{p} is neither a training run (episodes.csv), a sweep (sweep.json) nor a DT run (dt.pt)"
+            )
     seeds = len(runs)
     caption = f"{', '.join(names)}: {seeds} run{'s' * (seeds != 1)}"
     return runs, labels, stages, caption
@@ -347,11 +450,21 @@ def make_figures(
     Raises:
         FileNotFoundError: No finished episodes in the given folders.
     """
+    dt_runs = [p for p in paths if (p / "dt.pt").is_file()]
+    written: list[Path] = []
+    for p in dt_runs:  # Figs. 14-17 of the offline stage
+        from hptvsim.offline.pipeline import figures_for_run
+
+        written += figures_for_run(p / "dt.pt", out if len(dt_runs) == 1 else out / p.name, run_dir=p)
+    paths = [p for p in paths if p not in dt_runs]
+    if not paths:
+        return written
     runs, labels, sweep_stages, caption = _expand(paths)
     if not runs:
         raise FileNotFoundError("no finished episodes in the given folders")
     chosen = list(stages) if stages is not None else sweep_stages
-    written = reward_curves(runs, out, labels=labels, stages=chosen, caption=caption)
+    written += reward_curves(runs, out, labels=labels, stages=chosen, caption=caption)
+    written.append(reward_agents(runs, out, labels=labels, stages=chosen, caption=caption))
     last_stage = chosen[-1] if chosen else None
     written.append(final_reward_bars(runs, out, labels=labels, stage=last_stage, caption=caption))
     if with_trajectories:

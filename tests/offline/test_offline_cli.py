@@ -88,6 +88,14 @@ def test_collect_train_evaluate_figures(tmp_path: Path) -> None:
     assert (run / "eval" / "eval.md").is_file()
     out = _ok(["dt", "figures", str(run), "--max-steps", "15"])
     assert "dt_trajectories.png" in out and (run / "figures" / "distance_smoothed.png").is_file()
+    # `hptvsim figures` draws Figs. 14-17 for a DT run too
+    out = _ok(["figures", str(run), "--out", str(tmp_path / "all")])
+    assert {Path(line).name for line in out.split()} == {
+        "dt_loss.png",
+        "dt_trajectories.png",
+        "distance_raw.png",
+        "distance_smoothed.png",
+    }
 
 
 def test_errors_are_messages(tmp_path: Path) -> None:

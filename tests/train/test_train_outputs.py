@@ -85,6 +85,7 @@ def test_figures_for_runs_with_two_algorithms(run_dir: Path, tmp_path: Path) -> 
     names = sorted(p.name for p in (tmp_path / "fig").glob("*.png"))
     assert names == [
         "final_reward_mean_variance.png",
+        "reward_agents.png",
         "reward_evader.png",
         "reward_pursuer.png",
         "trajectories_source.png",
@@ -148,3 +149,40 @@ def test_sweep_on_a_local_ray(tmp_path: Path) -> None:
     assert [r["status"] for r in results] == ["finished"] * 4
     res = CliRunner().invoke(main, ["figures", str(tmp_path / "out"), "--no-trajectories"])
     assert res.exit_code == 0, res.output
+
+
+def test_every_figure_of_a_tiny_sweep_with_one_colour_per_agent_and_series(tmp_path: Path) -> None:
+    from matplotlib.colors import to_hex
+
+    from hptvsim.train.figures import reward_agents_figure
+
+    spec = load_sweep(_sweep_file(tmp_path))
+    run_sweep(spec, tmp_path / "out", serial=True, progress=False)
+    res = CliRunner().invoke(main, ["figures", str(tmp_path / "out"), "--out", str(tmp_path / "fig")])
+    assert res.exit_code == 0, res.output
+    names = sorted(p.name for p in (tmp_path / "fig").glob("*.png"))
+    assert names == [
+        "final_reward_mean_variance.png",  # Fig. 11
+        "reward_agents.png",
+        "reward_evader.png",  # Figs. 8, 10
+        "reward_pursuer.png",  # Figs. 7, 9
+        "trajectories_source.png",  # Figs. 12-13
+        "trajectories_target.png",
+    ]
+    runs = sorted((tmp_path / "out").glob("*-seed*"))
+    fig = reward_agents_figure(runs)
+    try:
+        assert len(fig.axes) == 2  # one panel per setting
+        for ax in fig.axes:
+            agents = {
+                line.get_label(): to_hex(line.get_color()) for line in ax.lines if line.get_label()[0] != "_"
+            }
+            assert set(agents) == {"pursuer_0", "pursuer_1", "evader_0"}
+            assert len(set(agents.values())) == len(agents)  # every agent its own colour
+            assert ax.get_xlabel() and ax.get_title()
+        assert fig.axes[0].get_ylabel().endswith("(dimensionless)")
+        assert "95 % band" in fig.texts[-1].get_text()  # the caption line
+    finally:
+        import matplotlib.pyplot as plt
+
+        plt.close(fig)
