@@ -4,6 +4,10 @@ Each command imports what it needs when it runs, so ``hptvsim --help`` stays fas
 add their commands through a module listed in :data:`COMMAND_MODULES`: each such module
 defines ``register(main: click.Group, bench: click.Group) -> None`` and adds its commands to
 the top-level group and, for benchmarks, to ``hptvsim bench``.
+
+A user error (an unknown name, a missing file, a bad number) ends a command with one line,
+``Error: ...``, naming the bad value and the valid ones, never a traceback: each command turns
+the errors its inputs can cause into click errors.
 """
 
 from __future__ import annotations
@@ -60,14 +64,28 @@ def fmu_build(out_dir: Path | None, vehicle_types: tuple[str, ...]) -> None:
     from hptvsim._paths import checkout_dir
     from hptvsim.dynamics import VEHICLE_TYPES
     from hptvsim.fmu import fmu_dir
-    from hptvsim.fmu.build import build_fmu
+    from hptvsim.fmu.build import FmuBuildError, build_fmu
 
     if out_dir is None and checkout_dir() is None and not os.environ.get("HPTVSIM_FMU_DIR"):
         raise click.UsageError("this is an installed copy, not a checkout: give the output folder with --out")
+    for vt in vehicle_types:
+        _check_vehicle_type(vt)
     target = out_dir if out_dir is not None else fmu_dir()
     for vt in vehicle_types or tuple(VEHICLE_TYPES):
-        path = build_fmu(vt, target)
+        try:
+            path = build_fmu(vt, target)
+        except FmuBuildError as exc:
+            raise click.ClickException(str(exc)) from None
         click.echo(f"built {path}")
+
+
+def _check_vehicle_type(vehicle_type: str) -> None:
+    from hptvsim.dynamics import VEHICLE_TYPES
+
+    if vehicle_type not in VEHICLE_TYPES:
+        raise click.BadParameter(
+            f"unknown vehicle type {vehicle_type!r}; valid: {', '.join(VEHICLE_TYPES)}", param_hint="--type"
+        )
 
 
 @fmu.command("check")
@@ -87,6 +105,11 @@ def fmu_check(fmu_folder: Path | None) -> None:
     from hptvsim.fmu.build import check_fmu
 
     folder = fmu_folder if fmu_folder is not None else fmu_dir()
+    missing = [f"{ident}.fmu" for ident in FMU_NAMES.values() if not (folder / f"{ident}.fmu").is_file()]
+    if missing:
+        raise click.ClickException(
+            f"{folder} has no {', '.join(missing)}; build them with `hptvsim fmu build --out {folder}`"
+        )
     bad = False
     for vt, ident in FMU_NAMES.items():
         path = folder / f"{ident}.fmu"
@@ -124,6 +147,7 @@ def bench_dynamics_cmd(quick: bool, vehicle_type: str, as_json: bool) -> None:
     """µs per vehicle-step: FMPy high-level calls, the lean hot path, the compiled C floor."""
     from hptvsim.bench.dynamics import bench_dynamics
 
+    _check_vehicle_type(vehicle_type)
     emit(bench_dynamics(quick=quick, vehicle_type=vehicle_type), as_json)
 
 
@@ -139,7 +163,13 @@ def bench_dynamics_cmd(quick: bool, vehicle_type: str, as_json: bool) -> None:
     show_default=True,
     help="Folder for the plot.",
 )
-@click.option("--duration", type=float, default=120.0, show_default=True, help="Simulated seconds.")
+@click.option(
+    "--duration",
+    type=click.FloatRange(min=0.0, min_open=True),
+    default=120.0,
+    show_default=True,
+    help="Simulated seconds.",
+)
 @click.option("--no-episode", is_flag=True, help="Skip the pursuit-evasion episode.")
 def demo(out_dir: Path, duration: float, no_episode: bool) -> None:
     """The vehicles through their FMUs, then one pursuit episode with the default policies."""

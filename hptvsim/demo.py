@@ -2,17 +2,25 @@
 
 1. A work-class UUV runs a lawnmower pattern and a spherical UUV a figure of eight, both in a
    0.3 m/s north-easterly current, stepped at the paper's 0.25 s through the lean FMI path
-   (``trajectories.png``: tracks, north up and east right, and commanded versus achieved surge
-   speed and yaw rate).
+   (``trajectories.png``: each track on its own map, north up and east right, and commanded
+   versus achieved surge speed and yaw rate).
 2. One episode of the game on the target scenario on the FMU backend, every agent with its
    default policy (:func:`hptvsim.zoo.default_policy`: the shipped trained ones where there are
-   some) (``episode.png``: the tracks over the seabed, and the pursuer-evader distances).
+   some): its outcome and metrics are printed (:func:`episode_report`) and ``episode.png``
+   shows the tracks over the seabed and each pursuer's distance to the evader.
+
+Every vehicle is drawn in its colour of :mod:`hptvsim.palette`, as in the dashboard, the viser
+view and the recordings (the work-class UUV in pursuer_0's, the spherical one in evader_0's: the
+types the game gives them); the seabed uses the depth ramp of the 3-D views
+(:data:`hptvsim.viz.style.DEPTH_STOPS`).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Mapping
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
@@ -21,10 +29,34 @@ from hptvsim.cosim import FmuModel
 from hptvsim.dynamics import vehicle_parameters
 from hptvsim.fmu import fmu_path
 from hptvsim.fmu.build import DEFAULT_STEP
+from hptvsim.palette import agent_color
 
-__all__ = ["run_demo", "simulate_manoeuvre"]
+if TYPE_CHECKING:
+    from hptvsim.viz.episode import EpisodeResult
+    from hptvsim.world.scenario import World
+
+__all__ = [
+    "VEHICLE_COLORS",
+    "episode_figure",
+    "episode_report",
+    "plot_episode",
+    "run_demo",
+    "simulate_manoeuvre",
+    "trajectories_figure",
+]
 
 _CURRENT = (0.3 * math.cos(math.pi / 4), 0.3 * math.sin(math.pi / 4))  # m/s, {n}
+
+VEHICLE_COLORS: dict[str, str] = {
+    "work_class": agent_color("pursuer", 0),
+    "spherical": agent_color("evader", 0),
+}
+"""Colours of the manoeuvre demo's vehicles: those of the first pursuer and the first evader."""
+
+_OUTLINE = "#141414"  # dark edge drawn under every track, so any colour shows on any background
+_OBSTACLE = "#7a5c3a"  # obstacles at the operating depth (as the scenario maps)
+_LAND = "#d9c79a"  # seabed above the surface
+_GUIDE = "#555555"  # reference lines (capture distance, capture time)
 
 
 def _lawnmower(t: float, v_max: float, omega_max: float) -> tuple[float, float]:
@@ -73,88 +105,342 @@ def simulate_manoeuvre(vehicle_type: str, duration: float) -> dict[str, npt.NDAr
     return {name: log[:, i] for i, name in enumerate(names)}
 
 
-def plot_episode(out_dir: Path, *, scenario: str = "target", seed: int = 0, max_steps: int = 1200) -> Path:
-    """Play one episode with the default policies on the FMU backend; write ``episode.png``."""
+# --- the episode's report ---------------------------------------------------------------------
+
+
+def episode_report(result: EpisodeResult, collisions: Mapping[str, float] | None = None) -> list[str]:
+    """What ``hptvsim demo`` prints about an episode: its outcome and metrics, one fact a line.
+
+    Args:
+        result: The episode.
+        collisions: ``{agent: time of its first collision [s]}`` if known (from the frames);
+            otherwise the metrics' yes/no.
+
+    Returns:
+        Lines ``episode:``, ``policies:``, ``outcome:``, ``collisions:``, ``min distance:``,
+        ``steps:`` and ``returns:``.
+    """
+    st, summary = result.static, result.summary
+    m = summary.metrics
+    by_policy: dict[str, list[str]] = {}
+    for a in st.agents:
+        by_policy.setdefault(a.policy, []).append(a.name)
+    lines = [
+        f"episode: {st.scenario} ({st.task}), seed {st.seed}",
+        "policies: " + "; ".join(f"{', '.join(names)}: {p}" for p, names in by_policy.items()),
+    ]
+    pursuit = st.task == "pursuit"
+    if pursuit and m.captured and m.time_to_capture_s is not None:
+        lines.append(f"outcome: captured at {m.time_to_capture_s:.2f} s (step {m.time_to_capture_steps})")
+    elif pursuit:
+        lines.append(f"outcome: not captured ({summary.outcome} after {summary.sim_time:.2f} s)")
+    else:
+        reached = "" if m.success_rate is None else f", {m.success_rate:.0%} of the goals reached"
+        lines.append(f"outcome: {summary.outcome} after {summary.sim_time:.2f} s{reached}")
+    if collisions:
+        lines.append("collisions: " + ", ".join(f"{a} at {t:.2f} s" for a, t in collisions.items()))
+    else:
+        lines.append("collisions: " + ("yes" if m.collision else "none"))
+    target = f"pursuer to evader (capture within {st.capture_distance:g} m)" if pursuit else "to the goal"
+    if m.min_distance is not None:
+        lines.append(f"min distance: {m.min_distance:.2f} m, {target}")
+    else:
+        lines.append("min distance: none (no step taken)")
+    lines.append(
+        f"steps: {summary.steps} of at most {st.max_steps} (dt {st.dt:g} s: {summary.sim_time:.2f} s "
+        f"simulated in {summary.wall_time:.1f} s)"
+    )
+    lines.append("returns: " + ", ".join(f"{name} {m.returns[name]:.1f}" for name in st.agent_names))
+    return lines
+
+
+# --- figures ----------------------------------------------------------------------------------
+
+
+def _pyplot() -> Any:
     import matplotlib
 
-    matplotlib.use("Agg")
+    matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
 
-    from hptvsim.viz.episode import run_episode
-    from hptvsim.world.scenario import load_scenario
+    return plt
 
-    result = run_episode(scenario, {}, seed=seed, max_steps=max_steps, backend="fmu")
-    world = load_scenario(scenario).build_world()
-    traj = result.trajectories
-    fig, (ax_map, ax_d) = plt.subplots(1, 2, figsize=(13, 6), layout="constrained", width_ratios=(1, 1.3))
-    x0, x1, y0, y1 = world.obstacles.geometry.extent
-    ax_map.imshow(-world.heightmap.depth, origin="lower", extent=(y0, y1, x0, x1), cmap="Blues_r", alpha=0.8)
-    ax_map.contour(
-        world.obstacles.occupied.astype(float), levels=[0.5], colors="saddlebrown", origin="lower",
-        extent=(y0, y1, x0, x1),
-    )  # fmt: skip
-    for agent in traj.agents:
-        color = "tab:red" if agent.name.startswith("pursuer") else "tab:blue"
-        ax_map.plot(agent.y, agent.x, color=color, lw=1.2, label=agent.name)
-        ax_map.plot(agent.y[-1], agent.x[-1], marker="o", color=color)
-        if agent.name.startswith("pursuer"):
-            ax_d.plot(
-                traj.time, agent.distance, color=color, lw=1.0, alpha=0.8, label=f"{agent.name} to evader"
-            )
-    ax_map.set_xlabel("east y [m]")
-    ax_map.set_ylabel("north x [m]")
-    ax_map.set_aspect("equal")
-    ax_map.legend(loc="upper right", fontsize=8)
-    outcome = result.summary.outcome
-    ax_map.set_title(f"{scenario}: {outcome} after {result.summary.sim_time:.0f} s")
-    ax_d.axhline(25.0, color="k", ls="--", lw=0.8, label="target distance 25 m (capture)")
-    ax_d.set_xlabel("time [s]")
-    ax_d.set_ylabel("distance [m]")
-    ax_d.grid(alpha=0.3)
-    ax_d.legend(fontsize=8)
+
+def _outlined(width: float) -> list[Any]:
+    """Path effects drawing a line over a dark edge (visible on light and dark backgrounds)."""
+    from matplotlib import patheffects
+
+    return [patheffects.Stroke(linewidth=width + 1.3, foreground=_OUTLINE, alpha=0.8), patheffects.Normal()]
+
+
+def _seabed_cmap() -> Any:
+    """The depth ramp of the 3-D views (sand when shallow, dark blue when deep) for matplotlib."""
+    from matplotlib.colors import LinearSegmentedColormap
+
+    from hptvsim.viz.style import DEPTH_STOPS
+
+    return LinearSegmentedColormap.from_list(
+        "hptvsim-seabed", [(t, (r / 255.0, g / 255.0, b / 255.0)) for t, (r, g, b) in DEPTH_STOPS]
+    )
+
+
+def _draw_seabed(ax: Any, fig: Any, world: World) -> None:
+    """Shaded seabed depth (land in a land colour), obstacles filled and outlined, a depth bar."""
+    from matplotlib import cm
+    from matplotlib.colors import LightSource, Normalize, to_rgb
+
+    hm = world.heightmap
+    g = hm.geometry
+    x0, x1, y0, y1 = g.extent
+    sea = hm.depth >= 0.0
+    lo, hi = (float(hm.depth[sea].min()), float(hm.depth[sea].max())) if sea.any() else (0.0, 1.0)
+    if hi - lo < 1e-6:
+        lo, hi = lo - 1.0, hi + 1.0
+    cmap = _seabed_cmap()
+    gx, gy = np.gradient(hm.depth, g.resolution)
+    steep = float(np.percentile(np.hypot(gx, gy), 95))  # relief as strong on any slopes
+    rgb = LightSource(azdeg=315.0, altdeg=40.0).shade(
+        -np.clip(hm.depth, lo, hi),
+        cmap=cmap.reversed(),
+        norm=Normalize(vmin=-hi, vmax=-lo),
+        blend_mode="soft",
+        vert_exag=min(3.0, 0.3 / steep) if steep > 0.0 else 1.0,
+        dx=g.resolution,
+        dy=g.resolution,
+    )
+    rgb[~sea, :3] = to_rgb(_LAND)
+    ax.imshow(rgb, origin="lower", extent=(y0, y1, x0, x1), interpolation="bilinear")
+    occ = world.obstacles
+    if occ.occupied.any():
+        ox0, ox1, oy0, oy1 = occ.geometry.extent
+        overlay = np.zeros((*occ.occupied.shape, 4))
+        overlay[occ.occupied] = (*to_rgb(_OBSTACLE), 0.8)
+        ax.imshow(overlay, origin="lower", extent=(oy0, oy1, ox0, ox1), interpolation="nearest")
+        xc, yc = occ.geometry.centres()
+        ax.contour(yc, xc, occ.occupied.astype(float), levels=[0.5], colors=_OUTLINE, linewidths=0.8)
+    bar = fig.colorbar(cm.ScalarMappable(norm=Normalize(vmin=lo, vmax=hi), cmap=cmap), ax=ax, shrink=0.85)
+    bar.ax.invert_yaxis()  # deep at the bottom
+    bar.set_label("seabed depth [m] (obstacles: brown)")
+
+
+def _collision_times(frames: list[Any]) -> dict[str, float]:
+    """``{agent: simulated time [s] of its first collision}`` over an episode's frames."""
+    out: dict[str, float] = {}
+    for f in frames:
+        for a in f.agents:
+            if a.collision and a.name not in out:
+                out[a.name] = float(f.time)
+    return out
+
+
+def plot_episode(
+    out_dir: Path,
+    *,
+    scenario: str = "target",
+    seed: int = 0,
+    max_steps: int = 1200,
+    echo: Callable[[str], None] | None = print,
+) -> Path:
+    """Play one episode with the default policies on the FMU backend; report it; write ``episode.png``.
+
+    Args:
+        out_dir: Folder of the figure (created if needed).
+        scenario: Shipped scenario.
+        seed: Episode seed.
+        max_steps: Step limit.
+        echo: Receives the report's lines (:func:`episode_report`); None: silent.
+
+    Returns:
+        The figure's path.
+    """
+    from hptvsim.viz.episode import run_episode
+
+    frames: list[Any] = []
+    result = run_episode(scenario, {}, seed=seed, max_steps=max_steps, backend="fmu", on_frame=frames.append)
+    if echo is not None:
+        for line in episode_report(result, _collision_times(frames)):
+            echo(line)
+    fig = episode_figure(result)
     out_dir.mkdir(parents=True, exist_ok=True)
     path = out_dir / "episode.png"
     fig.savefig(path, dpi=100)
-    plt.close(fig)
+    _pyplot().close(fig)
     return path
+
+
+def episode_figure(result: EpisodeResult) -> Any:
+    """The figure of an episode of a shipped scenario: tracks over the seabed, distances in time.
+
+    Returns:
+        A matplotlib figure; its first axes is the map (one track per agent, in the agent's
+        colour), its second the distance plot (one line per pursuer, or per agent in goto).
+    """
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Circle
+
+    from hptvsim.world.scenario import load_scenario
+
+    plt = _pyplot()
+    st, m = result.static, result.summary.metrics
+    world = load_scenario(st.scenario).build_world()
+    traj = result.trajectories
+    pursuit = st.task == "pursuit"
+
+    (x_min, y_min), (lx, ly) = st.site.origin, st.site.size
+    x_max, y_max = x_min + lx, y_min + ly  # m
+    map_h = 5.0  # in, the map's height
+    map_w = map_h * (y_max - y_min) / (x_max - x_min) + 1.4  # in, with its depth bar
+    fig = plt.figure(figsize=(map_w + 6.8, map_h + 1.9), layout="constrained")
+    ax_map, ax_d = fig.subplots(1, 2, width_ratios=(map_w, 6.8))
+    _draw_seabed(ax_map, fig, world)
+    handles: list[Any] = []
+    for info, a in zip(st.agents, traj.agents, strict=True):
+        x, y = np.asarray(a.x), np.asarray(a.y)
+        (line,) = ax_map.plot(
+            y, x, color=info.color, lw=1.8, path_effects=_outlined(1.8), label=info.name, zorder=3
+        )
+        handles.append(line)
+        ax_map.plot(y[0], x[0], marker="s", ms=6, color=info.color, mec=_OUTLINE, ls="none", zorder=4)
+        ax_map.plot(y[-1], x[-1], marker="o", ms=8, color=info.color, mec=_OUTLINE, ls="none", zorder=4)
+        if info.role == "pursuer" or not pursuit:
+            ax_d.plot(traj.time, a.distance, color=info.color, lw=1.8, label=info.name)
+        if info.goal is not None:  # goto: the goal and the distance within which it counts
+            gx, gy = info.goal
+            ax_map.plot(gy, gx, marker="*", ms=14, color=info.color, mec=_OUTLINE, ls="none", zorder=4)
+            ax_map.add_patch(
+                Circle((gy, gx), info.goal_radius or 1.0, fill=False, ec=info.color, lw=1.2, ls="--")
+            )
+    ax_map.set_xlim(y_min, y_max)
+    ax_map.set_ylim(x_min, x_max)
+    ax_map.set_aspect("equal")
+    ax_map.set_xlabel("east y [m]")
+    ax_map.set_ylabel("north x [m]")
+    ax_map.set_title("tracks over the seabed (north up)", fontsize=10)
+    handles += [
+        Line2D([], [], marker="s", color="0.6", mec=_OUTLINE, ls="none", label="start"),
+        Line2D([], [], marker="o", color="0.6", mec=_OUTLINE, ls="none", ms=8, label="end"),
+    ]
+    if pursuit:
+        ax_d.axhline(
+            st.capture_distance, color=_GUIDE, ls="--", lw=1.0, label=f"capture ({st.capture_distance:g} m)"
+        )
+        if m.captured and m.time_to_capture_s is not None:
+            ax_d.axvline(m.time_to_capture_s, color=_GUIDE, ls=":", lw=1.0, label="captured")
+    ax_d.set_xlabel("time [s]")
+    ax_d.set_ylabel("distance to the evader [m]" if pursuit else "distance to the goal [m]")
+    ax_d.set_title(
+        "each pursuer's distance to the evader" if pursuit else "each agent's distance to its goal",
+        fontsize=10,
+    )
+    ax_d.set_xlim(0.0, 1.03 * max(float(traj.time[-1]), st.dt))  # a capture line at the end shows
+    ax_d.set_ylim(bottom=0.0)
+    ax_d.grid(alpha=0.3)
+    ax_d.legend(fontsize=8, loc="upper right")
+    fig.legend(handles=handles, loc="outside lower center", ncols=len(handles), fontsize=9, frameon=False)
+    if pursuit and m.captured and m.time_to_capture_s is not None:
+        outcome = f"captured at {m.time_to_capture_s:.2f} s"
+    else:
+        outcome = f"{result.summary.outcome} after {result.summary.sim_time:.2f} s"
+    policies = " vs ".join(dict.fromkeys(a.policy for a in st.agents))
+    fig.suptitle(f"{st.scenario}, seed {st.seed}, {policies}: {outcome}", fontsize=11)
+    return fig
+
+
+def _padded(lo: float, hi: float, pad: float = 0.08, least: float = 2.0) -> tuple[float, float]:
+    """``(lo, hi)`` widened by ``pad`` of its span on each side, and to at least ``least`` [m]."""
+    mid, half = 0.5 * (lo + hi), max(0.5 * (hi - lo) * (1.0 + 2.0 * pad), 0.5 * least)
+    return mid - half, mid + half
 
 
 def run_demo(out_dir: Path, *, duration: float = 120.0) -> Path:
     """Run both manoeuvres and write ``trajectories.png`` into ``out_dir``; returns its path."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     runs = {vt: simulate_manoeuvre(vt, duration) for vt in ("work_class", "spherical")}
-    fig = plt.figure(figsize=(13, 7), layout="constrained")
-    grid = fig.add_gridspec(2, 3)
-    ax_map = fig.add_subplot(grid[:, 0:2])
-    colors = {"work_class": "tab:blue", "spherical": "tab:orange"}
-    labels = {"work_class": "work-class UUV (lawnmower)", "spherical": "spherical UUV (figure of eight)"}
-    for vt, run in runs.items():
-        ax_map.plot(run["y"], run["x"], color=colors[vt], label=labels[vt])
-        ax_map.plot(run["y"][-1], run["x"][-1], marker="o", color=colors[vt])
-    ax_map.set_xlabel("east y [m]")
-    ax_map.set_ylabel("north x [m]")
-    ax_map.set_aspect("equal")
-    ax_map.grid(alpha=0.3)
-    ax_map.set_title(f"Tracks over {duration:g} s in a 0.3 m/s NE current")
-    ax_map.legend(loc="best")
-    ax_u = fig.add_subplot(grid[0, 2])
-    ax_r = fig.add_subplot(grid[1, 2])
-    for vt, run in runs.items():
-        ax_u.plot(run["t"], run["u"], color=colors[vt])
-        ax_u.plot(run["t"][1:], run["v_cmd"][1:], color=colors[vt], ls="--", lw=0.8)
-        ax_r.plot(run["t"], run["r"], color=colors[vt])
-        ax_r.plot(run["t"][1:], run["omega_cmd"][1:], color=colors[vt], ls="--", lw=0.8)
-    ax_u.set_ylabel("surge u [m/s] (dashed: command)")
-    ax_r.set_ylabel("yaw rate r [rad/s] (dashed: command)")
-    ax_r.set_xlabel("time [s]")
-    for ax in (ax_u, ax_r):
-        ax.grid(alpha=0.3)
+    fig = trajectories_figure(runs, duration)
     out_dir.mkdir(parents=True, exist_ok=True)
     path = out_dir / "trajectories.png"
     fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _pyplot().close(fig)
     return path
+
+
+def trajectories_figure(runs: Mapping[str, Mapping[str, npt.NDArray[np.float64]]], duration: float) -> Any:
+    """The figure of the manoeuvres: a map per vehicle, surge speed and yaw rate in time.
+
+    Each track has its own map panel, sized to the track's extent (a lawnmower is long and
+    narrow, a figure of eight small), so neither leaves a blank gap or shrinks to a blob.
+
+    Args:
+        runs: ``{vehicle type: simulate_manoeuvre(vehicle type, duration)}``.
+        duration: Simulated time [s].
+
+    Returns:
+        A matplotlib figure: one map axes per vehicle, then the speed and yaw-rate axes.
+    """
+    from matplotlib.colors import to_hex
+    from matplotlib.lines import Line2D
+
+    plt = _pyplot()
+    titles = {"work_class": "work-class UUV: lawnmower", "spherical": "spherical UUV: figure of eight"}
+    map_h = 5.0  # in, height of the maps
+    limits: dict[str, tuple[tuple[float, float], tuple[float, float]]] = {}
+    widths: list[float] = []
+    for vt, run in runs.items():
+        north = _padded(float(run["x"].min()), float(run["x"].max()))
+        east = _padded(float(run["y"].min()), float(run["y"].max()))
+        limits[vt] = (north, east)
+        ratio = (east[1] - east[0]) / (north[1] - north[0])
+        widths.append(map_h * min(max(ratio, 0.45), 1.3) + 0.7)  # in, with the y axis' labels
+    fig = plt.figure(figsize=(sum(widths) + 5.6, map_h + 1.6), layout="constrained")
+    grid = fig.add_gridspec(2, 3, width_ratios=(*widths, 5.6))
+    water = to_hex(_seabed_cmap()(0.55))
+    for col, (vt, run) in enumerate(runs.items()):
+        ax = fig.add_subplot(grid[:, col])
+        color = VEHICLE_COLORS[vt]
+        ax.set_facecolor(water)
+        ax.plot(run["y"], run["x"], color=color, lw=1.8, path_effects=_outlined(1.8), zorder=3)
+        ax.plot(run["y"][0], run["x"][0], marker="s", ms=6, color=color, mec=_OUTLINE, ls="none", zorder=4)
+        ax.plot(run["y"][-1], run["x"][-1], marker="o", ms=8, color=color, mec=_OUTLINE, ls="none", zorder=4)
+        (n0, n1), (e0, e1) = limits[vt]
+        ax.update_datalim([(e0, n0), (e1, n1)])  # the padded extent, then equal aspect: the
+        ax.autoscale_view(tight=True)  # panel's box stays and the limits grow to fill it
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_xlabel("east y [m]")
+        ax.set_ylabel("north x [m]")
+        ax.set_title(titles[vt], fontsize=10)
+        ax.grid(color="white", alpha=0.25)
+    ax_u = fig.add_subplot(grid[0, 2])
+    ax_r = fig.add_subplot(grid[1, 2], sharex=ax_u)
+    for vt, run in runs.items():
+        color = VEHICLE_COLORS[vt]
+        ax_u.plot(run["t"], run["u"], color=color, lw=1.5, path_effects=_outlined(1.5))
+        ax_u.plot(run["t"][1:], run["v_cmd"][1:], color=color, ls="--", lw=1.0, path_effects=_outlined(1.0))
+        ax_r.plot(run["t"], run["r"], color=color, lw=1.5, path_effects=_outlined(1.5))
+        ax_r.plot(
+            run["t"][1:], run["omega_cmd"][1:], color=color, ls="--", lw=1.0, path_effects=_outlined(1.0)
+        )
+    ax_u.set_ylabel("surge speed u [m/s]")
+    ax_r.set_ylabel("yaw rate r [rad/s]")
+    ax_r.set_xlabel("time [s]")
+    ax_u.tick_params(labelbottom=False)
+    for ax in (ax_u, ax_r):
+        ax.grid(alpha=0.3)
+        ax.set_xlim(0.0, duration)
+    fig.legend(
+        handles=[
+            *(Line2D([], [], color=VEHICLE_COLORS[vt], lw=2, label=titles[vt]) for vt in runs),
+            Line2D([], [], color="0.3", lw=1.5, label="speeds: achieved"),
+            Line2D([], [], color="0.3", lw=1.0, ls="--", label="commanded"),
+            Line2D([], [], marker="s", color="0.6", mec=_OUTLINE, ls="none", label="start"),
+            Line2D([], [], marker="o", color="0.6", mec=_OUTLINE, ls="none", ms=8, label="end"),
+        ],
+        loc="outside lower center",
+        ncols=6,
+        fontsize=9,
+        frameon=False,
+    )
+    fig.suptitle(
+        f"Both vehicles through their FMUs: {duration:g} s in a 0.3 m/s north-easterly current "
+        f"(steps of {DEFAULT_STEP:g} s)",
+        fontsize=11,
+    )
+    return fig

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import importlib
 import tomllib
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -32,6 +32,8 @@ from hptvsim.envs.policies import POLICY_NAMES, Limits, Policy, make_policy
 __all__ = [
     "PolicyInfo",
     "PolicyLoader",
+    "UnknownPolicyError",
+    "check_policy_spec",
     "default_policy",
     "list_policies",
     "load_policy",
@@ -155,6 +157,56 @@ def _role(core: GameCore, agent: str) -> str:
     return "pursuer" if core.pursuer[core.agents.index(agent)] else "evader"
 
 
+class UnknownPolicyError(ValueError):
+    """A policy spec names no policy of the zoo (the message lists the valid names)."""
+
+
+def check_policy_spec(spec: str, role: str, *, allow_paths: bool = False, agent: str | None = None) -> None:
+    """Check, without loading anything, that ``spec`` names a policy that drives ``role``.
+
+    The same rule as the service's (:func:`hptvsim.catalog.check_policy`): a scripted or shipped
+    policy drives the roles it lists; a checkpoint file (``<kind>:<path>``, only with
+    ``allow_paths``) must exist and is not checked further.
+
+    Args:
+        spec: What :func:`load_policy` takes.
+        role: ``"pursuer"`` or ``"evader"``.
+        allow_paths: Accept ``<kind>:<path>`` checkpoint files.
+        agent: The agent's name, for the message.
+
+    Raises:
+        UnknownPolicyError: Not a name of the zoo, nor (with ``allow_paths``) a checkpoint spec;
+            the message lists the policies that drive ``role``.
+        ValueError: A policy for another role, a path while paths are not allowed, or a
+            checkpoint file that does not exist.
+    """
+    infos = list_policies()
+    valid = [p.name for p in infos if role in p.roles]
+    who = f"{agent} ({'an' if role == 'evader' else 'a'} {role})" if agent else f"a {role}"
+    name = spec.removeprefix("scripted:")
+    info = next((p for p in infos if p.name == spec), None)
+    if info is None and name in POLICY_NAMES:
+        info = next(p for p in infos if p.name == f"scripted:{name}")
+    if info is not None:
+        if role not in info.roles:
+            raise ValueError(
+                f"policy {spec!r} drives {', '.join(info.roles)}, not {who}; valid: {', '.join(valid)}"
+            )
+        return
+    kind, sep, path = spec.partition(":")
+    if sep and kind in _LOADER_MODULES:
+        if not allow_paths:
+            raise ValueError(
+                f"policy {spec!r} names a checkpoint file, which is not allowed here; "
+                f"valid: {', '.join(valid)}"
+            )
+        if not Path(path).is_file():
+            raise ValueError(f"policy file not found: {path} (policy {spec!r})")
+        return
+    files = f", or <kind>:<checkpoint> with kind in {', '.join(_LOADER_MODULES)}" if allow_paths else ""
+    raise UnknownPolicyError(f"unknown policy {spec!r}; valid for {who}: {', '.join(valid)}{files}")
+
+
 def load_policy(
     spec: str, core: GameCore, agent: str, *, seed: int | None = None, allow_paths: bool = False
 ) -> Policy:
@@ -171,11 +223,13 @@ def load_policy(
             service and the live view name shipped policies only.
 
     Raises:
-        ValueError: Unknown name or kind, a path while paths are not allowed, or a policy made
-            for another role (the message lists the valid names).
+        UnknownPolicyError: Unknown name or kind (the message lists the valid names).
+        ValueError: Unknown agent, a path while paths are not allowed, a missing checkpoint
+            file, or a policy made for another role (:func:`check_policy_spec`).
     """
     if agent not in core.agents:
         raise ValueError(f"unknown agent {agent!r}; agents: {', '.join(core.agents)}")
+    check_policy_spec(spec, _role(core, agent), allow_paths=allow_paths, agent=agent)
     name = spec.removeprefix("scripted:")
     if name in POLICY_NAMES:
         i = core.agents.index(agent)
@@ -191,24 +245,8 @@ def load_policy(
     known = {p.name: p for p in list_policies()}
     if spec in known:
         info = known[spec]
-        role = _role(core, agent)
-        if role not in info.roles:
-            raise ValueError(f"policy {spec!r} drives {', '.join(info.roles)}; {agent} is a {role}")
         file = info.files.get(agent, info.path)
         assert file is not None
         return _loader(info.kind)(file, core, agent)
-    kind, sep, path = spec.partition(":")
-    valid: Sequence[str] = [p.name for p in known.values()]
-    if sep and kind in _LOADER_MODULES and not allow_paths:
-        raise ValueError(
-            f"policy {spec!r} names a checkpoint file, which is not allowed here; valid: {', '.join(valid)}"
-        )
-    if sep and kind in _LOADER_MODULES:
-        p = Path(path)
-        if not p.is_file():
-            raise ValueError(f"policy file not found: {p}")
-        return _loader(kind)(p, core, agent)
-    raise ValueError(
-        f"unknown policy {spec!r}; valid: {', '.join(valid)}, or <kind>:<checkpoint> with kind in "
-        f"{', '.join(_LOADER_MODULES)}"
-    )
+    kind, _, path = spec.partition(":")
+    return _loader(kind)(Path(path), core, agent)

@@ -40,10 +40,13 @@ def register(main: click.Group, bench: click.Group) -> None:
         import numpy as np
         from tqdm import tqdm
 
-        from hptvsim.cosim.graph import load_graph
+        from hptvsim.cosim.graph import GraphError, load_graph
         from hptvsim.cosim.orchestrator import Orchestrator
 
-        graph = load_graph(graph_file)
+        try:
+            graph = load_graph(graph_file)
+        except GraphError as exc:
+            raise click.ClickException(str(exc)) from None
         steps = round(stop_time / graph.step_size)
         if steps < 1 or abs(steps * graph.step_size - stop_time) > 1e-9 * max(1.0, stop_time):
             raise click.BadParameter(
@@ -51,15 +54,26 @@ def register(main: click.Group, bench: click.Group) -> None:
                 param_hint="--stop-time",
             )
         target = out_file if out_file is not None else graph_file.with_suffix(".csv")
-        with Orchestrator(graph) as orch:
-            for item in settings:
-                name, eq, value = item.partition("=")
-                if not eq:
-                    raise click.BadParameter(f"{item!r} is not INPUT=VALUE", param_hint="--set")
+        held: list[tuple[str, float]] = []
+        for item in settings:
+            name, eq, value = item.partition("=")
+            if not eq:
+                raise click.BadParameter(f"{item!r} is not INPUT=VALUE", param_hint="--set")
+            try:
+                held.append((name.strip(), float(value)))
+            except ValueError:
+                raise click.BadParameter(f"{item!r}: {value!r} is not a number", param_hint="--set") from None
+        try:
+            orch = Orchestrator(graph)
+        except GraphError as exc:
+            raise click.ClickException(str(exc)) from None
+        with orch:
+            for name, number in held:
                 try:
-                    orch.set_input(name.strip(), float(value))
-                except (KeyError, ValueError) as exc:
-                    raise click.BadParameter(str(exc).strip("\"'"), param_hint="--set") from None
+                    orch.set_input(name, number)
+                except (KeyError, ValueError) as exc:  # str() of a KeyError is the repr of its message
+                    message = str(exc.args[0]) if exc.args else repr(exc)
+                    raise click.BadParameter(message, param_hint="--set") from None
             rows = np.empty((steps + 1, 1 + len(orch.outputs)))
             rows[0, 0] = 0.0
             rows[0, 1:] = orch.outputs
@@ -76,7 +90,7 @@ def register(main: click.Group, bench: click.Group) -> None:
     @click.option("--quick", is_flag=True, help="About a second instead of several.")
     @click.option(
         "--h-max",
-        type=float,
+        type=click.FloatRange(min=0.0, min_open=True),
         default=0.05,
         show_default=True,
         help="Largest internal RK4 step [s] for every row (the FMUs default to 0.01).",

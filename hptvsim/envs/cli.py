@@ -18,5 +18,10 @@ def register(main: click.Group, bench: click.Group) -> None:
         """env-steps/s of the 3-vs-1 game: FMU backend, batched B = 1, 64, 1024, mpe2 and VMAS."""
         from hptvsim.bench.env import bench_env
         from hptvsim.cli import emit
+        from hptvsim.world.scenario import ScenarioError, load_scenario
 
+        try:
+            load_scenario(scenario)
+        except ScenarioError as exc:
+            raise click.BadParameter(str(exc), param_hint="--scenario") from None
         emit(bench_env(quick=quick, scenario=scenario), as_json)

@@ -1,8 +1,9 @@
 """``render_mode="rgb_array"``: a top-down map for quick looks (north up, east right).
 
 The background shades seabed depth (darker is deeper) and paints obstacles at the operating
-depth; vehicles are discs with a heading line (pursuers red, evaders blue), with their trails
-and sonar fans (beams to their measured ranges). Drawn with Pillow: a few milliseconds a frame.
+depth; vehicles are discs with a heading line, each in its colour of :mod:`hptvsim.palette` (the
+same as in every other view), with their trails and sonar fans (beams to their measured ranges).
+Drawn with Pillow: a few milliseconds a frame.
 """
 
 from __future__ import annotations
@@ -15,12 +16,12 @@ import numpy as np
 import numpy.typing as npt
 from PIL import Image, ImageDraw
 
+from hptvsim.palette import agent_rgb
+
 __all__ = ["TopDownRenderer"]
 
 F64 = npt.NDArray[np.float64]
 
-_PURSUER = (214, 39, 40)
-_EVADER = (31, 119, 180)
 _GOAL = (44, 160, 44)
 _OBSTACLE = (110, 84, 60)
 
@@ -63,6 +64,11 @@ class TopDownRenderer:
         scale = width / ly  # east is horizontal
         self.frame = _Frame(width=width, height=max(1, round(lx * scale)), scale=scale, site=site)
         self.pursuer = np.asarray(pursuer, dtype=bool)
+        n_pursuers = np.cumsum(self.pursuer) - self.pursuer  # pursuers before each agent
+        self.colors = [
+            agent_rgb("pursuer", int(n_pursuers[i])) if p else agent_rgb("evader", i - int(n_pursuers[i]))
+            for i, p in enumerate(self.pursuer)
+        ]  # each agent's (r, g, b), numbered within its role in agent order
         self.beam_angles = np.asarray(beam_angles, dtype=np.float64)
         self.trails: list[deque[tuple[float, float]]] = [deque(maxlen=trail) for _ in self.pursuer]
         self.background = self._background(depth, occupied, extent)
@@ -137,7 +143,7 @@ class TopDownRenderer:
                 draw.line([(cx - 6, cy), (cx + 6, cy)], fill=_GOAL, width=2)
                 draw.line([(cx, cy - 6), (cx, cy + 6)], fill=_GOAL, width=2)
         for i in range(n):
-            color = _PURSUER if self.pursuer[i] else _EVADER
+            color = self.colors[i]
             trail = [self._px(x, y) for x, y in self.trails[i]]
             if len(trail) > 1:
                 draw.line(trail, fill=color, width=1)

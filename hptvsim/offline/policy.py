@@ -273,7 +273,9 @@ def load_policy_file(path: Path) -> dict[str, Any]:
     try:
         payload: dict[str, Any] = torch.load(Path(path), map_location="cpu", weights_only=True)
     except Exception as exc:
-        raise ValueError(f"{path} is not a readable DT policy file: {exc}") from None
+        first = next((line for line in str(exc).splitlines() if line.strip()), type(exc).__name__)
+        reason = first if len(first) <= 160 else first.split(". ")[0]  # torch explains at length
+        raise ValueError(f"{path} is not a readable DT policy file: {reason}") from None
     if not isinstance(payload, dict) or payload.get("format") != POLICY_FORMAT:
         raise ValueError(f"{path} is not a DT policy file (written by `hptvsim dt train`)")
     return payload

@@ -148,7 +148,9 @@ def serve(
     "--api", "api_url", default="http://127.0.0.1:8000", show_default=True, help="The service to follow."
 )
 @click.option("--host", default="127.0.0.1", show_default=True, help="Interface the live view binds.")
-@click.option("--port", type=int, default=8080, show_default=True, help="Live view port.")
+@click.option(
+    "--port", type=click.IntRange(0, 65535), default=8080, show_default=True, help="Live view port."
+)
 @click.option(
     "--api-key", envvar="HPTVSIM_API_KEY", default=None, help="The service's API key (HPTVSIM_API_KEY)."
 )
@@ -204,15 +206,28 @@ def register(main: click.Group, bench: click.Group) -> None:
     @click.option("--quick", is_flag=True, help="Seconds instead of a minute.")
     @click.option("--url", default=None, help="Measure a running service (default: start one).")
     @click.option(
-        "--workers", type=int, default=2, show_default=True, help="Workers of the service it starts."
+        "--workers",
+        type=click.IntRange(min=1),
+        default=2,
+        show_default=True,
+        help="Workers of the service it starts.",
     )
     @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of tables.")
     def bench_command(quick: bool, url: str | None, workers: int, as_json: bool) -> None:
         """What the service costs: RemoteEnv steps and API episode runs against in-process floors."""
         import json
 
+        import httpx
+
         from hptvsim.service.bench import bench_service
 
+        if url is not None:
+            try:
+                httpx.get(f"{url.rstrip('/')}/healthz", timeout=10.0).raise_for_status()
+            except (httpx.HTTPError, httpx.InvalidURL) as exc:
+                raise click.BadParameter(
+                    f"no hptvsim service answers at {url} ({exc})", param_hint="--url"
+                ) from None
         results = bench_service(url=url, quick=quick, workers=workers)
         if as_json:
             click.echo(json.dumps([r.as_dict() for r in results], indent=2))

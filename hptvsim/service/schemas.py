@@ -189,6 +189,9 @@ class ScenarioOut(BaseModel):
     site_size: tuple[float, float]
     agents: list[str]
     roles: dict[str, str]
+    colors: dict[str, str] = Field(
+        description="each agent's display colour `#rrggbb` (hptvsim.palette: the same in every view)"
+    )
     max_steps: int
     dt: float
 

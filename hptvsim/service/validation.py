@@ -72,7 +72,9 @@ def shipped_scenario(name: str) -> Any:
 
 
 def scenario_summary(scenario: Any) -> dict[str, Any]:
-    """What the scenario list shows about a scenario."""
+    """What the scenario list shows about a scenario (with each agent's display colour)."""
+    from hptvsim.palette import agent_colors
+
     agents = scenario.agents
     return {
         "name": scenario.name,
@@ -81,6 +83,7 @@ def scenario_summary(scenario: Any) -> dict[str, Any]:
         "site_size": (float(scenario.site.size[0]), float(scenario.site.size[1])),
         "agents": [a.name for a in agents],
         "roles": {a.name: a.role for a in agents},
+        "colors": agent_colors((a.name, a.role) for a in agents),
         "max_steps": int(scenario.simulation.max_steps),
         "dt": float(scenario.simulation.dt),
     }

@@ -82,11 +82,12 @@ def register(main: click.Group, bench: click.Group) -> None:
         """Train MAISAC or IPPO through a curriculum (CONFIG: a file or a shipped name: quick, paper, toy).
 
         Writes CSV and TensorBoard logs, checkpoints every `checkpoint_every` env steps and each
-        stage's models (SB3 zip and .pth). After a kill or Ctrl-C, run the same command with
-        --resume to go on from the last checkpoint.
+        stage's models (SB3 zip and .pth). Every stage is checked before the first step. After a
+        kill or Ctrl-C, run the same command with --resume to go on from the last checkpoint; a
+        CONFIG (or --set) that corrects stages not started yet is taken, one that changes what is
+        trained already is refused.
         """
         from hptvsim.train.config import ConfigError, load_config
-        from hptvsim.train.trainer import TrainingInterrupted, load_run_config, train
 
         sets = parse_overrides(overrides)
         if seed is not None:
@@ -97,21 +98,27 @@ def register(main: click.Group, bench: click.Group) -> None:
             if config is None:
                 if not (resume and out_dir is not None):
                     raise click.UsageError("give a CONFIG (or --resume --out RUN_DIR)")
-                cfg = load_run_config(out_dir)
+                if not (out_dir / "config.toml").is_file():
+                    raise click.ClickException(
+                        f"--resume: {out_dir} holds no run (no config.toml); start it with a CONFIG"
+                    )
+                cfg = load_config(out_dir / "config.toml", sets)  # --set corrects the run's own config
             else:
                 cfg = load_config(config, sets)
         except ConfigError as exc:
             raise click.ClickException(str(exc)) from None
         run_dir = out_dir if out_dir is not None else default_run_dir(cfg.name, cfg.algo, cfg.seed)
-        if resume and config is not None and (run_dir / "config.toml").is_file():
-            saved = load_run_config(run_dir)
-            if saved != cfg:
-                click.echo(
-                    f"note: resuming with the run's own {run_dir / 'config.toml'}, not {config}", err=True
-                )
+        from hptvsim.train.trainer import TrainingInterrupted, train  # torch: after the config is read
+
         try:
             result = train(
-                cfg, run_dir, resume=resume, progress=not no_progress, tensorboard=not no_tensorboard
+                cfg,
+                run_dir,
+                resume=resume,
+                progress=not no_progress,
+                tensorboard=not no_tensorboard,
+                update_config=resume and (config is not None or bool(sets)),
+                log=lambda line: click.echo(line, err=True),
             )
         except TrainingInterrupted as exc:
             click.echo(str(exc), err=True)
@@ -149,7 +156,13 @@ def register(main: click.Group, bench: click.Group) -> None:
     @click.option(
         "--agent", "agent_specs", multiple=True, metavar="NAME=SPEC", help="Policy spec of one agent."
     )
-    @click.option("--episodes", type=int, default=100, show_default=True, help="Episodes per policy set.")
+    @click.option(
+        "--episodes",
+        type=click.IntRange(min=1),
+        default=100,
+        show_default=True,
+        help="Episodes per policy set.",
+    )
     @click.option(
         "--seed", type=int, default=0, show_default=True, help="Picks the fixed list of episode seeds."
     )
@@ -190,6 +203,7 @@ def register(main: click.Group, bench: click.Group) -> None:
         """
         import json
 
+        from hptvsim.train.config import ConfigError, check_env_spec
         from hptvsim.train.envs import EnvSpec, make_env_factory
         from hptvsim.train.evaluate import across_seeds, evaluate, markdown_table, policies_from_specs
         from hptvsim.train.trainer import load_run_config
@@ -205,9 +219,17 @@ def register(main: click.Group, bench: click.Group) -> None:
                 raise click.BadParameter(f"expected NAME=SPEC, got {item!r}", param_hint="--agent")
             over[agent_name] = agent_spec
         env_spec = _parse_env(env_text, parse_overrides(env_options)) if env_text else None
+        if env_spec is not None:
+            try:
+                check_env_spec(env_spec, f"--env {env_spec.label()}")
+            except ConfigError as exc:
+                raise click.ClickException(str(exc)) from None
         jobs: list[tuple[str, EnvSpec, str, dict[str, str]]] = []
         for run in run_dirs:
-            cfg = load_run_config(run)
+            try:
+                cfg = load_run_config(run)
+            except (FileNotFoundError, ConfigError) as exc:
+                raise click.ClickException(str(exc)) from None
             names = [s.name for s in cfg.stages]
             if stage is not None and stage not in names:
                 raise click.BadParameter(f"{run} has stages {', '.join(names)}", param_hint="--stage")
@@ -235,13 +257,15 @@ def register(main: click.Group, bench: click.Group) -> None:
             try:
                 res = evaluate(
                     make_env_factory(spec),
-                    policies_from_specs(default, run_over),
+                    policies_from_specs(default, run_over, required=tuple(over)),
                     episodes=episodes,
                     seed=seed,
                     label=name,
                     progress=True,
                 )
-            except (FileNotFoundError, ValueError, KeyError, RuntimeError) as exc:
+            except KeyError as exc:  # str() of a KeyError is the repr of its message
+                raise click.ClickException(str(exc.args[0]) if exc.args else repr(exc)) from None
+            except (FileNotFoundError, ValueError, RuntimeError) as exc:
                 raise click.ClickException(str(exc)) from None
             results.append(res)
         rows = [(r.label, r.summary) for r in results]

@@ -41,7 +41,7 @@ from types import MappingProxyType
 from typing import Any, Literal, TypeVar, get_args, get_origin
 
 from hptvsim._paths import shipped_dir
-from hptvsim.train.envs import EnvSpec
+from hptvsim.train.envs import EnvSpec, env_kinds, env_options
 
 __all__ = [
     "Carry",
@@ -51,6 +51,8 @@ __all__ = [
     "StageConfig",
     "TrainConfig",
     "apply_overrides",
+    "check_env_spec",
+    "check_value",
     "config_dir",
     "config_to_dict",
     "dump_toml",
@@ -304,6 +306,8 @@ def _type_name(tp: Any) -> str:
         return " or ".join(_type_name(a) for a in get_args(tp))
     if origin is tuple:
         return f"list of {_type_name(get_args(tp)[0])}"
+    if origin in (Mapping, dict) or tp is Mapping:
+        return "a table"
     if tp is type(None):
         return "nothing"
     return getattr(tp, "__name__", str(tp))
@@ -329,6 +333,8 @@ def _convert(value: Any, tp: Any, where: str) -> Any:
                 return _convert(value, arg, where)
             except ConfigError as exc:
                 errors.append(str(exc))
+        if len(errors) == 1:  # X | None: TOML has no None, so say what X needs
+            raise ConfigError(errors[0])
         raise ConfigError(f"{where}: expected {_type_name(tp)}, got {value!r}")
     if origin is tuple:
         if isinstance(value, str | bytes) or not isinstance(value, Sequence):
@@ -364,6 +370,67 @@ def _convert(value: Any, tp: Any, where: str) -> Any:
             raise ConfigError(f"{where}: expected a string, got {value!r}")
         return value
     raise ConfigError(f"{where}: unsupported field type {tp!r}")  # pragma: no cover - a bug in this module
+
+
+def _checkable(tp: Any) -> bool:
+    """Whether :func:`_convert` understands the annotation ``tp`` (config values, not classes)."""
+    origin = get_origin(tp)
+    if tp is Any or tp in (int, float, bool, str, type(None)) or origin is Literal:
+        return True
+    if origin in (types.UnionType, typing.Union):
+        return all(_checkable(a) for a in get_args(tp))
+    if origin is tuple:
+        args = get_args(tp)
+        return len(args) == 2 and args[1] is Ellipsis and _checkable(args[0])
+    if origin in (Mapping, dict):
+        args = get_args(tp)
+        return not args or (args[0] is str and _checkable(args[1]))
+    return False
+
+
+def check_value(value: Any, tp: Any, where: str) -> None:
+    """Check ``value`` against the type annotation ``tp`` the way config files are checked.
+
+    Annotations of numbers, strings, booleans, literals, lists, tables and unions of them are
+    checked (an integer is a number, a number is not an integer); others are not.
+
+    Raises:
+        ConfigError: ``value`` does not fit; the message names ``where`` and what was expected.
+    """
+    if _checkable(tp):
+        _convert(value, tp, where)
+
+
+def check_env_spec(spec: EnvSpec, where: str) -> None:
+    """Check an env table's kind, option names and option types, without building the env.
+
+    Args:
+        spec: The env spec (a stage's ``env`` table, or ``--env`` and ``--env-option``).
+        where: What the message starts with (``"stage 'target'"``).
+
+    Raises:
+        ConfigError: An unknown kind or option (the message lists the valid ones), or an option
+            value of the wrong type. Kinds that do not list their options are not checked further.
+    """
+    try:
+        options = env_options(spec)
+    except KeyError:
+        raise ConfigError(
+            f"{where}: env.kind {spec.kind!r} is unknown; valid: {', '.join(env_kinds())}"
+        ) from None
+    if options is None:
+        return
+    unknown = [k for k in spec.options if k not in options]
+    if unknown:
+        raise ConfigError(
+            f"{where}: env.options: unknown key(s) {', '.join(repr(k) for k in unknown)} for env kind "
+            f"{spec.kind!r}; valid: {', '.join(options)}"
+        )
+    for key, value in spec.options.items():
+        try:
+            check_value(value, options[key], f"env.options.{key}")
+        except ConfigError as exc:
+            raise ConfigError(f"{where}: {exc}") from None
 
 
 def _from_mapping(cls: type[_T], data: Mapping[str, Any], where: str) -> _T:

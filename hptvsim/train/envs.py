@@ -14,12 +14,15 @@ of *kinds* below:
     Any callable named ``"package.module:attribute"`` in ``options["entry_point"]``; the other
     options are passed to it as keyword arguments.
 
-New kinds are added with :func:`register_env_kind`.
+New kinds are added with :func:`register_env_kind`; a kind that names the callable taking its
+options lets :func:`env_options` list them, so a misspelt option is found before training.
 """
 
 from __future__ import annotations
 
 import importlib
+import inspect
+import typing
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
@@ -29,6 +32,7 @@ __all__ = [
     "EnvFactory",
     "EnvSpec",
     "env_kinds",
+    "env_options",
     "make_env_factory",
     "make_parallel_env",
     "register_env_kind",
@@ -38,6 +42,7 @@ EnvFactory = Callable[[], Any]
 """A zero-argument callable returning a fresh PettingZoo ``ParallelEnv``."""
 
 _Builder = Callable[["EnvSpec"], Any]
+_Signature = Callable[["EnvSpec"], Callable[..., Any]]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -62,15 +67,24 @@ class EnvSpec:
 
 
 _REGISTRY: dict[str, _Builder] = {}
+_SIGNATURES: dict[str, _Signature] = {}
+
+_SPEC_FIELDS = ("scenario", "task")
+"""Keyword arguments a builder fills from the spec itself, never from ``options``."""
 
 
-def register_env_kind(name: str, builder: _Builder, *, replace: bool = False) -> None:
+def register_env_kind(
+    name: str, builder: _Builder, *, replace: bool = False, signature: _Signature | None = None
+) -> None:
     """Add an environment kind to the registry.
 
     Args:
         name: The ``kind`` value that selects it.
         builder: Builds a ParallelEnv from an :class:`EnvSpec`.
         replace: Allow replacing an existing kind.
+        signature: Given a spec, the callable (class or function) whose keyword parameters are
+            this kind's options (``scenario`` and ``task`` aside); without it the kind's options
+            are not listed by :func:`env_options`.
 
     Raises:
         ValueError: ``name`` is taken and ``replace`` is false.
@@ -78,11 +92,50 @@ def register_env_kind(name: str, builder: _Builder, *, replace: bool = False) ->
     if name in _REGISTRY and not replace:
         raise ValueError(f"environment kind {name!r} is already registered")
     _REGISTRY[name] = builder
+    _SIGNATURES.pop(name, None)
+    if signature is not None:
+        _SIGNATURES[name] = signature
 
 
 def env_kinds() -> tuple[str, ...]:
     """Names of the registered environment kinds."""
     return tuple(sorted(_REGISTRY))
+
+
+def env_options(spec: EnvSpec) -> dict[str, Any] | None:
+    """The options ``spec``'s kind accepts, each with its type annotation (``Any`` if unknown).
+
+    Returns:
+        Option name -> annotation, in the callable's order; None when the kind does not say
+        (registered without a signature, a callable taking ``**kwargs``, or one that cannot be
+        imported: building the env then reports that).
+
+    Raises:
+        KeyError: Unknown kind (the message lists the registered ones).
+    """
+    if spec.kind not in _REGISTRY:
+        raise KeyError(f"unknown environment kind {spec.kind!r}; registered kinds: {', '.join(env_kinds())}")
+    signature = _SIGNATURES.get(spec.kind)
+    if signature is None:
+        return None
+    try:
+        target = signature(spec)
+    except ImportError:
+        return None
+    func = target.__init__ if inspect.isclass(target) else target
+    params = inspect.signature(func).parameters.values()
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params):
+        return None
+    try:
+        hints = typing.get_type_hints(func)
+    except (NameError, TypeError):  # annotations naming what only type checkers import
+        hints = {}
+    keyword = (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
+    return {
+        p.name: hints.get(p.name, Any)
+        for p in params
+        if p.kind in keyword and p.name not in ("self", *_SPEC_FIELDS)
+    }
 
 
 def make_parallel_env(spec: EnvSpec) -> Any:
@@ -110,10 +163,20 @@ def make_env_factory(spec_or_factory: EnvSpec | EnvFactory) -> EnvFactory:
     return spec_or_factory
 
 
-def _build_toy(spec: EnvSpec) -> Any:
+def _toy_class(spec: EnvSpec) -> Callable[..., Any]:
     from hptvsim.train.toy import PointMassGame
 
-    return PointMassGame(task=spec.task, scenario=spec.scenario, **dict(spec.options))
+    return PointMassGame
+
+
+def _build_toy(spec: EnvSpec) -> Any:
+    return _toy_class(spec)(task=spec.task, scenario=spec.scenario, **dict(spec.options))
+
+
+def _hptvsim_class(spec: EnvSpec) -> Callable[..., Any]:
+    from hptvsim.envs.parallel import UPEGParallelEnv
+
+    return UPEGParallelEnv
 
 
 def _build_hptvsim(spec: EnvSpec) -> Any:
@@ -130,21 +193,35 @@ def _build_hptvsim(spec: EnvSpec) -> Any:
     return make(scenario=spec.scenario, task=spec.task, **dict(spec.options))
 
 
-def _build_entry_point(spec: EnvSpec) -> Any:
-    options = dict(spec.options)
-    target = options.pop("entry_point", None)
+def _entry_point(spec: EnvSpec) -> Callable[..., Any]:
+    """The callable ``options.entry_point`` names.
+
+    Raises:
+        ValueError: A malformed entry point, or one that cannot be imported.
+    """
+    target = spec.options.get("entry_point")
     if not isinstance(target, str) or ":" not in target:
         raise ValueError(
             "environment kind 'entry_point' needs options.entry_point = 'package.module:callable', "
             f"got {target!r}"
         )
     module_name, attr = target.split(":", 1)
-    obj: Any = importlib.import_module(module_name)
-    for part in attr.split("."):
-        obj = getattr(obj, part)
-    return obj(scenario=spec.scenario, task=spec.task, **options)
+    try:
+        obj: Any = importlib.import_module(module_name)
+        for part in attr.split("."):
+            obj = getattr(obj, part)
+    except (ImportError, AttributeError) as exc:
+        raise ValueError(f"options.entry_point {target!r} cannot be imported: {exc}") from None
+    if not callable(obj):
+        raise ValueError(f"options.entry_point {target!r} is not callable")
+    return obj  # type: ignore[no-any-return]  # checked callable above
 
 
-register_env_kind("toy", _build_toy)
-register_env_kind("hptvsim", _build_hptvsim)
+def _build_entry_point(spec: EnvSpec) -> Any:
+    options = {k: v for k, v in spec.options.items() if k != "entry_point"}
+    return _entry_point(spec)(scenario=spec.scenario, task=spec.task, **options)
+
+
+register_env_kind("toy", _build_toy, signature=_toy_class)
+register_env_kind("hptvsim", _build_hptvsim, signature=_hptvsim_class)
 register_env_kind("entry_point", _build_entry_point)

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -314,22 +314,20 @@ def policy_from_spec(spec: str, env: Any, agent: str) -> Policy:
         make = getattr(envs, "scripted_policy", None)
         if make is not None:
             scripted = make(rest, env, agent)
-        elif hasattr(env, "core"):  # the underwater game: its own builder of scripted policies
-            from hptvsim.envs.single import build_policies
+        elif hasattr(env, "core"):  # the underwater game: the zoo's scripted policies (roles checked)
+            from hptvsim.zoo import load_policy
 
-            scripted = build_policies(env.core, [agent], {agent: rest})[agent]
+            scripted = load_policy(f"scripted:{rest}", env.core, agent)
         else:
             raise ValueError(f"scripted policies need the underwater game (hptvsim.envs); {env!r} is not")
         return _ActAdapter(scripted) if hasattr(scripted, "act") else scripted
     if hasattr(env, "core"):  # the underwater game: anything the policy zoo knows
-        from hptvsim.zoo import load_policy
+        from hptvsim.zoo import UnknownPolicyError, load_policy
 
         try:
             return _ActAdapter(load_policy(spec, env.core, agent, allow_paths=True))
-        except ValueError as exc:
-            raise ValueError(
-                f"unknown policy spec {spec!r}: {exc}; also valid: run:RUN_DIR[@STAGE], zip:PATH, random"
-            ) from None
+        except UnknownPolicyError as exc:
+            raise ValueError(f"{exc}; also valid: run:RUN_DIR[@STAGE], zip:PATH, random") from None
     raise ValueError(
         f"unknown policy spec {spec!r}; "
         "valid: run:RUN_DIR[@STAGE], zip:PATH, toy:greedy, random, scripted:NAME, and for the "
@@ -338,12 +336,25 @@ def policy_from_spec(spec: str, env: Any, agent: str) -> Policy:
 
 
 def policies_from_specs(
-    default: str, overrides: Mapping[str, str] | None = None
+    default: str, overrides: Mapping[str, str] | None = None, *, required: Collection[str] = ()
 ) -> Callable[[Any], dict[str, Policy]]:
-    """A builder of ``agent -> policy``: ``overrides`` by agent or role (``pursuer``), else ``default``."""
+    """A builder of ``agent -> policy``: ``overrides`` by agent or role (``pursuer``), else ``default``.
+
+    Args:
+        default: Spec of every agent without an override.
+        overrides: Spec by agent name or role.
+        required: Keys of ``overrides`` that must name an agent or a role of the env (the
+            builder raises ``ValueError`` naming the valid ones); other keys may name none.
+    """
     over = dict(overrides or {})
 
     def build(env: Any) -> dict[str, Policy]:
+        names = {*env.possible_agents, *(_role(a) for a in env.possible_agents)}
+        unknown = sorted(set(required) - names)
+        if unknown:
+            raise ValueError(
+                f"policy given for unknown agent or role {unknown[0]!r}; valid: {', '.join(sorted(names))}"
+            )
         out = {}
         for agent in env.possible_agents:
             spec = over.get(agent) or over.get(_role(agent)) or default

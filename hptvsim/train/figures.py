@@ -72,9 +72,18 @@ def agent_returns(run_dir: Path) -> dict[tuple[int, str], dict[str, list[float]]
 
 
 def agent_color(agent: str, agents: Sequence[str]) -> str:
-    """The colour of ``agent`` among ``agents`` (matplotlib's default cycle, in agent order)."""
-    ordered = sorted(agents, key=lambda a: (not a.startswith("pursuer"), a))
-    return f"C{ordered.index(agent) % 10}"
+    """The colour of ``agent`` in figures.
+
+    Its :mod:`hptvsim.palette` colour (the same as the dashboard, viser and recordings) for
+    ``pursuer_<i>``/``evader_<i>`` names, else matplotlib's cycle in agent order.
+    """
+    from hptvsim.palette import color_of
+
+    try:
+        return color_of(agent)
+    except ValueError:
+        ordered = sorted(agents, key=lambda a: (not a.startswith("pursuer"), a))
+        return f"C{ordered.index(agent) % 10}"
 
 
 def _smooth(y: np.ndarray, window: int) -> np.ndarray:

@@ -71,8 +71,11 @@ def load_sweep(path: Path) -> SweepSpec:
     Raises:
         ConfigError: Unknown keys, wrong types, or a grid that does not make valid configs.
     """
-    with path.open("rb") as f:
-        data = tomllib.load(f)
+    try:
+        with path.open("rb") as f:
+            data = tomllib.load(f)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
     valid = {"name", "config", "seeds", "set", "grid"}
     unknown = sorted(set(data) - valid)
     if unknown:

@@ -4,7 +4,7 @@
 
     RUN_DIR/
       config.toml          the resolved config (a resumed run reads this one)
-      run.json             command, versions, start and resume times
+      run.json             command, versions, start and resume times (and config updates)
       episodes.csv         one row per agent per finished episode
       updates.csv          losses and entropy coefficients every ``log_every`` env steps
       tb/                  TensorBoard events
@@ -14,6 +14,11 @@
 
 Every episode is reset with a seed that depends only on (run seed, stage, episode index), so a
 run is reproducible and a resumed run sees the same episodes.
+
+Before the first step every stage is checked (:func:`check_stages`: its environment is built
+once and its fixed policies loaded), so a typo in the last stage fails at once, not after the
+stages before it trained. A resumed run may take a corrected config for the stages that have
+not started yet (:func:`resume_changes`); what is trained already cannot change.
 """
 
 from __future__ import annotations
@@ -22,7 +27,7 @@ import json
 import sys
 import time
 from collections import defaultdict, deque
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -30,9 +35,18 @@ from typing import Any
 import numpy as np
 
 from hptvsim.train.checkpoint import LoopState, has_checkpoint, load_checkpoint, save_checkpoint
-from hptvsim.train.common import Transition, agent_spaces, episode_seed, set_rng_state, write_json
+from hptvsim.train.common import (
+    Transition,
+    agent_spaces,
+    atomic_write_text,
+    episode_seed,
+    set_rng_state,
+    write_json,
+)
 from hptvsim.train.config import (
+    ConfigError,
     TrainConfig,
+    check_env_spec,
     config_from_dict,
     config_to_dict,
     dump_toml,
@@ -41,7 +55,14 @@ from hptvsim.train.curriculum import build_learner, finish_stage, stage_dir
 from hptvsim.train.envs import EnvFactory, make_env_factory
 from hptvsim.train.logs import RunLogger
 
-__all__ = ["RunResult", "TrainingInterrupted", "load_run_config", "train"]
+__all__ = [
+    "RunResult",
+    "TrainingInterrupted",
+    "check_stages",
+    "load_run_config",
+    "resume_changes",
+    "train",
+]
 
 
 class TrainingInterrupted(KeyboardInterrupt):
@@ -66,10 +87,16 @@ class RunResult:
 
 
 def load_run_config(run_dir: Path) -> TrainConfig:
-    """The config a run was started with (``RUN_DIR/config.toml``)."""
+    """The config a run is trained with (``RUN_DIR/config.toml``).
+
+    Raises:
+        FileNotFoundError: ``run_dir`` holds no run.
+    """
     import tomllib
 
-    path = run_dir / "config.toml"
+    path = Path(run_dir) / "config.toml"
+    if not path.is_file():
+        raise FileNotFoundError(f"{run_dir} is not a training run: it has no config.toml")
     with path.open("rb") as f:
         return config_from_dict(tomllib.load(f), str(path))
 
@@ -95,19 +122,162 @@ def _precision_in_use(cfg: TrainConfig) -> str:
     return resolve_precision(cfg.sac.precision)
 
 
-def _start_run(cfg: TrainConfig, run_dir: Path, resume: bool, label: str | None) -> TrainConfig:
-    if resume:
-        if not has_checkpoint(run_dir):
-            raise FileNotFoundError(f"--resume: {run_dir} has no checkpoint (start it without --resume)")
-        saved = load_run_config(run_dir)
-        info = json.loads((run_dir / "run.json").read_text()) if (run_dir / "run.json").is_file() else {}
-        info.setdefault("resumed_at", []).append(time.strftime("%Y-%m-%dT%H:%M:%S"))
-        write_json(run_dir / "run.json", info)
-        return saved
-    if has_checkpoint(run_dir) or (run_dir / "episodes.csv").exists():
-        raise FileExistsError(
-            f"{run_dir} already holds a run; continue it with --resume or choose another --out"
+class _Unset:
+    """A key one of two configs does not have."""
+
+    def __repr__(self) -> str:
+        return "unset"
+
+
+_UNSET = _Unset()
+
+_LOCKED_SETTINGS = ("algo", "seed", "sac", "ppo", "fixed")
+"""Settings every trained stage depends on: a resumed run keeps them."""
+
+
+def _first_difference(saved: Any, given: Any, path: str = "") -> tuple[str, Any, Any] | None:
+    """The first dotted key (in the saved config's order) at which two raw configs differ."""
+    if isinstance(saved, Mapping) and isinstance(given, Mapping):
+        for key in [*saved, *(k for k in given if k not in saved)]:
+            found = _first_difference(
+                saved.get(key, _UNSET), given.get(key, _UNSET), f"{path}.{key}" if path else str(key)
+            )
+            if found is not None:
+                return found
+        return None
+    if isinstance(saved, list) and isinstance(given, list) and len(saved) == len(given):
+        for i, (a, b) in enumerate(zip(saved, given, strict=True)):
+            found = _first_difference(a, b, f"{path}.{i}" if path else str(i))
+            if found is not None:
+                return found
+        return None
+    return None if saved == given else (path, saved, given)
+
+
+def _show(value: Any) -> str:
+    return "unset" if value is _UNSET else json.dumps(value)
+
+
+def resume_changes(saved: TrainConfig, given: TrainConfig, state: LoopState) -> list[str]:
+    """What ``given`` changes in a run at ``state`` that was started with ``saved``.
+
+    A resumed run may take a corrected config for what it has not trained yet: stages not
+    started (changed, added or removed) and settings that do not touch trained networks (name,
+    logging and checkpoint intervals). The algorithm, seed, hyperparameters, fixed policies, the
+    finished stages and the stage in progress must stay as they are.
+
+    Args:
+        saved: The run's config (``RUN_DIR/config.toml``).
+        given: The config to go on with.
+        state: The run's checkpointed loop state (which stages are finished or in progress).
+
+    Returns:
+        The changed keys and stages (``"log_every"``, ``"stage 'target'"``); empty when the two
+        configs are the same.
+
+    Raises:
+        ConfigError: ``given`` changes something already trained; one line naming the first
+            differing key with both values.
+    """
+    a, b = config_to_dict(saved), config_to_dict(given)
+    for key in _LOCKED_SETTINGS:
+        found = _first_difference(a.get(key, _UNSET), b.get(key, _UNSET), key)
+        if found is not None:
+            raise ConfigError(
+                f"--resume: the run's config differs at {found[0]} (saved {_show(found[1])}, given "
+                f"{_show(found[2])}); only stages that have not started yet may change"
+            )
+    saved_stages, given_stages = a["stage"], b["stage"]
+    started = min(state.stage_index + int(state.stage_started), len(saved_stages))
+    for i in range(started):
+        status = "finished" if i < state.stage_index else "in progress"
+        name = saved.stages[i].name
+        if i >= len(given_stages):
+            raise ConfigError(
+                f"--resume: stage {name!r} is {status}; the given config has only "
+                f"{len(given_stages)} stage(s)"
+            )
+        found = _first_difference(saved_stages[i], given_stages[i])
+        if found is not None:
+            raise ConfigError(
+                f"--resume: stage {name!r} is {status}; its config differs at {found[0]} "
+                f"(saved {_show(found[1])}, given {_show(found[2])})"
+            )
+    changes = [k for k in (*a, *(k for k in b if k not in a)) if k != "stage" and a.get(k) != b.get(k)]
+    for i in range(started, max(len(saved_stages), len(given_stages))):
+        if i >= len(given_stages):
+            changes.append(f"stage {saved_stages[i]['name']!r} (removed)")
+        elif i >= len(saved_stages):
+            changes.append(f"stage {given_stages[i]['name']!r} (added)")
+        elif saved_stages[i] != given_stages[i]:
+            changes.append(f"stage {given_stages[i]['name']!r}")
+    return changes
+
+
+def check_stages(
+    cfg: TrainConfig, env_factories: Mapping[str, EnvFactory] | None = None, *, start: int = 0
+) -> None:
+    """Check every stage from ``start`` on before training: build its env once, load its fixed policies.
+
+    Args:
+        cfg: The run's config.
+        env_factories: ``stage name -> factory`` replacing the stages' env specs (as in :func:`train`).
+        start: Index of the first stage to check (a resumed run's finished stages are not).
+
+    Raises:
+        ConfigError: One line naming the stage and the problem: an unknown env kind, option or
+            scenario, an option of the wrong type or value, a fixed policy that cannot drive its
+            agent, every agent fixed, or a ``fixed`` key that names no agent or role.
+    """
+    factories = dict(env_factories or {})
+    names: set[str] = set()
+    for stage in cfg.stages[start:]:
+        where = f"stage {stage.name!r}"
+        factory = factories.get(stage.name)
+        if factory is None:
+            check_env_spec(stage.env, where)
+            factory = make_env_factory(stage.env)
+        try:
+            env = factory()
+        except ValueError as exc:
+            raise ConfigError(f"{where}: env {stage.env.label()}: {exc}") from exc
+        try:
+            agents = list(env.possible_agents)
+            names.update(agents, (a.split("_")[0] for a in agents))
+            learning = []
+            for agent in agents:
+                fixed = _fixed_spec(cfg, agent)
+                if fixed is None:
+                    learning.append(agent)
+                    continue
+                try:
+                    _fixed_policies(cfg, env, [agent])
+                except (ValueError, FileNotFoundError) as exc:
+                    raise ConfigError(f"{where}: fixed.{fixed[0]}: {exc}") from exc
+            if not learning:
+                raise ConfigError(f"{where}: every agent is fixed by 'fixed'; nothing would learn")
+        finally:
+            env.close()
+    unknown = sorted(set(cfg.fixed) - names)
+    if unknown and start == 0:
+        raise ConfigError(
+            f"fixed: {unknown[0]!r} names no agent or role of any stage; valid: {', '.join(sorted(names))}"
         )
+
+
+def _start_run(
+    cfg: TrainConfig, run_dir: Path, *, resume: bool, label: str | None, config_updated: bool
+) -> None:
+    """Write the run's ``config.toml`` and ``run.json`` (on resume: the resume time, any config update)."""
+    now = time.strftime("%Y-%m-%dT%H:%M:%S")
+    if resume:
+        info = json.loads((run_dir / "run.json").read_text()) if (run_dir / "run.json").is_file() else {}
+        info.setdefault("resumed_at", []).append(now)
+        if config_updated:
+            atomic_write_text(run_dir / "config.toml", dump_toml(config_to_dict(cfg)))
+            info.setdefault("config_updated_at", []).append(now)
+        write_json(run_dir / "run.json", info)
+        return
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "config.toml").write_text(dump_toml(config_to_dict(cfg)))
     write_json(
@@ -118,12 +288,11 @@ def _start_run(cfg: TrainConfig, run_dir: Path, resume: bool, label: str | None)
             "seed": cfg.seed,
             "label": label,
             "command": sys.argv,
-            "started_at": time.strftime("%Y-%m-%dT%H:%M:%S"),
+            "started_at": now,
             "versions": _env_versions(),
             "precision": _precision_in_use(cfg),
         },
     )
-    return cfg
 
 
 def _progress(total: int, initial: int, desc: str, unit: str, enabled: bool) -> Any:
@@ -145,11 +314,16 @@ def train(
     stop_after: int | None = None,
     on_stage_end: Callable[[int, Path], None] | None = None,
     label: str | None = None,
+    update_config: bool = False,
+    log: Callable[[str], None] | None = None,
 ) -> RunResult:
     """Train a run to the end of its curriculum (or continue a killed one with ``resume``).
 
+    Every stage not finished yet is checked before the first step (:func:`check_stages`).
+
     Args:
-        cfg: The config (ignored on resume: the run folder's own ``config.toml`` is used).
+        cfg: The config. On resume the run folder's own ``config.toml`` is used instead, unless
+            ``update_config`` is set.
         run_dir: The run's folder.
         resume: Continue from ``run_dir``'s last checkpoint.
         progress: Show a progress bar per stage.
@@ -158,24 +332,47 @@ def train(
         stop_after: Stop (with a checkpoint) once this many env steps are done in total.
         on_stage_end: Called with (stage index, stage model folder) after each stage.
         label: Name of the run's group in figures (a sweep's setting), kept in ``run.json``.
+        update_config: On resume, go on with ``cfg`` where it differs from the saved config in
+            what is not trained yet (:func:`resume_changes`); it becomes the run's
+            ``config.toml`` and ``run.json`` records when (``config_updated_at``).
+        log: Called with a line on what is worth telling the user (a config update on resume).
 
     Raises:
         FileExistsError: ``run_dir`` holds a run and ``resume`` is false.
         FileNotFoundError: ``resume`` without a checkpoint.
+        ConfigError: A stage that cannot run, or (``update_config``) a ``cfg`` that changes what
+            is trained already; nothing is trained or written then.
         TrainingInterrupted: Ctrl-C; a checkpoint was written first.
     """
     import torch
     from stable_baselines3.common.utils import set_random_seed
 
     run_dir = Path(run_dir)
-    cfg = _start_run(cfg, run_dir, resume, label)
     torch.set_num_threads(1)
     rng_state: dict[str, Any] | None = None
+    changes: list[str] = []
     if resume:
+        if not has_checkpoint(run_dir):
+            raise FileNotFoundError(f"--resume: {run_dir} has no checkpoint (start it without --resume)")
         state, ckpt_models, rng_state = load_checkpoint(run_dir)
+        saved = load_run_config(run_dir)
+        changes = resume_changes(saved, cfg, state) if update_config else []
+        cfg = cfg if changes else saved
     else:
-        set_random_seed(cfg.seed)
+        if has_checkpoint(run_dir) or (run_dir / "episodes.csv").exists():
+            raise FileExistsError(
+                f"{run_dir} already holds a run; continue it with --resume or choose another --out"
+            )
         state, ckpt_models = LoopState(), None
+    check_stages(cfg, env_factories, start=state.stage_index)
+    if changes and log is not None:
+        log(
+            f"note: resuming with the given config, which changes {', '.join(changes)} (not started "
+            f"yet); {run_dir / 'config.toml'} is updated"
+        )
+    _start_run(cfg, run_dir, resume=resume, label=label, config_updated=bool(changes))
+    if not resume:
+        set_random_seed(cfg.seed)  # after the checks, which may draw (loading fixed policies)
     logger = RunLogger(
         run_dir,
         offsets=state.log_offsets if resume else None,
@@ -236,17 +433,26 @@ def train(
     return RunResult(run_dir, state.global_step, True, tuple(stage_dirs))
 
 
-def _fixed_policies(cfg: TrainConfig, env: Any) -> dict[str, Any]:
+def _fixed_spec(cfg: TrainConfig, agent: str) -> tuple[str, str] | None:
+    """The key of ``cfg.fixed`` (agent name, else role) that fixes ``agent``, and its policy spec."""
+    for key in (agent, agent.split("_")[0]):
+        spec = cfg.fixed.get(key)
+        if spec:
+            return key, spec
+    return None
+
+
+def _fixed_policies(cfg: TrainConfig, env: Any, agents: Sequence[str] | None = None) -> dict[str, Any]:
     """Policies of the agents that do not learn (``cfg.fixed``, by agent name or role)."""
     if not cfg.fixed:
         return {}
     from hptvsim.train.evaluate import policy_from_spec
 
     out = {}
-    for agent in env.possible_agents:
-        spec = cfg.fixed.get(agent) or cfg.fixed.get(agent.split("_")[0])
-        if spec is not None:
-            out[agent] = policy_from_spec(spec, env, agent)
+    for agent in env.possible_agents if agents is None else agents:
+        fixed = _fixed_spec(cfg, agent)
+        if fixed is not None:
+            out[agent] = policy_from_spec(fixed[1], env, agent)
     return out
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import sys
 from pathlib import Path
+from typing import Any
 
 import click
 
@@ -34,6 +35,124 @@ def _policy_options(policy: tuple[str, ...]) -> dict[str, str]:
     return out
 
 
+# --- argument checks of the visualisation layer's commands -----------------------------------------
+
+
+def check_scenario_arg(scenario: str, **_: Any) -> None:
+    """``--scenario`` must be a shipped scenario's name or a valid scenario file.
+
+    Raises:
+        click.BadParameter: It is neither (the message lists the shipped names).
+    """
+    from hptvsim.world.scenario import ScenarioError, load_scenario
+
+    try:
+        load_scenario(scenario)
+    except ScenarioError as exc:
+        raise click.BadParameter(str(exc), param_hint="--scenario") from None
+
+
+def _check_policy_args(agents: Any, scenario: str, policy: tuple[str, ...], *, allow_paths: bool) -> None:
+    """Each ``--policy AGENT=SPEC`` names an agent of the scenario and a policy for its role."""
+    from hptvsim.zoo import check_policy_spec
+
+    roles = {a.name: a.role for a in agents}
+    for item in policy:
+        agent, sep, spec = item.partition("=")
+        if not sep or not agent or not spec:
+            continue  # the command itself says what AGENT=SPEC looks like
+        if agent not in roles:
+            raise click.BadParameter(
+                f"unknown agent {agent!r} in {item!r}; agents of {scenario}: {', '.join(roles)}",
+                param_hint="--policy",
+            )
+        try:
+            check_policy_spec(spec, roles[agent], allow_paths=allow_paths, agent=agent)
+        except ValueError as exc:
+            raise click.BadParameter(str(exc), param_hint="--policy") from None
+
+
+def _check_seed(seed: int | None) -> None:
+    if seed is not None and seed < 0:
+        raise click.BadParameter(f"{seed} is invalid; valid: an integer >= 0", param_hint="--seed")
+
+
+def check_episode_args(
+    scenario: str,
+    policy: tuple[str, ...],
+    seed: int | None,
+    max_steps: int | None,
+    record: Path | None,
+    json_out: Path | None,
+    **_: Any,
+) -> None:
+    """The arguments of ``hptvsim episode``, checked before it builds anything.
+
+    Raises:
+        click.BadParameter: An unknown or invalid scenario, an agent the scenario does not have,
+            a policy unknown or made for another role (the same rule as the service's), a
+            negative seed, a step limit below 1, or an output folder that cannot be made.
+    """
+    from hptvsim.viz.episode import resolve_scenario
+    from hptvsim.world.scenario import ScenarioError
+
+    try:
+        sc = resolve_scenario(scenario, allow_paths=True)
+    except ScenarioError as exc:
+        raise click.BadParameter(str(exc), param_hint="--scenario") from None
+    _check_policy_args(sc.agents, scenario, policy, allow_paths=True)
+    _check_seed(seed)
+    if max_steps is not None and max_steps < 1:
+        raise click.BadParameter(f"{max_steps} is invalid; valid: an integer >= 1", param_hint="--max-steps")
+    for path, hint in ((record, "--record"), (json_out, "--json")):
+        if path is not None:
+            try:
+                path.parent.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                raise click.BadParameter(f"cannot write {path}: {exc.strerror}", param_hint=hint) from None
+
+
+def check_view_args(
+    scenario: str, policy: tuple[str, ...], seed: int, port: int, speed: float, **_: Any
+) -> None:
+    """The arguments of ``hptvsim view``: shipped names only, as for the service's clients.
+
+    Raises:
+        click.BadParameter: Not a shipped scenario, an unknown agent or policy, a policy for
+            another role, a seed out of range, a port out of range, or a speed that is not positive.
+    """
+    from hptvsim.catalog import CatalogError, check_scenario, check_seed, shipped_scenario
+
+    try:
+        sc = shipped_scenario(check_scenario(scenario))
+    except CatalogError as exc:
+        raise click.BadParameter(str(exc), param_hint="--scenario") from None
+    _check_policy_args(sc.agents, scenario, policy, allow_paths=False)
+    try:
+        check_seed(seed)
+    except CatalogError as exc:
+        raise click.BadParameter(str(exc), param_hint="--seed") from None
+    if not 0 <= port <= 65535:
+        raise click.BadParameter(f"{port} is invalid; valid: 0..65535", param_hint="--port")
+    if not speed > 0:
+        raise click.BadParameter(
+            f"{speed} is invalid; valid: a number > 0 (x real time)", param_hint="--speed"
+        )
+
+
+def check_web_out(out_dir: Path | None, check: bool, **_: Any) -> None:
+    """``hptvsim viz schema --out DIR``: DIR must be a folder that can be made (unless ``--check``).
+
+    Raises:
+        click.BadParameter: It cannot.
+    """
+    if out_dir is not None and not check:
+        try:
+            out_dir.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise click.BadParameter(f"cannot make {out_dir}: {exc.strerror}", param_hint="--out") from None
+
+
 def register(main: click.Group, bench: click.Group) -> None:
     """Add the visualisation commands to ``main`` and the episode benchmark to ``bench``."""
 
@@ -54,6 +173,7 @@ def register(main: click.Group, bench: click.Group) -> None:
     )
     def viz_schema(out_dir: Path | None, check: bool) -> None:
         """Write web/schema/frames.schema.json and web/js/frames.gen.js from hptvsim/viz/frames.py."""
+        check_web_out(out_dir, check)
         from hptvsim.viz.frames import json_schema, schema_js
 
         web = out_dir if out_dir is not None else _repo_web()
@@ -115,6 +235,7 @@ def register(main: click.Group, bench: click.Group) -> None:
         json_out: Path | None,
     ) -> None:
         """Run one episode, print its outcome and metrics, optionally record it."""
+        check_episode_args(scenario, policy, seed, max_steps, record, json_out)
         from hptvsim.viz.episode import run_episode
 
         result = run_episode(
@@ -167,6 +288,7 @@ def register(main: click.Group, bench: click.Group) -> None:
     @click.option("--speed", type=float, default=4.0, show_default=True, help="x real time.")
     def view(scenario: str, policy: tuple[str, ...], seed: int, host: str, port: int, speed: float) -> None:
         """Live 3D view (viser) of episodes, with play/pause, speed, reset and pickers."""
+        check_view_args(scenario, policy, seed, port, speed)
         import time
 
         from hptvsim.viz.viser_view import LiveView
@@ -190,6 +312,7 @@ def register(main: click.Group, bench: click.Group) -> None:
     @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of a table.")
     def bench_episode(quick: bool, scenario: str, as_json: bool) -> None:
         """µs per episode step: bare GameCore, + frames, + rerun recording (ratios to the bare core)."""
+        check_scenario_arg(scenario)
         from hptvsim.cli import emit
         from hptvsim.viz.bench import bench_episode as run
 

@@ -43,6 +43,7 @@ from typing import Any, ClassVar, Final, Literal, Self, TypeVar, get_args, get_o
 import numpy as np
 import numpy.typing as npt
 
+from hptvsim.palette import agent_color  # re-exported: the one palette of every view
 from hptvsim.train.evaluate import EpisodeMetrics
 
 __all__ = [
@@ -538,15 +539,6 @@ class Trajectories(SchemaObject):
 
 
 # --- building the static part -----------------------------------------------------------------
-
-_PURSUER_COLORS: Final = ("#d62728", "#ff7f0e", "#e377c2", "#8c564b", "#bcbd22", "#9467bd")
-_EVADER_COLORS: Final = ("#1f77b4", "#17becf", "#2ca02c", "#7f7f7f")
-
-
-def agent_color(role: str, index: int) -> str:
-    """Display colour of the ``index``-th agent of ``role`` (reds for pursuers, blues for evaders)."""
-    palette = _PURSUER_COLORS if role == "pursuer" else _EVADER_COLORS
-    return palette[index % len(palette)]
 
 
 def terrain_mesh(

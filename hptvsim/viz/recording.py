@@ -21,6 +21,10 @@ state, so a service writes many at once). Entities (world frame NED, ``RIGHT_HAN
                                        and :class:`~hptvsim.viz.frames.EpisodeSummary` as JSON
 =====================================  ===========================================================
 
+Every agent's entities (body, heading, trail, sonar fan, path, its plot series) are drawn in its
+colour of :mod:`hptvsim.palette` (``AgentInfo.color``, the same in every view; static styling
+components logged once), sonar hits in :data:`~hptvsim.palette.SONAR_HIT_COLOR`.
+
 Timelines: ``sim_time`` (duration, seconds of simulated time) and ``step`` (sequence). Per-step
 data is buffered and sent in columns every ``flush_every`` steps, so a crash loses at most that
 many steps, and a recording costs little time per step.
@@ -42,6 +46,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from hptvsim.palette import SONAR_HIT_COLOR
 from hptvsim.viz.frames import EpisodeStatic, EpisodeSummary, Frame, FrameSchemaError, SchemaObject
 from hptvsim.viz.style import depth_colors, hex_rgb
 
@@ -232,6 +237,16 @@ class RecordingWriter:
                 rr.Arrows3D(vectors=[(4.0 * max(a.radius, 1.0), 0.0, 0.0)], colors=[rgb], radii=[0.3]),
                 static=True,
             )
+            # styling of what is sent per step later (colours only; rerun would pick its own)
+            rec.log(f"world/trails/{a.name}", rr.LineStrips3D.from_fields(colors=[rgb]), static=True)
+            rec.log(f"world/agents/{a.name}/sonar", rr.LineStrips3D.from_fields(colors=[rgb]), static=True)
+            rec.log(
+                f"world/hits/{a.name}",
+                rr.Points3D.from_fields(colors=[hex_rgb(SONAR_HIT_COLOR)]),
+                static=True,
+            )
+            for key, _ in _PLOTS:
+                rec.log(f"plots/{key}/{a.name}", rr.SeriesLines(colors=[rgb], names=[a.name]), static=True)
         rec.log("meta/static", rr.TextDocument(st.to_json(), media_type="application/json"), static=True)
 
     # -- per frame -------------------------------------------------------------------------------

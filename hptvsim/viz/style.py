@@ -1,9 +1,14 @@
-"""Colours shared by the views (rerun, viser; the dashboard's JavaScript mirrors ``depth_color``)."""
+"""Colours shared by the views (rerun, viser; the dashboard's JavaScript mirrors ``depth_color``).
+
+The agents' colours are :mod:`hptvsim.palette` (one palette for every view and every layer).
+"""
 
 from __future__ import annotations
 
 import numpy as np
 import numpy.typing as npt
+
+from hptvsim.palette import hex_rgb
 
 __all__ = ["DEPTH_STOPS", "depth_colors", "hex_rgb"]
 
@@ -26,11 +31,3 @@ def depth_colors(depth: npt.ArrayLike, depth_range: tuple[float, float]) -> npt.
     out = np.stack([np.interp(t, xs, cols[:, c]) for c in range(3)], axis=-1)
     result: npt.NDArray[np.uint8] = np.round(out).astype(np.uint8)
     return result
-
-
-def hex_rgb(color: str) -> tuple[int, int, int]:
-    """``"#rrggbb"`` as an ``(r, g, b)`` tuple of 0-255 integers."""
-    c = color.lstrip("#")
-    if len(c) != 6:
-        raise ValueError(f"colour {color!r} is not of the form #rrggbb")
-    return int(c[0:2], 16), int(c[2:4], 16), int(c[4:6], 16)

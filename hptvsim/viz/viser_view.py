@@ -6,7 +6,9 @@ builds the terrain mesh (banded by depth), the site's edge, goals and the vehicl
 
 :class:`LiveView` is the viser server with a simulation thread: it runs episodes with an
 :class:`~hptvsim.viz.episode.EpisodeStepper` and offers play/pause, speed, reset, scenario,
-policy and seed pickers, sonar and trail switches, progress and a distance plot. Viser runs its
+policy and seed pickers, sonar and trail switches, progress and a distance plot (simulated
+seconds on its x axis, one line per pursuer in the pursuer's colour of :mod:`hptvsim.palette`,
+see :func:`distance_plot`). Viser runs its
 own HTTP and WebSocket server on a background thread (it cannot be mounted in FastAPI): a
 service starts a :class:`LiveView` on its own port in its lifespan, and may show a service
 episode's frames in it with :meth:`LiveView.follow` and :meth:`LiveView.push` (which pause the
@@ -32,10 +34,11 @@ import numpy as np
 import numpy.typing as npt
 
 from hptvsim.catalog import MAX_SEED
+from hptvsim.palette import SONAR_HIT_COLOR
 from hptvsim.viz.frames import EpisodeStatic, Frame
 from hptvsim.viz.style import depth_colors, hex_rgb
 
-__all__ = ["Launcher", "LiveView", "SceneRenderer", "start_live_view"]
+__all__ = ["Launcher", "LiveView", "SceneRenderer", "distance_plot", "plotted_agents", "start_live_view"]
 
 log = logging.getLogger("hptvsim.viz.live_view")
 
@@ -44,6 +47,8 @@ F64 = npt.NDArray[np.float64]
 CAMERA_FAR = 20_000.0  # m, far plane (viser's default of 1000 clips a 400 m site seen from afar)
 DEPTH_BANDS = 8  # terrain meshes, one colour each (viser's simple meshes have one colour)
 MIN_DISPLAY_RADIUS = 2.5  # m, vehicles drawn at least this large (the evader's radius is 0.2 m)
+TIME_LABEL = "time [s]"  # the x axis of the view's plots: simulated seconds
+GUIDE_COLOR = "#9aa5b1"  # reference lines of plots (the capture distance)
 
 
 def _quat_wxyz(psi: float) -> tuple[float, float, float, float]:
@@ -153,7 +158,7 @@ class SceneRenderer:
         self._hits = scene.add_point_cloud(
             "/sonar/hits",
             np.zeros((1, 3), dtype=np.float32),
-            (255, 60, 60),
+            hex_rgb(SONAR_HIT_COLOR),
             point_size=1.5,
             point_shape="circle",
         )
@@ -230,8 +235,56 @@ class SceneRenderer:
                 if hits:
                     pts = np.concatenate(hits).astype(np.float32)
                     self._hits.points = pts
-                    self._hits.colors = np.broadcast_to(np.array([255, 60, 60], np.uint8), pts.shape).copy()
+                    hit_rgb = np.array(hex_rgb(SONAR_HIT_COLOR), np.uint8)
+                    self._hits.colors = np.broadcast_to(hit_rgb, pts.shape).copy()
                 self._hits.visible = self.show_sonar and bool(hits)
+
+
+def plotted_agents(static: EpisodeStatic) -> list[int]:
+    """Indices of the agents the distance plot shows.
+
+    The pursuers (their distance to the evader) or, in a task without pursuers (goto), every
+    agent (its distance to its goal).
+    """
+    pursuers = [i for i, a in enumerate(static.agents) if a.role == "pursuer"]
+    return pursuers or list(range(len(static.agents)))
+
+
+def distance_plot(static: EpisodeStatic | None) -> dict[str, Any]:
+    """Keyword arguments of viser's ``gui.add_uplot`` for the distance plot of an episode.
+
+    The x axis is simulated time in seconds, as plain numbers: uPlot's x scale is a time scale
+    of Unix timestamps unless ``time`` is off, and would label 0-300 s as dates in 1970. One
+    line per agent of :func:`plotted_agents`, in the agent's colour (:mod:`hptvsim.palette`,
+    as in the dashboard and the recordings); in a pursuit, a dashed line marks the capture
+    distance.
+
+    Args:
+        static: The episode's static part (None: an empty plot).
+    """
+    agents = [static.agents[i] for i in plotted_agents(static)] if static is not None else []
+    pursuit = static is not None and any(a.role == "pursuer" for a in static.agents)
+    target = "the evader" if pursuit else "the goal"  # the y label, short: the panel is narrow
+    series: list[dict[str, Any]] = [{"label": TIME_LABEL}]
+    series += [{"label": a.name, "stroke": a.color, "width": 2} for a in agents]
+    if pursuit and static is not None:
+        series.append(
+            {
+                "label": f"capture {static.capture_distance:g} m",
+                "stroke": GUIDE_COLOR,
+                "width": 1,
+                "dash": (6, 4),
+            }
+        )
+    if len(series) == 1:  # uPlot needs one y series
+        series.append({"label": "distance [m]", "show": False})
+    return {
+        "data": tuple(np.zeros(1) for _ in series),
+        "series": tuple(series),
+        "scales": {"x": {"time": False}},
+        "axes": ({"label": TIME_LABEL}, {"label": f"to {target} [m]"}),
+        "aspect": 1.2,  # width / height: tall enough for the y label in the narrow panel
+    }
 
 
 @dataclass
@@ -336,7 +389,8 @@ class LiveView:
         self._thread: threading.Thread | None = None
         self._lock = threading.Lock()
         self._gui: dict[str, Any] = {}
-        self._distance: deque[tuple[float, float]] = deque(maxlen=2000)
+        self._distance: deque[tuple[float, ...]] = deque(maxlen=2000)  # (t [s], distances [m])
+        self._plotted: list[int] = []  # agents of the distance plot (indices into static.agents)
         self.follow_service = True
         self.error: str | None = None
         self._service_episode: str | None = None
@@ -381,8 +435,8 @@ class LiveView:
 
             policies = dict.fromkeys(shipped_scenario(self.scenario).agent_names, "scripted:stationary")
         self.stepper = EpisodeStepper(self.scenario, policies, seed=self.seed, max_steps=self.max_steps)
-        self.renderer.set_static(self.stepper.static)
         self._build_gui()
+        self._set_static(self.stepper.static)
         self._show(self.stepper.frame)  # the scene, and the status line saying what it shows
 
         self.server.on_client_connect(self._on_connect)
@@ -574,16 +628,14 @@ class LiveView:
                 old.close()
             self.scenario, self.policies, self.seed = scenario, policies, seed
             self.following = None
-            self._distance.clear()
-            self.renderer.set_static(new.static)
+            self._set_static(new.static)
             self._show(new.frame)
         elif req.kind == "follow":
             label, static = req.value
             if isinstance(static, Mapping):
                 static = EpisodeStatic.from_dict(static)
             self.following = label
-            self._distance.clear()
-            self.renderer.set_static(static)
+            self._set_static(static)
         elif req.kind == "frame":
             label, frame = req.value
             if self.following is not None and label in (None, self.following):
@@ -594,8 +646,7 @@ class LiveView:
             self._unfollow_at = time.monotonic() + self.unfollow_delay
         elif req.kind == "unfollow" and self.following is not None:
             if self.stepper is not None:
-                self._distance.clear()
-                self.renderer.set_static(self.stepper.static)
+                self._set_static(self.stepper.static)
             self.following = None  # after the scene is back: readers see both or neither
             if self.stepper is not None:
                 self._show(self.stepper.frame)
@@ -615,18 +666,21 @@ class LiveView:
         if pending is not None:
             self._apply(pending)
 
+    def _set_static(self, static: EpisodeStatic) -> None:
+        """Show a new episode: its scene, and a distance plot of its agents."""
+        assert self.renderer is not None
+        self._distance.clear()
+        self.renderer.set_static(static)
+        self._plotted = plotted_agents(static)
+        self._build_plot(static)
+
     def _show(self, frame: Frame) -> None:
         assert self.renderer is not None
         self.renderer.show(frame)
         self.last_frame = frame
-        static = self.renderer.static
-        pursuers = (
-            [a.distance for a, i in zip(frame.agents, static.agents, strict=True) if i.role == "pursuer"]
-            if static is not None
-            else []
-        )
-        if pursuers:
-            self._distance.append((frame.time, min(pursuers)))
+        fresh = not self._distance or frame.time > self._distance[-1][0]  # not a frame shown again
+        if fresh and self._plotted and len(frame.agents) > max(self._plotted):
+            self._distance.append((frame.time, *(frame.agents[i].distance for i in self._plotted)))
         self._update_gui(frame)
 
     def _run(self) -> None:
@@ -715,21 +769,8 @@ class LiveView:
             g["trails"] = gui.add_checkbox("Trails", True)
             if local:
                 g["loop"] = gui.add_checkbox("Next episode when one ends", self.loop)
-        with gui.add_folder("Distance"):
-            g["plot"] = None
-            try:
-                import viser.uplot as uplot
-
-                g["plot"] = gui.add_uplot(
-                    data=(np.zeros(1), np.zeros(1)),
-                    series=(
-                        uplot.Series(label="time [s]"),
-                        uplot.Series(label="pursuer-evader [m]", stroke="#ff7f0e", width=2),
-                    ),
-                    aspect=2.0,
-                )
-            except Exception:  # pragma: no cover - a viser without uplot still shows everything else
-                g["plot"] = None
+        g["distance_folder"] = gui.add_folder("Distance")  # its plot: _build_plot, per episode
+        g["plot"] = None
 
         if local:
             g["play"].on_click(self._on_play)
@@ -740,6 +781,25 @@ class LiveView:
         g["sonar"].on_update(lambda _: self._display(sonar=bool(g["sonar"].value)))
         g["trails"].on_update(lambda _: self._display(trails=bool(g["trails"].value)))
         g["follow"].on_update(self._on_follow)
+
+    def _build_plot(self, static: EpisodeStatic | None) -> None:
+        """(Re)create the distance plot for ``static``'s agents.
+
+        Their number and colours change with the episode; a new plot never shows data that do
+        not match its series.
+        """
+        folder = self._gui.get("distance_folder")
+        if folder is None:
+            return
+        old = self._gui.get("plot")
+        self._gui["plot"] = None
+        if old is not None:
+            old.remove()
+        try:
+            with folder:
+                self._gui["plot"] = self.server.gui.add_uplot(**distance_plot(static))
+        except Exception:  # pragma: no cover - a viser without uplot still shows everything else
+            log.exception("the live view could not draw its distance plot")
 
     def _on_play(self, _: Any) -> None:
         if self.playing:
@@ -822,7 +882,10 @@ class LiveView:
         plot = self._gui.get("plot")
         if plot is not None and len(self._distance) >= 2:
             arr = np.asarray(self._distance, dtype=np.float64)
-            plot.data = (arr[:, 0], arr[:, 1])
+            columns = [arr[:, j] for j in range(arr.shape[1])]
+            if len(plot.series) > len(columns):  # the capture distance, a constant
+                columns.append(np.full(len(arr), st.capture_distance))
+            plot.data = tuple(columns)
 
 
 def start_live_view(

@@ -13,13 +13,15 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from hptvsim.palette import ROLES, agent_color
+
 if TYPE_CHECKING:
     from hptvsim.world.scenario import Scenario
     from hptvsim.world.terrain import HeightMap
 
 __all__ = ["render_heightmap", "render_scenario"]
 
-_ROLE_COLOURS = {"pursuer": "#d62728", "evader": "#ffbf00"}
+_ROLE_COLOURS = {role: agent_color(role, 0) for role in ROLES}  # a group's spawn region: its role's first
 _OBSTACLE_COLOUR = "#7a5c3a"
 _LAND_COLOUR = "#d9c79a"
 
@@ -98,8 +100,9 @@ def render_scenario(scenario: Scenario, path: str | Path, *, dpi: int = 110) -> 
     """Draw a scenario's map to a PNG; returns the path.
 
     Shows the shaded seabed depth, obstacles at the operating depth (brown, outlined), the site
-    boundary, spawn regions (pursuers red, evaders amber, labelled with count and type), goals
-    (star and radius) and, when there is a current, its arrows at ``t = 0``.
+    boundary, spawn regions (in their role's first colour of :mod:`hptvsim.palette`: pursuers
+    crimson, evaders gold; labelled with count and type), goals (star and radius) and, when
+    there is a current, its arrows at ``t = 0``.
     """
     import matplotlib.pyplot as plt
     from matplotlib.patches import Circle, Rectangle

@@ -86,9 +86,11 @@ def test_rgb_array_shows_the_vehicles() -> None:
     assert frame is not None
     h, w, _ = frame.shape
     assert w == 480 and h == 640  # 400 m north x 300 m east, north up
-    red = (frame[..., 0] > 180) & (frame[..., 1] < 80) & (frame[..., 2] < 80)
-    blue = (frame[..., 2] > 150) & (frame[..., 0] < 60)
-    assert red.sum() > 20 and blue.sum() > 5  # three pursuers, one evader
+    from hptvsim.palette import color_of, hex_rgb
+
+    for agent in env.possible_agents:  # three pursuers, one evader, each in its palette colour
+        pixels = (frame.astype(int) == hex_rgb(color_of(agent))).all(axis=-1)
+        assert pixels.sum() > 5, agent
 
 
 def test_vehicle_parameters_per_role_change_limits_and_are_validated() -> None:

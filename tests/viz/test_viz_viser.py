@@ -7,9 +7,17 @@ import math
 import numpy as np
 import pytest
 
+from hptvsim.palette import agent_color
 from hptvsim.viz.episode import run_episode
 from hptvsim.viz.frames import Frame
-from hptvsim.viz.viser_view import CAMERA_FAR, LiveView, SceneRenderer, start_live_view
+from hptvsim.viz.viser_view import (
+    CAMERA_FAR,
+    TIME_LABEL,
+    LiveView,
+    SceneRenderer,
+    distance_plot,
+    start_live_view,
+)
 
 
 def test_scene_renderer_places_what_the_frames_say() -> None:
@@ -164,5 +172,70 @@ def test_live_view_inputs_are_checked_and_cross_site_sockets_refused() -> None:
             )
         assert exc.value.response.status_code == 403
         assert view.gateway is not None and view.gateway.refused >= 1
+    finally:
+        view.stop()
+
+
+def test_the_distance_plot_counts_simulated_seconds_in_each_pursuers_colour() -> None:
+    """uPlot reads x as Unix time unless told otherwise (0-300 s showed as 1970 dates)."""
+    target = run_episode("target", seed=0, max_steps=1).static
+    cfg = distance_plot(target)
+    assert cfg["scales"] == {"x": {"time": False}}
+    assert cfg["axes"][0]["label"] == TIME_LABEL == "time [s]"
+    assert cfg["axes"][1]["label"] == "to the evader [m]"
+    series = cfg["series"]
+    assert series[0]["label"] == TIME_LABEL
+    pursuers = [a for a in target.agents if a.role == "pursuer"]
+    assert [(s["label"], s["stroke"]) for s in series[1:4]] == [
+        (f"pursuer_{k}", agent_color("pursuer", k)) for k in range(3)
+    ]
+    assert [s["stroke"] for s in series[1:4]] == [a.color for a in pursuers]
+    assert series[4]["label"] == "capture 25 m" and series[4]["dash"]
+    assert len(cfg["data"]) == len(series)
+    goto = distance_plot(run_episode("goto_tiny", seed=0, max_steps=1).static)  # no pursuer: to the goal
+    assert goto["axes"][1]["label"] == "to the goal [m]"
+    assert [(s["label"], s["stroke"]) for s in goto["series"][1:]] == [("evader_0", agent_color("evader", 0))]
+    assert distance_plot(None)["scales"] == {"x": {"time": False}}
+
+
+def test_the_live_view_sends_a_seconds_axis_and_replots_per_episode() -> None:
+    """What a browser receives: the uPlot message with a non-time x scale, series in the agents'
+    colours, data whose x column is the frames' simulated time; a new scenario replaces the plot."""
+    from viser_protocol import ViserClient
+
+    view = LiveView(port=0, scenario="target", seed=3, speed=64.0, run_without_clients=True).start()
+    try:
+        client = ViserClient(view.url)
+        try:
+            client.pump(1.0)
+            plots = client.received("GuiUplotMessage")
+            assert plots, [m.get("type") for m in client.messages][:40]
+            props = plots[-1]["props"]
+            assert props["scales"] == {"x": {"time": False}}
+            assert [a["label"] for a in props["axes"]] == ["time [s]", "to the evader [m]"]
+            strokes = [s.get("stroke") for s in props["series"][1:4]]
+            assert strokes == [agent_color("pursuer", k) for k in range(3)]
+            assert view.wait_for(lambda v: v.last_frame is not None and v.last_frame.time >= 5.0, 30)
+            plot = view._gui["plot"]
+            assert len(plot.data) == len(plot.series)  # one column per series, the capture line too
+            time_column = plot.data[0]
+            last = view.last_frame
+            assert (
+                last is not None and time_column[0] >= 0.0 and time_column[-1] <= last.time + 1e-9
+            )  # seconds
+            assert np.all(np.diff(time_column) > 0)
+            first = plots[-1]["uuid"]
+            view.reset(scenario="goto_tiny", seed=0)
+            assert view.wait_for(lambda v: v.stepper.static.scenario == "goto_tiny", 30)
+            client.pump(1.0)
+            removed = {m["uuid"] for m in client.received("GuiRemoveMessage")}
+            assert first in removed  # the old plot went with its series
+            props = client.received("GuiUplotMessage")[-1]["props"]
+            assert props["scales"] == {"x": {"time": False}}
+            assert [(s["label"], s.get("stroke")) for s in props["series"][1:]] == [
+                ("evader_0", agent_color("evader", 0))
+            ]
+        finally:
+            client.close()
     finally:
         view.stop()

@@ -36,6 +36,7 @@ class ViserClient:
             max_size=None,
         )
         self.gui: dict[str, dict[str, Any]] = {}  # label -> {"uuid", "type", "options", "value"}
+        self.messages: list[dict[str, Any]] = []  # every message received, in order
         self._zstd = zstandard.ZstdDecompressor()
         # viser counts a client as connected (and runs its GUI callbacks) after its first camera
         self.send(
@@ -75,6 +76,7 @@ class ViserClient:
             if not isinstance(frame, bytes):
                 continue
             for m in self._decode(frame):
+                self.messages.append(m)
                 kind = str(m.get("type", ""))
                 props = m.get("props")
                 if kind.startswith("Gui") and isinstance(props, dict) and "label" in props:
@@ -84,6 +86,10 @@ class ViserClient:
                         "options": props.get("options"),
                         "value": m.get("value"),
                     }
+
+    def received(self, kind: str) -> list[dict[str, Any]]:
+        """The messages of type ``kind`` received so far (call :meth:`pump` first)."""
+        return [m for m in self.messages if m.get("type") == kind]
 
     def wait_for(self, label: str, timeout: float = 30.0) -> dict[str, Any]:
         """The GUI element labelled ``label`` once the server has sent it."""

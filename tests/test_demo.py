@@ -1,0 +1,156 @@
+"""``hptvsim demo``: it prints the episode's outcome and metrics, and its figures give every agent
+its own palette colour, label their axes with units and leave no blank gap (looked at as pixels)."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from matplotlib.colors import to_hex
+
+from hptvsim.demo import (
+    VEHICLE_COLORS,
+    episode_figure,
+    episode_report,
+    simulate_manoeuvre,
+    trajectories_figure,
+)
+from hptvsim.palette import agent_color, color_of, hex_rgb
+from hptvsim.viz.episode import EpisodeResult, run_episode
+
+matplotlib.use("Agg")
+
+
+@pytest.fixture(scope="module")
+def short_episode() -> EpisodeResult:
+    """200 steps (50 s) of the demo's episode."""
+    return run_episode("target", {}, seed=0, max_steps=200, backend="fmu")
+
+
+def _pixels(fig: Any, ax: Any, tmp_path: Path) -> np.ndarray:
+    """The RGB pixels of ``ax`` in ``fig`` rendered to a PNG (frame and ticks excluded)."""
+    from PIL import Image
+
+    png = tmp_path / "figure.png"
+    fig.savefig(png, dpi=100)
+    img = np.asarray(Image.open(png).convert("RGB")).astype(np.int64)
+    box = ax.get_window_extent()  # display pixels, origin at the bottom
+    height = img.shape[0]
+    return img[height - int(box.y1) + 3 : height - int(box.y0) - 3, int(box.x0) + 3 : int(box.x1) - 3]
+
+
+def _count(pixels: np.ndarray, color: str, tolerance: float = 12.0) -> int:
+    """Pixels within ``tolerance`` (RGB, 0-255) of ``color``."""
+    return int((np.linalg.norm(pixels - np.array(hex_rgb(color)), axis=-1) <= tolerance).sum())
+
+
+def _longest_white_run(png: Path) -> float:
+    """The widest band of all-white pixel columns between the title and the legend, as a fraction
+    of the width (a blank gap between panels)."""
+    from PIL import Image
+
+    img = np.asarray(Image.open(png).convert("RGB"))
+    height, width = int(img.shape[0]), int(img.shape[1])
+    body = img[int(0.06 * height) : int(0.9 * height)]
+    white = [bool((body[:, j] >= 250).all()) for j in range(width)]
+    best = run = 0
+    for w in white:
+        run = run + 1 if w else 0
+        best = max(best, run)
+    return best / width
+
+
+def test_the_demo_prints_the_outcome_and_metrics_and_writes_both_figures(tmp_path: Path) -> None:
+    from hptvsim.cli import main
+
+    result = CliRunner().invoke(main, ["demo", "--out", str(tmp_path), "--duration", "20"])
+    assert result.exit_code == 0, result.output
+    out = result.output
+    assert re.search(
+        r"^outcome: (captured at \d+\.\d\d s \(step \d+\)|not captured \(\w+ after [\d.]+ s\))$", out, re.M
+    )
+    assert re.search(r"^collisions: (none|yes|.+ at [\d.]+ s)$", out, re.M)
+    assert re.search(r"^min distance: \d+\.\d\d m, pursuer to evader \(capture within 25 m\)$", out, re.M)
+    assert re.search(r"^steps: \d+ of at most 1200 \(dt 0\.25 s: [\d.]+ s simulated", out, re.M)
+    returns = re.search(r"^returns: (.+)$", out, re.M)
+    assert returns is not None
+    assert [p.split()[0] for p in returns.group(1).split(", ")] == [
+        "pursuer_0",
+        "pursuer_1",
+        "pursuer_2",
+        "evader_0",
+    ]
+    assert "Traceback" not in out
+    for name in ("trajectories.png", "episode.png"):
+        png = tmp_path / name
+        assert png.is_file() and str(png.resolve()) in out
+        assert _longest_white_run(png) < 0.05, name  # no blank gap between the panels
+
+
+def test_the_report_says_when_there_was_no_capture(short_episode: EpisodeResult) -> None:
+    lines = episode_report(short_episode, {"pursuer_1": 12.5})
+    text = "\n".join(lines)
+    assert "outcome: not captured (truncated after 50.00 s)" in text
+    assert "collisions: pursuer_1 at 12.50 s" in text
+    m = short_episode.summary.metrics
+    assert f"min distance: {m.min_distance:.2f} m" in text
+    assert "steps: 200 of at most 200" in text
+    assert f"pursuer_0 {m.returns['pursuer_0']:.1f}" in text
+    assert episode_report(short_episode)[3] == "collisions: none"
+
+
+def test_the_episode_figure_gives_each_agent_its_palette_colour(
+    short_episode: EpisodeResult, tmp_path: Path
+) -> None:
+    import matplotlib.pyplot as plt
+
+    fig = episode_figure(short_episode)
+    try:
+        ax_map, ax_d = fig.axes[0], fig.axes[1]
+        tracks = {
+            ln.get_label(): to_hex(ln.get_color())
+            for ln in ax_map.lines
+            if not ln.get_label().startswith("_")
+        }
+        names = [a.name for a in short_episode.static.agents]
+        assert tracks == {n: color_of(n) for n in names}
+        assert len(set(tracks.values())) == len(names) == 4
+        distances = {
+            ln.get_label(): to_hex(ln.get_color())
+            for ln in ax_d.lines
+            if ln.get_label().startswith("pursuer")
+        }
+        assert distances == {f"pursuer_{k}": agent_color("pursuer", k) for k in range(3)}
+        for ax in (ax_map, ax_d):
+            assert "[m]" in ax.get_ylabel() and re.search(r"\[(m|s)\]", ax.get_xlabel())
+        assert fig.axes[2].get_ylabel().startswith("seabed depth [m]")  # the depth bar
+        pixels = _pixels(fig, ax_map, tmp_path)
+        for name in names:  # every track, the evader's too, shows over the seabed
+            assert _count(pixels, color_of(name)) > 40, name
+    finally:
+        plt.close(fig)
+
+
+def test_the_trajectories_figure_uses_the_palette_and_labels_its_axes(tmp_path: Path) -> None:
+    import matplotlib.pyplot as plt
+
+    runs = {vt: simulate_manoeuvre(vt, 15.0) for vt in ("work_class", "spherical")}
+    assert {"work_class": color_of("pursuer_0"), "spherical": color_of("evader_0")} == VEHICLE_COLORS
+    fig = trajectories_figure(runs, 15.0)
+    try:
+        maps, (ax_u, ax_r) = fig.axes[:2], fig.axes[2:4]
+        for ax, vt in zip(maps, runs, strict=True):
+            assert {to_hex(ln.get_color()) for ln in ax.lines} == {VEHICLE_COLORS[vt]}
+            assert (ax.get_xlabel(), ax.get_ylabel()) == ("east y [m]", "north x [m]")
+            assert _count(_pixels(fig, ax, tmp_path), VEHICLE_COLORS[vt]) > 40, vt
+        assert ax_u.get_ylabel() == "surge speed u [m/s]" and ax_r.get_ylabel() == "yaw rate r [rad/s]"
+        assert ax_r.get_xlabel() == "time [s]"
+        for ax in (ax_u, ax_r):
+            assert {to_hex(ln.get_color()) for ln in ax.lines} == set(VEHICLE_COLORS.values())
+    finally:
+        plt.close(fig)
