@@ -185,17 +185,18 @@ def reward_curves(
             ax.text(
                 offset + max(n_max, 1) / 2,
                 1.01,
-                f"STT {s_idx + 1}: {stage}" if len(all_stages) > 1 else stage,
+                f"STT {s_idx + 1}\n{stage}" if len(all_stages) > 1 else stage,
                 transform=ax.get_xaxis_transform(),
                 ha="center",
                 va="bottom",
-                fontsize=8,
+                fontsize=7,
+                linespacing=0.9,
             )
             offset += n_max
         ax.set_xlabel("training episode (all stages in order)")
         ax.set_ylabel("average total reward per episode (dimensionless)")
         fig_no = {"pursuer": "Figs. 7, 9", "evader": "Figs. 8, 10"}.get(role, "")
-        ax.set_title(f"{names.get(role, role)}: mean over seeds, 95 % band (paper {fig_no})", pad=16)
+        ax.set_title(f"{names.get(role, role)}: mean over seeds, 95 % band (paper {fig_no})", pad=22)
         ax.legend(loc="best", fontsize=8)
         ax.grid(alpha=0.3)
         fig.tight_layout(rect=(0, 0.03, 1, 1))

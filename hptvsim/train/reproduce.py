@@ -1022,8 +1022,19 @@ def _experiment_section(
             written = make_figures([folder], fig_dir, with_trajectories=False, stages=stages)
         except FileNotFoundError:
             written = []
+        running = [
+            f"`runs/{e.setting}-seed{s}`"
+            for e in exp.entries
+            for s in plan.seeds
+            if results.progress[(e.setting, s)].startswith("training")
+        ]
         if written:
             w(f"Figures: `hptvsim figures {_rel(folder)} --out {_rel(fig_dir)}`.")
+            if running:
+                w(
+                    f"They include the episodes so far of runs still training ({', '.join(running)}); "
+                    "the tables do not."
+                )
             w("")
             for p in written:
                 w(f"![{p.stem}]({os.path.relpath(p, fig_root.parent)})")
