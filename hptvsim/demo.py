@@ -54,8 +54,6 @@ VEHICLE_COLORS: dict[str, str] = {
 """Colours of the manoeuvre demo's vehicles: those of the first pursuer and the first evader."""
 
 _OUTLINE = "#141414"  # dark edge drawn under every track, so any colour shows on any background
-_OBSTACLE = "#7a5c3a"  # obstacles at the operating depth (as the scenario maps)
-_LAND = "#d9c79a"  # seabed above the surface
 _GUIDE = "#555555"  # reference lines (capture distance, capture time)
 
 
@@ -187,37 +185,16 @@ def _seabed_cmap() -> Any:
 def _draw_seabed(ax: Any, fig: Any, world: World) -> None:
     """Shaded seabed depth (land in a land colour), obstacles filled and outlined, a depth bar."""
     from matplotlib import cm
-    from matplotlib.colors import LightSource, Normalize, to_rgb
+    from matplotlib.colors import Normalize
+
+    from hptvsim.world.render import draw_obstacles, shaded_depth
 
     hm = world.heightmap
-    g = hm.geometry
-    x0, x1, y0, y1 = g.extent
-    sea = hm.depth >= 0.0
-    lo, hi = (float(hm.depth[sea].min()), float(hm.depth[sea].max())) if sea.any() else (0.0, 1.0)
-    if hi - lo < 1e-6:
-        lo, hi = lo - 1.0, hi + 1.0
+    x0, x1, y0, y1 = hm.geometry.extent
     cmap = _seabed_cmap()
-    gx, gy = np.gradient(hm.depth, g.resolution)
-    steep = float(np.percentile(np.hypot(gx, gy), 95))  # relief as strong on any slopes
-    rgb = LightSource(azdeg=315.0, altdeg=40.0).shade(
-        -np.clip(hm.depth, lo, hi),
-        cmap=cmap.reversed(),
-        norm=Normalize(vmin=-hi, vmax=-lo),
-        blend_mode="soft",
-        vert_exag=min(3.0, 0.3 / steep) if steep > 0.0 else 1.0,
-        dx=g.resolution,
-        dy=g.resolution,
-    )
-    rgb[~sea, :3] = to_rgb(_LAND)
+    rgb, lo, hi = shaded_depth(hm, cmap)
     ax.imshow(rgb, origin="lower", extent=(y0, y1, x0, x1), interpolation="bilinear")
-    occ = world.obstacles
-    if occ.occupied.any():
-        ox0, ox1, oy0, oy1 = occ.geometry.extent
-        overlay = np.zeros((*occ.occupied.shape, 4))
-        overlay[occ.occupied] = (*to_rgb(_OBSTACLE), 0.8)
-        ax.imshow(overlay, origin="lower", extent=(oy0, oy1, ox0, ox1), interpolation="nearest")
-        xc, yc = occ.geometry.centres()
-        ax.contour(yc, xc, occ.occupied.astype(float), levels=[0.5], colors=_OUTLINE, linewidths=0.8)
+    draw_obstacles(ax, world.obstacles, alpha=0.8, edge=_OUTLINE, linewidth=0.8)
     bar = fig.colorbar(cm.ScalarMappable(norm=Normalize(vmin=lo, vmax=hi), cmap=cmap), ax=ax, shrink=0.85)
     bar.ax.invert_yaxis()  # deep at the bottom
     bar.set_label("seabed depth [m] (obstacles: brown)")

@@ -95,6 +95,12 @@ def _smooth(y: np.ndarray, window: int) -> np.ndarray:
     return np.convolve(padded, kernel, mode="valid")
 
 
+def _stack(series: Sequence[Sequence[float]], smooth: int) -> np.ndarray:
+    """Seeds' series cut to the shortest and smoothed, as ``(seeds, episodes)``."""
+    n = min(len(s) for s in series)
+    return np.stack([_smooth(np.asarray(s[:n], dtype=np.float64), smooth) for s in series])
+
+
 def _t_half(arr: np.ndarray) -> np.ndarray:
     """Half-width of the 95 % t interval of the mean over axis 0 (seeds)."""
     from scipy import stats
@@ -166,9 +172,9 @@ def reward_curves(
                 ]
                 if not series:
                     continue
-                n = min(len(s) for s in series)
+                arr = _stack(series, smooth)
+                n = arr.shape[1]
                 n_max = max(n_max, n)
-                arr = np.stack([_smooth(np.asarray(s[:n]), smooth) for s in series])
                 x = offset + np.arange(1, n + 1)
                 mean, half = arr.mean(0), _t_half(arr)
                 color = f"C{g_idx}"
@@ -245,9 +251,9 @@ def reward_agents_figure(
                 series = [r[key][agent] for r in runs if agent in r.get(key, {})]
                 if not series:
                     continue
-                n = min(len(v) for v in series)
+                arr = _stack(series, smooth)
+                n = arr.shape[1]
                 n_max = max(n_max, n)
-                arr = np.stack([_smooth(np.asarray(v[:n]), smooth) for v in series])
                 x = offset + np.arange(1, n + 1)
                 color = agent_color(agent, agents)
                 ax.plot(x, arr.mean(0), color=color, linewidth=1.2, label=agent if s_idx == 0 else None)

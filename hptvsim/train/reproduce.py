@@ -858,20 +858,6 @@ def _write_experiment_sweep(plan: Plan, exp: Experiment, out: Path) -> Path:
     return folder
 
 
-def _machine() -> str:
-    import platform
-
-    cpu = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}"
-
-
 def write_report(
     plan: Plan, out: Path, report: Path, *, figures: bool = True, command: str | None = None
 ) -> Path:
@@ -880,6 +866,8 @@ def write_report(
     Figures go to ``<report stem>/<experiment>/`` next to the report. A partial set of results
     gives a partial report that lists what is missing.
     """
+    from hptvsim.bench.common import machine_summary
+
     results = collect(plan, out)
     report.parent.mkdir(parents=True, exist_ok=True)
     fig_root = report.parent / report.stem
@@ -906,7 +894,7 @@ def write_report(
         f"{plan.evaluation.num_envs} environments per batch), the same for every run."
     )
     w(
-        f"- Runs finished: {n_done} of {len(jobs)}. Machine: {_machine()}. "
+        f"- Runs finished: {n_done} of {len(jobs)}. Machine: {machine_summary()}. "
         f"Written {time.strftime('%Y-%m-%d %H:%M')}."
     )
     w(

@@ -19,11 +19,18 @@ if TYPE_CHECKING:
     from hptvsim.world.scenario import Scenario
     from hptvsim.world.terrain import HeightMap
 
-__all__ = ["render_heightmap", "render_scenario"]
+__all__ = [
+    "LAND_COLOUR",
+    "OBSTACLE_COLOUR",
+    "draw_obstacles",
+    "render_heightmap",
+    "render_scenario",
+    "shaded_depth",
+]
 
 _ROLE_COLOURS = {role: agent_color(role, 0) for role in ROLES}  # a group's spawn region: its role's first
-_OBSTACLE_COLOUR = "#7a5c3a"
-_LAND_COLOUR = "#d9c79a"
+OBSTACLE_COLOUR = "#7a5c3a"  # obstacles at the operating depth
+LAND_COLOUR = "#d9c79a"  # seabed above the surface
 
 
 def _figure(extent: tuple[float, float, float, float]) -> tuple[Any, Any]:
@@ -39,24 +46,29 @@ def _figure(extent: tuple[float, float, float, float]) -> tuple[Any, Any]:
     return fig, ax
 
 
-def _relief(ax: Any, fig: Any, hm: HeightMap) -> None:
-    """Shaded seabed depth; land (depth < 0) in a land colour."""
-    from matplotlib import cm, colors
+def shaded_depth(hm: HeightMap, cmap: Any) -> tuple[np.ndarray, float, float]:
+    """The seabed depth as a shaded-relief RGBA image (land, depth < 0, in :data:`LAND_COLOUR`).
+
+    Args:
+        hm: The height map.
+        cmap: A matplotlib colormap from shallow (0) to deep (1).
+
+    Returns:
+        The image ``(nx, ny, 4)`` (row = north index; draw with ``origin="lower"``) and the
+        sea's depth range ``lo, hi`` [m] the colours span.
+    """
+    from matplotlib import colors
     from matplotlib.colors import LightSource
 
     g = hm.geometry
-    x_min, x_max, y_min, y_max = g.extent
     sea = hm.depth >= 0.0
     lo, hi = (float(hm.depth[sea].min()), float(hm.depth[sea].max())) if sea.any() else hm.depth_range
     if hi - lo < 1e-6:
         lo, hi = lo - 1.0, hi + 1.0
-    norm = colors.Normalize(vmin=lo, vmax=hi)
-    cmap = matplotlib_cmap("Blues")
-    ls = LightSource(azdeg=315.0, altdeg=40.0)
     # subtle relief whatever the slopes: exaggerate so the steep 5 % of slopes reach about 0.3
     gx, gy = np.gradient(hm.depth, g.resolution)
     steep = float(np.percentile(np.hypot(gx, gy), 95))
-    rgb = ls.shade(
+    rgb: np.ndarray = LightSource(azdeg=315.0, altdeg=40.0).shade(
         -np.clip(hm.depth, lo, hi),
         cmap=cmap.reversed(),
         norm=colors.Normalize(vmin=-hi, vmax=-lo),
@@ -65,10 +77,44 @@ def _relief(ax: Any, fig: Any, hm: HeightMap) -> None:
         dx=g.resolution,
         dy=g.resolution,
     )
-    rgb[~sea, :3] = _rgb(_LAND_COLOUR)
+    rgb[~sea, :3] = _rgb(LAND_COLOUR)
+    return rgb, lo, hi
+
+
+def draw_obstacles(
+    ax: Any, occ: Any, *, alpha: float = 0.85, edge: str = "black", linewidth: float = 0.6
+) -> None:
+    """Fill the occupied cells of an occupancy grid in :data:`OBSTACLE_COLOUR` and outline them.
+
+    Args:
+        ax: A matplotlib axes with east right and north up (metres).
+        occ: The :class:`~hptvsim.world.obstacles.OccupancyGrid` (``occupied``, ``geometry``).
+        alpha: Opacity of the fill.
+        edge: Colour of the outline.
+        linewidth: Width of the outline (points).
+    """
+    if not occ.occupied.any():
+        return
+    gx0, gx1, gy0, gy1 = occ.geometry.extent
+    overlay = np.zeros((*occ.occupied.shape, 4))
+    overlay[occ.occupied] = (*_rgb(OBSTACLE_COLOUR), alpha)
+    ax.imshow(overlay, origin="lower", extent=(gy0, gy1, gx0, gx1), interpolation="nearest")
+    xc, yc = occ.geometry.centres()
+    ax.contour(yc, xc, occ.occupied.astype(float), levels=[0.5], colors=edge, linewidths=linewidth)
+
+
+def _relief(ax: Any, fig: Any, hm: HeightMap) -> None:
+    """Shaded seabed depth; land (depth < 0) in a land colour."""
+    from matplotlib import cm, colors
+
+    x_min, x_max, y_min, y_max = hm.geometry.extent
+    cmap = matplotlib_cmap("Blues")
+    rgb, lo, hi = shaded_depth(hm, cmap)
     ax.imshow(rgb, origin="lower", extent=(y_min, y_max, x_min, x_max), interpolation="bilinear")
-    bar = fig.colorbar(cm.ScalarMappable(norm=norm, cmap=cmap), ax=ax, shrink=0.8, pad=0.02)
-    bar.set_label("seabed depth [m]" + ("; land: tan" if not sea.all() else ""))
+    bar = fig.colorbar(
+        cm.ScalarMappable(norm=colors.Normalize(vmin=lo, vmax=hi), cmap=cmap), ax=ax, shrink=0.8, pad=0.02
+    )
+    bar.set_label("seabed depth [m]" + ("; land: tan" if not (hm.depth >= 0.0).all() else ""))
 
 
 def matplotlib_cmap(name: str) -> Any:
@@ -117,13 +163,7 @@ def render_scenario(scenario: Scenario, path: str | Path, *, dpi: int = 110) -> 
     _relief(ax, fig, world.heightmap)
 
     occ = world.obstacles
-    if occ.occupied.any():
-        gx0, gx1, gy0, gy1 = occ.geometry.extent
-        overlay = np.zeros((*occ.occupied.shape, 4))
-        overlay[occ.occupied] = (*_rgb(_OBSTACLE_COLOUR), 0.85)
-        ax.imshow(overlay, origin="lower", extent=(gy0, gy1, gx0, gx1), interpolation="nearest")
-        xc, yc = occ.geometry.centres()
-        ax.contour(yc, xc, occ.occupied.astype(float), levels=[0.5], colors="black", linewidths=0.6)
+    draw_obstacles(ax, occ)
     ax.add_patch(Rectangle((y_min, x_min), y_max - y_min, x_max - x_min, fill=False, lw=1.5, ec="black"))
 
     handles = []
