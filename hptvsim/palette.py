@@ -6,8 +6,12 @@ and the ``hptvsim demo`` figures all take an agent's colour from here, so ``purs
 same colour everywhere. An agent's colour follows from its role and its index within the role
 (the number in its name, ``{role}_{index}``).
 
+The map colours live here too (the seabed's depth ramp :data:`DEPTH_STOPS`, obstacles, land,
+sonar), and the dashboard's generated module ``web/js/frames.gen.js`` carries them
+(:func:`display_constants`), so the browser draws with the same colours as Python.
+
 The colours are chosen to be told apart from each other and from the seabed's depth ramp
-(sand to dark blue, :data:`hptvsim.viz.style.DEPTH_STOPS`) and the dashboard's dark page:
+(sand to dark blue, :data:`DEPTH_STOPS`) and the dashboard's dark page:
 pursuers are warm (crimson, orange, pink, ...), evaders are bright and never blue or cyan
 (gold first), so an evader stays visible over deep water.
 
@@ -20,7 +24,10 @@ from collections.abc import Iterable, Mapping
 from typing import Final
 
 __all__ = [
+    "DEPTH_STOPS",
     "EVADER_COLORS",
+    "LAND_COLOR",
+    "OBSTACLE_COLOR",
     "PURSUER_COLORS",
     "ROLES",
     "SONAR_HIT_COLOR",
@@ -28,6 +35,7 @@ __all__ = [
     "agent_colors",
     "agent_rgb",
     "color_of",
+    "display_constants",
     "hex_rgb",
 ]
 
@@ -42,6 +50,20 @@ EVADER_COLORS: Final = ("#f2b400", "#9be22d", "#f2f2f2", "#ffe4a0")
 
 SONAR_HIT_COLOR: Final = "#ff3c3c"
 """Sonar hit points (the same for every vehicle)."""
+
+DEPTH_STOPS: Final[tuple[tuple[float, tuple[int, int, int]], ...]] = (
+    (0.0, (222, 196, 140)),  # shallow: sand
+    (0.35, (120, 170, 150)),
+    (0.7, (50, 110, 150)),
+    (1.0, (20, 40, 90)),  # deep: dark blue
+)
+"""Colour ramp of seabed depth, from the shallowest (0) to the deepest (1) depth of a scene."""
+
+OBSTACLE_COLOR: Final = "#7a5c3a"
+"""Obstacles at the operating depth (terrain the vehicles would hit)."""
+
+LAND_COLOR: Final = "#d9c79a"
+"""Seabed above the surface."""
 
 
 def agent_color(role: str, index: int) -> str:
@@ -112,3 +134,15 @@ def hex_rgb(color: str) -> tuple[int, int, int]:
 def agent_rgb(role: str, index: int) -> tuple[int, int, int]:
     """:func:`agent_color` as an ``(r, g, b)`` tuple of 0-255 integers."""
     return hex_rgb(agent_color(role, index))
+
+
+def display_constants() -> dict[str, object]:
+    """Every colour above as JSON-ready data (what the dashboard's generated module carries)."""
+    return {
+        "pursuer_colors": list(PURSUER_COLORS),
+        "evader_colors": list(EVADER_COLORS),
+        "sonar_hit_color": SONAR_HIT_COLOR,
+        "depth_stops": [[t, list(rgb)] for t, rgb in DEPTH_STOPS],
+        "obstacle_color": OBSTACLE_COLOR,
+        "land_color": LAND_COLOR,
+    }

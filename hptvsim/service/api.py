@@ -118,17 +118,42 @@ def _trajectory_table(svc: Service, row: EpisodeRow) -> Any:
 
 
 def trajectory_json(table: Any) -> dict[str, Any]:
-    """A trajectory table (agent-major rows) as the frame schema's ``Trajectories`` data."""
+    """A trajectory table (agent-major rows) as the frame schema's ``Trajectories`` data.
+
+    Columns an older episode did not store (the reward terms, the sonar ranges) come out as
+    None; sonar ranges are rounded to centimetres.
+    """
     from hptvsim.viz.frames import AgentTrajectory
 
+    names = set(table.column_names)
     data = table.to_pydict()
     agents = list(dict.fromkeys(data["agent"]))
     n_steps = len(data["step"]) // max(len(agents), 1)
     out: dict[str, Any] = {"step": data["step"][:n_steps], "time": data["time"][:n_steps], "agents": []}
     for k, name in enumerate(agents):
         rows = slice(k * n_steps, (k + 1) * n_steps)
-        out["agents"].append({"name": name, **{c: data[c][rows] for c in AgentTrajectory.COLUMNS}})
+        agent: dict[str, Any] = {"name": name}
+        for c in AgentTrajectory.COLUMNS:
+            agent[c] = data[c][rows] if c in names else None
+        agent["ranges"] = (
+            [[round(v, 2) for v in r] for r in data["ranges"][rows]] if "ranges" in names else None
+        )
+        out["agents"].append(agent)
     return out
+
+
+def trajectory_csv(table: Any) -> bytes:
+    """A trajectory table as CSV; each row's sonar ranges become one space-separated field."""
+    import pyarrow as pa
+    import pyarrow.csv as pacsv
+
+    if "ranges" in table.column_names:
+        text = [" ".join(f"{v:.2f}" for v in r) for r in table.column("ranges").to_pylist()]
+        i = table.column_names.index("ranges")
+        table = table.set_column(i, "ranges", pa.array(text, pa.string()))
+    buf = io.BytesIO()
+    pacsv.write_csv(table, buf)
+    return buf.getvalue()
 
 
 async def _events(
@@ -266,6 +291,26 @@ def build_routers(settings: Settings) -> tuple[APIRouter, APIRouter]:
             await svc.render_map(str(name), cache)
         return FileResponse(cache, media_type="image/png", headers={"Cache-Control": "max-age=3600"})
 
+    @router.get("/scenarios/{name}/preview", tags=["scenarios"])
+    async def scenario_preview(
+        name: Annotated[ScenarioName, Path()],  # type: ignore[valid-type]  # an enum of the catalog
+        svc: Svc,
+    ) -> Response:
+        """The scenario as an episode would start: ``{static, frame}`` in the frame schema.
+
+        ``static`` is the episode's static part (site, seabed mesh, obstacle map, agents and
+        their sonars), ``frame`` the frame after reset with the spawn poses of the scenario's
+        seed. The dashboard draws its scenario preview from it.
+        """
+        from hptvsim.world.scenario import scenario_dir
+
+        source = scenario_dir() / f"{name}.toml"
+        cache = svc.settings.data_dir / "maps" / f"{name}-{source.stat().st_mtime_ns}.json"
+        if not cache.is_file():
+            cache.parent.mkdir(parents=True, exist_ok=True)
+            await svc.scenario_preview(str(name), cache)
+        return FileResponse(cache, media_type="application/json", headers={"Cache-Control": "max-age=3600"})
+
     @router.get("/policies", response_model=list[PolicyOut], tags=["policies"])
     def list_policies_route(
         role: Annotated[
@@ -393,12 +438,8 @@ def build_routers(settings: Settings) -> tuple[APIRouter, APIRouter]:
             return JSONResponse(trajectory_json(table))
         name = f"{row.id}-trajectory"
         if format == "csv":
-            import pyarrow.csv as pacsv
-
-            buf = io.BytesIO()
-            pacsv.write_csv(table, buf)
             return Response(
-                buf.getvalue(),
+                trajectory_csv(table),
                 media_type="text/csv",
                 headers={"Content-Disposition": f'attachment; filename="{name}.csv"'},
             )

@@ -206,7 +206,8 @@ def write_outputs(
         out_dir / STATIC_FILE, json.dumps(static if static is not None else result.static.to_dict())
     )
     cols = result.trajectories.columns()
-    table = pa.table({k: (pa.array(v.tolist(), pa.string()) if k == "agent" else v) for k, v in cols.items()})
+    kinds = {"agent": pa.string(), "ranges": pa.list_(pa.float32())}  # others: numpy's dtype
+    table = pa.table({k: (pa.array(v.tolist(), kinds[k]) if k in kinds else v) for k, v in cols.items()})
     traj = out_dir / TRAJECTORY_FILE
     tmp = out_dir / (TRAJECTORY_FILE + ".tmp")
     pq.write_table(table, tmp)

@@ -33,8 +33,26 @@ MEMORY_LIMIT_BYTES = 4 << 30
 """Address space a preparation process may use (a scenario that needs more is refused)."""
 
 
+def _preview(name: str, path: str) -> str:
+    """Write a shipped scenario's preview: its frames' static part and the frame after reset.
+
+    The spawn poses are those of the scenario's own seed; every agent is left external, so no
+    policy is loaded.
+    """
+    from hptvsim.catalog import shipped_scenario
+    from hptvsim.service.engine import static_dict, write_json_atomic
+    from hptvsim.viz.episode import EXTERNAL, EpisodeStepper
+
+    scenario = shipped_scenario(name)
+    agents = [a.name for a in scenario.agents]
+    with EpisodeStepper(scenario, dict.fromkeys(agents, EXTERNAL)) as stepper:
+        data = {"static": static_dict(stepper.static), "frame": stepper.frame.to_dict()}
+    write_json_atomic(Path(path), data)
+    return path
+
+
 def _prep_main(conn: multiprocessing.connection.Connection) -> None:
-    """A preparation process: answer ``resolve`` and ``map`` requests in order."""
+    """A preparation process: answer ``resolve``, ``map`` and ``preview`` requests in order."""
     from hptvsim.service.workers import _child_setup
 
     _child_setup(preload=False)
@@ -68,6 +86,8 @@ def _prep_main(conn: multiprocessing.connection.Connection) -> None:
                 render_scenario(shipped_scenario(args["name"]), tmp)
                 tmp.replace(out)
                 payload = str(out)
+            elif op == "preview":
+                payload = _preview(args["name"], args["path"])
             else:
                 raise ValueError(f"unknown request {op!r}")
             conn.send((req_id, "ok", payload))
@@ -131,7 +151,7 @@ class PrepPool:
         """Run ``op`` in a free process within the time limit.
 
         Args:
-            op: ``"resolve"`` or ``"map"``.
+            op: ``"resolve"``, ``"map"`` or ``"preview"``.
             args: Its arguments (picklable).
             what: The request field an overrun or a failure is blamed on.
 

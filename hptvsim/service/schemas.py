@@ -192,6 +192,9 @@ class ScenarioOut(BaseModel):
     colors: dict[str, str] = Field(
         description="each agent's display colour `#rrggbb` (hptvsim.palette: the same in every view)"
     )
+    default_policies: dict[str, str] = Field(
+        description="the policy each role follows when a request names none (hptvsim.zoo.default_policy)"
+    )
     max_steps: int
     dt: float
 

@@ -303,6 +303,13 @@ class Service:
         """Draw a shipped scenario's map into ``path`` (in a preparation process)."""
         await self.prep.call("map", {"name": name, "path": str(path)}, what="name")
 
+    async def scenario_preview(self, name: str, path: Path) -> None:
+        """Write a shipped scenario's preview (static part, frame after reset) into ``path``.
+
+        In a preparation process: building the scenario costs a second or more.
+        """
+        await self.prep.call("preview", {"name": name, "path": str(path)}, what="name")
+
     # -- interactive stepping ----------------------------------------------------------------------
 
     def _interactive(self, episode_id: str) -> _Live:

@@ -73,7 +73,8 @@ def shipped_scenario(name: str) -> Any:
 
 def scenario_summary(scenario: Any) -> dict[str, Any]:
     """What the scenario list shows about a scenario (with each agent's display colour)."""
-    from hptvsim.palette import agent_colors
+    from hptvsim.palette import ROLES, agent_colors
+    from hptvsim.zoo import default_policy
 
     agents = scenario.agents
     return {
@@ -84,6 +85,7 @@ def scenario_summary(scenario: Any) -> dict[str, Any]:
         "agents": [a.name for a in agents],
         "roles": {a.name: a.role for a in agents},
         "colors": agent_colors((a.name, a.role) for a in agents),
+        "default_policies": {role: default_policy(role, scenario.task.kind) for role in ROLES},
         "max_steps": int(scenario.simulation.max_steps),
         "dt": float(scenario.simulation.dt),
     }

@@ -36,7 +36,6 @@ from hptvsim.train.evaluate import EpisodeMetrics
 from hptvsim.viz.frames import (
     AgentInfo,
     AgentState,
-    AgentTrajectory,
     EpisodeStatic,
     EpisodeSummary,
     Frame,
@@ -45,8 +44,11 @@ from hptvsim.viz.frames import (
     SiteInfo,
     Trajectories,
     agent_color,
+    append_state,
+    empty_columns,
     obstacle_summary,
     terrain_mesh,
+    trajectory_of,
 )
 from hptvsim.world.scenario import Scenario, ScenarioError, list_scenarios, load_scenario, scenario_dir
 
@@ -273,9 +275,7 @@ class _Columns:
         self.pursuer = pursuer
         self.step: list[int] = []
         self.time: list[float] = []
-        self.cols: dict[str, dict[str, list[float]]] = {
-            n: {c: [] for c in AgentTrajectory.COLUMNS} for n in names
-        }
+        self.cols: dict[str, dict[str, list[Any]]] = {n: empty_columns() for n in names}
         self.captured_at: int | None = None
         self.collision = False
         self.distances: list[float] = []
@@ -285,18 +285,7 @@ class _Columns:
         self.step.append(frame.step)
         self.time.append(frame.time)
         for a in frame.agents:
-            c: dict[str, list[float]] = self.cols[a.name]
-            c["x"].append(a.x)
-            c["y"].append(a.y)
-            c["psi"].append(a.psi)
-            c["u"].append(a.u)
-            c["v"].append(a.v)
-            c["r"].append(a.r)
-            c["v_cmd"].append(a.action[0])
-            c["omega_cmd"].append(a.action[1])
-            c["reward"].append(a.reward)
-            c["distance"].append(a.distance)
-            c["min_range"].append(a.min_range)
+            append_state(self.cols[a.name], a)
         if frame.step == 0:
             return
         # the evaluation's definitions (hptvsim.train.evaluate.run_episode)
@@ -316,9 +305,7 @@ class _Columns:
         return Trajectories(
             step=tuple(self.step),
             time=tuple(self.time),
-            agents=tuple(
-                AgentTrajectory(name=n, **{k: tuple(v) for k, v in self.cols[n].items()}) for n in self.names
-            ),
+            agents=tuple(trajectory_of(n, self.cols[n]) for n in self.names),
         )
 
     def metrics(self, seed: int, length: int, dt: float, returns: dict[str, float]) -> EpisodeMetrics:
@@ -642,12 +629,16 @@ class EpisodeStepper:
         n = core.num_agents
         if result is None:
             reward = [0.0] * n
+            r_C = r_E1 = r_E2 = reward
             falses = [False] * n
             terminated = truncated = collision = out_of_site = reached = falses
             captured = trunc_all = done = False
         else:
             f = result.flags
             reward = result.reward[0].tolist()
+            r_C = result.terms.r_C[0].tolist()
+            r_E1 = result.terms.r_E1[0].tolist()
+            r_E2 = result.terms.r_E2[0].tolist()
             terminated = result.terminated[0].tolist()
             truncated = result.truncated[0].tolist()
             collision = f.collision[0].tolist()
@@ -676,6 +667,9 @@ class EpisodeStepper:
                 action=(act[i][0], act[i][1]),
                 reward=reward[i],
                 episode_return=ret[i],
+                r_C=r_C[i],
+                r_E1=r_E1[i],
+                r_E2=r_E2[i],
                 distance=dist[i],
                 min_range=min_range[i],
                 ranges=tuple(ranges[i].tolist()) if sonar else None,

@@ -43,7 +43,7 @@ from typing import Any, ClassVar, Final, Literal, Self, TypeVar, get_args, get_o
 import numpy as np
 import numpy.typing as npt
 
-from hptvsim.palette import agent_color  # re-exported: the one palette of every view
+from hptvsim.palette import agent_color, display_constants  # the one palette of every view
 from hptvsim.train.evaluate import EpisodeMetrics
 
 __all__ = [
@@ -63,11 +63,14 @@ __all__ = [
     "TerrainMesh",
     "Trajectories",
     "agent_color",
+    "append_state",
+    "empty_columns",
     "from_dict",
     "json_schema",
     "obstacle_summary",
     "terrain_mesh",
     "to_dict",
+    "trajectory_of",
 ]
 
 F64 = npt.NDArray[np.float64]
@@ -319,8 +322,11 @@ class AgentState(SchemaObject):
         r: Yaw rate [rad/s].
         action: The command applied during the step ``[v, omega]`` [m/s, rad/s] (Eq. 16,
             clipped to Eq. 15's box; zero once the agent is done and in the reset frame).
-        reward: Reward of the step (Eq. 20).
+        reward: Reward of the step (Eq. 20: ``delta_C r_C + delta_E1 r_E1 + delta_E2 r_E2``).
         episode_return: Sum of rewards so far.
+        r_C: The step's obstacle term (Eq. 17), before its weight ``delta_C``.
+        r_E1: The step's approach term (Eq. 18), before its weight ``delta_E1``.
+        r_E2: The step's capture term (Eq. 19), before its weight ``delta_E2``.
         distance: Distance to the target [m] (pursuer: the evader; evader: the nearest pursuer;
             goto: the goal).
         min_range: Smallest sonar range [m].
@@ -347,6 +353,9 @@ class AgentState(SchemaObject):
     episode_return: float
     distance: float
     min_range: float
+    r_C: float = 0.0
+    r_E1: float = 0.0
+    r_E2: float = 0.0
     ranges: tuple[float, ...] | None = None
     hits: tuple[tuple[float, float], ...] | None = None
     obs: tuple[float, ...] | None = None
@@ -432,9 +441,15 @@ class AgentTrajectory(SchemaObject):
         r: Yaw rate [rad/s].
         v_cmd: Commanded surge speed [m/s].
         omega_cmd: Commanded yaw rate [rad/s].
-        reward: Reward of the step.
+        reward: Reward of the step (Eq. 20).
         distance: Distance to the target [m].
         min_range: Smallest sonar range [m].
+        r_C: Obstacle term of each step (Eq. 17, unweighted; None in trajectories stored before
+            the terms were).
+        r_E1: Approach term of each step (Eq. 18, unweighted; None likewise).
+        r_E2: Capture term of each step (Eq. 19, unweighted; None likewise).
+        ranges: Sonar ranges per beam [m] of each step; an empty tuple at steps whose frame
+            carried no sonar (``FrameOptions.sonar_every``); None when not stored at all.
     """
 
     name: str
@@ -449,6 +464,10 @@ class AgentTrajectory(SchemaObject):
     reward: tuple[float, ...]
     distance: tuple[float, ...]
     min_range: tuple[float, ...]
+    r_C: tuple[float, ...] | None = None
+    r_E1: tuple[float, ...] | None = None
+    r_E2: tuple[float, ...] | None = None
+    ranges: tuple[tuple[float, ...], ...] | None = None
 
     COLUMNS: ClassVar[tuple[str, ...]] = (
         "x",
@@ -462,7 +481,11 @@ class AgentTrajectory(SchemaObject):
         "reward",
         "distance",
         "min_range",
+        "r_C",
+        "r_E1",
+        "r_E2",
     )
+    """The scalar columns, one value per step (the long table's columns after ``step, time, agent``)."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -485,25 +508,14 @@ class Trajectories(SchemaObject):
         if not frames:
             return cls(step=(), time=(), agents=())
         names = [a.name for a in frames[0].agents]
-        cols: dict[str, dict[str, list[float]]] = {n: {c: [] for c in AgentTrajectory.COLUMNS} for n in names}
+        cols: dict[str, dict[str, list[Any]]] = {n: empty_columns() for n in names}
         for f in frames:
             for a in f.agents:
-                c = cols[a.name]
-                c["x"].append(a.x)
-                c["y"].append(a.y)
-                c["psi"].append(a.psi)
-                c["u"].append(a.u)
-                c["v"].append(a.v)
-                c["r"].append(a.r)
-                c["v_cmd"].append(a.action[0])
-                c["omega_cmd"].append(a.action[1])
-                c["reward"].append(a.reward)
-                c["distance"].append(a.distance)
-                c["min_range"].append(a.min_range)
+                append_state(cols[a.name], a)
         return cls(
             step=tuple(f.step for f in frames),
             time=tuple(f.time for f in frames),
-            agents=tuple(AgentTrajectory(name=n, **{k: tuple(v) for k, v in cols[n].items()}) for n in names),
+            agents=tuple(trajectory_of(n, cols[n]) for n in names),
         )
 
     def agent(self, name: str) -> AgentTrajectory:
@@ -520,7 +532,9 @@ class Trajectories(SchemaObject):
     def columns(self) -> dict[str, npt.NDArray[Any]]:
         """Long table (one row per step and agent) as columns: ``step, time, agent, x, y, ...``.
 
-        What the service writes as CSV or Parquet.
+        What the service writes as CSV or Parquet. A column that some agent lacks (a trajectory
+        stored before it existed) is left out. ``ranges``, when every agent has them, is an object
+        column holding each row's list of beam ranges [m] (empty where the step had no sonar).
         """
         n_rows = len(self.step) * len(self.agents)
         out: dict[str, npt.NDArray[Any]] = {
@@ -529,13 +543,54 @@ class Trajectories(SchemaObject):
             "agent": np.repeat(np.asarray([a.name for a in self.agents], dtype=object), len(self.step)),
         }
         for c in AgentTrajectory.COLUMNS:
+            if any(getattr(a, c) is None for a in self.agents):
+                continue
             out[c] = (
                 np.concatenate([np.asarray(getattr(a, c), dtype=np.float64) for a in self.agents])
                 if self.agents
                 else np.zeros(0)
             )
+        if self.agents and all(a.ranges is not None for a in self.agents):
+            rows = np.empty(n_rows, dtype=object)
+            rows[:] = [list(r) for a in self.agents for r in (a.ranges or ())]
+            out["ranges"] = rows
         assert all(v.shape == (n_rows,) for v in out.values())
         return out
+
+
+def empty_columns() -> dict[str, list[Any]]:
+    """Empty per-agent trajectory columns (:attr:`AgentTrajectory.COLUMNS` and ``ranges``)."""
+    cols: dict[str, list[Any]] = {c: [] for c in AgentTrajectory.COLUMNS}
+    cols["ranges"] = []
+    return cols
+
+
+def append_state(cols: dict[str, list[Any]], a: AgentState) -> None:
+    """Append one agent's state after a step to its trajectory columns (see :func:`empty_columns`)."""
+    cols["x"].append(a.x)
+    cols["y"].append(a.y)
+    cols["psi"].append(a.psi)
+    cols["u"].append(a.u)
+    cols["v"].append(a.v)
+    cols["r"].append(a.r)
+    cols["v_cmd"].append(a.action[0])
+    cols["omega_cmd"].append(a.action[1])
+    cols["reward"].append(a.reward)
+    cols["distance"].append(a.distance)
+    cols["min_range"].append(a.min_range)
+    cols["r_C"].append(a.r_C)
+    cols["r_E1"].append(a.r_E1)
+    cols["r_E2"].append(a.r_E2)
+    cols["ranges"].append(a.ranges if a.ranges is not None else ())
+
+
+def trajectory_of(name: str, cols: dict[str, list[Any]]) -> AgentTrajectory:
+    """The :class:`AgentTrajectory` of columns filled by :func:`append_state`."""
+    return AgentTrajectory(
+        name=name,
+        **{k: tuple(v) for k, v in cols.items() if k != "ranges"},
+        ranges=tuple(tuple(r) for r in cols["ranges"]),
+    )
 
 
 # --- building the static part -----------------------------------------------------------------
@@ -933,5 +988,8 @@ def schema_js(schema: Mapping[str, Any] | None = None) -> str:
     lines.append(f"export const SCHEMA_VERSION = {json.dumps(s['version'])};")
     lines.append("")
     lines.append(f"export const FRAME_SCHEMA = {json.dumps(s, indent=2)};")
+    lines.append("")
+    lines.append("/** The display colours of every view (hptvsim/palette.py). */")
+    lines.append(f"export const DISPLAY = {json.dumps(display_constants())};")
     lines.append("")
     return "\n".join(lines)

@@ -1,4 +1,4 @@
-"""Colours shared by the views (rerun, viser; the dashboard's JavaScript mirrors ``depth_color``).
+"""Colours shared by the views (rerun, viser; the dashboard gets the same through ``frames.gen.js``).
 
 The agents' colours are :mod:`hptvsim.palette` (one palette for every view and every layer).
 """
@@ -8,17 +8,10 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from hptvsim.palette import hex_rgb
+from hptvsim.palette import DEPTH_STOPS, hex_rgb
 
 __all__ = ["DEPTH_STOPS", "depth_colors", "hex_rgb"]
 
-DEPTH_STOPS: tuple[tuple[float, tuple[int, int, int]], ...] = (
-    (0.0, (222, 196, 140)),  # shallow: sand
-    (0.35, (120, 170, 150)),
-    (0.7, (50, 110, 150)),
-    (1.0, (20, 40, 90)),  # deep: dark blue
-)
-"""Colour ramp of seabed depth, from the shallowest (0) to the deepest (1) depth of a scene."""
 
 
 def depth_colors(depth: npt.ArrayLike, depth_range: tuple[float, float]) -> npt.NDArray[np.uint8]:

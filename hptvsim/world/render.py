@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from hptvsim.palette import ROLES, agent_color
+from hptvsim.palette import LAND_COLOR, OBSTACLE_COLOR, ROLES, agent_color
 
 if TYPE_CHECKING:
     from hptvsim.world.scenario import Scenario
@@ -29,8 +29,8 @@ __all__ = [
 ]
 
 _ROLE_COLOURS = {role: agent_color(role, 0) for role in ROLES}  # a group's spawn region: its role's first
-OBSTACLE_COLOUR = "#7a5c3a"  # obstacles at the operating depth
-LAND_COLOUR = "#d9c79a"  # seabed above the surface
+OBSTACLE_COLOUR = OBSTACLE_COLOR  # obstacles at the operating depth (hptvsim.palette)
+LAND_COLOUR = LAND_COLOR  # seabed above the surface (hptvsim.palette)
 
 
 def _figure(extent: tuple[float, float, float, float]) -> tuple[Any, Any]:

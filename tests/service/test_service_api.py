@@ -14,6 +14,7 @@ import pyarrow.parquet as pq
 import pytest
 from service_helpers import Server, wait_final
 
+from hptvsim.catalog import shipped_scenario
 from hptvsim.client import Client, ServiceError
 from hptvsim.viz.frames import EpisodeStatic, EpisodeSummary, Frame, Trajectories
 from hptvsim.viz.recording import read_recording
@@ -39,6 +40,19 @@ def test_health_scenarios_policies_config(server: Server, api: httpx.Client) -> 
     png = api.get("/scenarios/target/map.png")
     assert png.status_code == 200 and png.headers["content-type"] == "image/png"
     assert png.content[:8] == b"\x89PNG\r\n\x1a\n" and len(png.content) > 10_000
+    # the defaults each role follows, from the zoo (the dashboard preselects them)
+    assert scenarios["target"]["default_policies"] == {
+        role: default_policy(role, "pursuit") for role in ("pursuer", "evader")
+    }
+    # the preview: the static part and the frame after reset, in the frame schema
+    preview = api.get("/scenarios/target/preview")
+    assert preview.status_code == 200, preview.text
+    pv_static = EpisodeStatic.from_dict(preview.json()["static"])
+    pv_frame = Frame.from_dict(preview.json()["frame"])
+    assert pv_static.scenario == "target" and pv_frame.step == 0
+    assert [a.name for a in pv_frame.agents] == list(pv_static.agent_names)
+    assert all(a.ranges is not None for a in pv_frame.agents)
+    assert api.get("/scenarios/nope/preview").status_code == 422
     # an unknown name is outside the schema's enum of shipped scenarios: 422 listing them
     nope = api.get("/scenarios/nope/map.png")
     assert nope.status_code == 422 and "goto_tiny" in nope.json()["detail"]
@@ -98,6 +112,19 @@ def test_run_stream_results_and_recording(server: Server, api: httpx.Client, tmp
     table = pq.read_table(io.BytesIO(parquet.content)).to_pydict()
     k = [i for i, a in enumerate(table["agent"]) if a == "evader_0"]
     assert [table["x"][i] for i in k] == list(traj.agent("evader_0").x)
+    # the reward terms and the sonar ranges of every step are stored (the dashboard replays them)
+    ev = traj.agent("evader_0")
+    assert ev.r_C is not None and ev.r_E1 is not None and ev.r_E2 is not None and ev.ranges is not None
+    assert len(ev.r_C) == n + 1 and all(len(r) == len(static.agents[3].beam_angles) for r in ev.ranges)
+    assert [table["r_E1"][i] for i in k] == list(ev.r_E1)
+    assert np.allclose([table["ranges"][i] for i in k], ev.ranges, atol=0.006)  # JSON: centimetres
+    assert "ranges" in header and "r_C" in header
+    w = shipped_scenario("target").task.reward
+    for agent in traj.agents:  # the terms add up to the reward (Eq. 20, the scenario's weights)
+        assert agent.r_C is not None and agent.r_E1 is not None and agent.r_E2 is not None
+        total = w.delta_C * np.asarray(agent.r_C) + w.delta_E1 * np.asarray(agent.r_E1)
+        total += w.delta_E2 * np.asarray(agent.r_E2)
+        assert np.allclose(total, agent.reward)
     # the recording reads back with the same trajectories (rerun stores poses as float32)
     rrd = tmp_path / "episode.rrd"
     with Client(server.url) as client:

@@ -1,9 +1,10 @@
-// The hptvsim dashboard: create, run, watch and cancel episodes; browse the episode list.
+// The hptvsim dashboard: create, run, watch and cancel episodes; scrub finished ones; compare
+// episodes on one timeline; browse the episode list.
 // Talks to the service's REST API under /api/v1 and its server-sent events; live data follow the
 // frame schema (frames.gen.js, generated from hptvsim/viz/frames.py) and are checked against it.
 
 import { validate, VERSION } from "./schema.js";
-import { TopDownMap, lineChart } from "./draw.js";
+import { TopDownMap, panelChart, lineChart, rangeColor, EPISODE_COLORS, EPISODE_DASHES } from "./draw.js";
 
 const API = "/api/v1";
 const ACTIVE = new Set(["queued", "running"]);
@@ -15,7 +16,9 @@ const state = {
   scenarios: [],
   policies: [],
   episodes: [],
-  current: null, // {id, static, series, es, status}
+  current: null, // {id, static, series, traj, es, status, episode}
+  compare: null, // {items: [{id, episode, static, traj, map}], t: [s], playing}
+  compareIds: new Set(),
   schemaErrors: [],
   framesSeen: 0,
   lastFrame: null,
@@ -68,9 +71,9 @@ function checkSchema(kind, data) {
     state.schemaErrors.push(...errors.slice(0, 5));
     console.warn(`frame schema: ${kind} does not conform`, errors);
   }
-  $("schema-state").textContent =
-    `frame schema ${VERSION}: ${state.framesSeen} frames checked` +
-    (state.schemaErrors.length ? `, ${state.schemaErrors.length} problems (see the console)` : ", all conform");
+  $("schema-state").textContent = state.schemaErrors.length
+    ? ` (${state.schemaErrors.length} values did not: see the browser console)`
+    : "";
   return data;
 }
 
@@ -85,6 +88,7 @@ async function loadConfig() {
   try {
     state.config = await api("/config");
     $("service-state").textContent = `service ${state.config.version || ""} up`;
+    $("footer-version").textContent = `hptvsim ${state.config.version || ""}`;
     $("service-state").className = "pill ok";
     $("key-box").hidden = !state.config.auth;
     if (state.config.viser_url) {
@@ -118,12 +122,14 @@ async function loadChoices() {
   const byRole = (role) => state.policies.filter((p) => p.roles.includes(role)).map((p) => option(p.name));
   $("f-pursuer-policy").replaceChildren(...byRole("pursuer"));
   $("f-evader-policy").replaceChildren(...byRole("evader"));
-  $("f-pursuer-policy").value = "scripted:pure_pursuit";
-  $("f-evader-policy").value = "scripted:potential_field";
-  showScenario();
+  showScenario(true);
 }
 
-function showScenario() {
+const previewMap = new TopDownMap($("scenario-canvas"), { compact: true });
+const previews = new Map();
+
+/** The scenario's description, its map (drawn like the episode map) and its default policies. */
+async function showScenario(setDefaults = true) {
   const s = state.scenarios.find((x) => x.name === $("f-scenario").value);
   if (!s) return;
   const n = s.agents.length;
@@ -132,8 +138,37 @@ function showScenario() {
   $("scenario-info").textContent =
     `${s.description || ""} ${s.task} task, ${s.site_size[0]} m × ${s.site_size[1]} m, ` +
     `${p} pursuer(s) and ${n - p} evader(s), dt ${s.dt} s, up to ${s.max_steps} steps.`;
-  $("scenario-map").src = withKey(`${API}/scenarios/${encodeURIComponent(s.name)}/map.png`);
   $("f-max-steps").placeholder = `scenario's (${s.max_steps})`;
+  if (setDefaults && s.default_policies) {
+    // the service's defaults (hptvsim.zoo.default_policy): the shipped trained policies
+    for (const [role, id] of [["pursuer", "f-pursuer-policy"], ["evader", "f-evader-policy"]]) {
+      const want = s.default_policies[role];
+      if ([...$(id).options].some((o) => o.value === want)) $(id).value = want;
+    }
+  }
+  const legend = $("scenario-legend");
+  legend.replaceChildren(
+    ...s.agents.map((a) => {
+      const span = document.createElement("span");
+      span.className = "key";
+      span.style.setProperty("--c", s.colors[a]);
+      span.textContent = a;
+      return span;
+    }),
+  );
+  try {
+    let pv = previews.get(s.name);
+    if (!pv) {
+      pv = await api(`/scenarios/${encodeURIComponent(s.name)}/preview`);
+      previews.set(s.name, pv);
+    }
+    if ($("f-scenario").value !== s.name) return;
+    previewMap.setStatic(checkSchema("EpisodeStatic", pv.static));
+    previewMap.caption = "spawn poses";
+    previewMap.showFrame(checkSchema("Frame", pv.frame));
+  } catch (err) {
+    $("scenario-info").textContent += ` (no map: ${err.message})`;
+  }
 }
 
 // --- creating and cancelling ------------------------------------------------------------------
@@ -178,18 +213,79 @@ async function cancelCurrent() {
   }
 }
 
+// --- series for the plots --------------------------------------------------------------------
+
+const TERMS = [
+  ["r_C", "Σ r_C, obstacle within the safe distance (Eq. 17)"],
+  ["r_E1", "Σ r_E1, closing on the target (Eq. 18)"],
+  ["r_E2", "Σ r_E2, target within capture distance (Eq. 19)"],
+];
+
+function newSeries(st) {
+  const per = () => new Map(st.agents.map((a) => [a.name, []]));
+  return { t: [], distance: per(), terms: { r_C: per(), r_E1: per(), r_E2: per() }, hasTerms: true };
+}
+
+/** Series of a finished episode's trajectories: distances and the running sums of the terms. */
+function seriesOfTrajectory(st, traj) {
+  const s = newSeries(st);
+  s.t = traj.time;
+  for (const a of traj.agents) {
+    s.distance.set(a.name, a.distance);
+    for (const [term] of TERMS) {
+      if (!a[term]) {
+        s.hasTerms = false;
+        continue;
+      }
+      let acc = 0;
+      s.terms[term].set(a.name, a[term].map((r) => (acc += r)));
+    }
+  }
+  return s;
+}
+
+function addFrame(s, f) {
+  s.t.push(f.time);
+  for (const a of f.agents) {
+    s.distance.get(a.name)?.push(a.distance);
+    for (const [term] of TERMS) {
+      const ys = s.terms[term].get(a.name);
+      if (ys) ys.push((ys.length ? ys[ys.length - 1] : 0) + (f.step === 0 ? 0 : a[term]));
+    }
+  }
+}
+
+/** Distance and reward-term plots of one episode; cursor: a time [s] to mark. */
+function drawEpisodePlots(st, series, cursor) {
+  const info = st.agents;
+  const pursuit = st.task === "pursuit";
+  const shown = pursuit ? info.filter((a) => a.role === "pursuer") : info;
+  const mk = (m, agents) =>
+    agents.map((a) => ({ label: a.name, color: a.color, xs: series.t, ys: m.get(a.name) || [] }));
+  lineChart($("plot-distance"), mk(series.distance, shown), {
+    title: pursuit ? "distance from each pursuer to the evader" : "distance to the goal",
+    ylabel: "distance [m]",
+    xlabel: "simulated time [s]",
+    hline: pursuit ? { y: st.capture_distance, label: `capture (${st.capture_distance} m)` } : null,
+    cursor,
+  });
+  panelChart(
+    $("plot-terms"),
+    TERMS.map(([term, title]) => ({ title, ylabel: "reward", series: series.hasTerms ? mk(series.terms[term], info) : [] })),
+    {
+      xlabel: "simulated time [s]",
+      cursor,
+      empty: series.hasTerms ? "no data yet" : "this episode was stored without its reward terms",
+    },
+  );
+}
+
 // --- watching one episode ---------------------------------------------------------------------
 
 const map = new TopDownMap($("map-canvas"));
+state.map = map;
+state.rangeColor = rangeColor; // the sonar colour of a range fraction (tests check pixels against it)
 let redrawPending = false;
-
-function newSeries(st) {
-  return {
-    t: [],
-    distance: new Map(st.agents.map((a) => [a.name, []])),
-    ret: new Map(st.agents.map((a) => [a.name, []])),
-  };
-}
 
 function setStatus(status) {
   const b = $("live-status");
@@ -199,15 +295,25 @@ function setStatus(status) {
   if (state.current) state.current.status = status;
 }
 
+function setTimeline(enabled, n = 0) {
+  stopPlaying();
+  $("scrub").disabled = !enabled;
+  $("play-button").disabled = !enabled;
+  $("scrub").max = String(Math.max(0, n - 1));
+  if (!enabled) $("scrub-time").textContent = "live";
+}
+
 function watch(ep) {
   if (state.current?.es) state.current.es.close();
-  state.current = { id: ep.id, static: null, series: null, es: null, status: ep.status, episode: ep };
+  state.current = { id: ep.id, static: null, series: null, traj: null, es: null, status: ep.status, episode: ep };
+  history.replaceState(null, "", `#episode=${ep.id}`);
   $("live-id").textContent = ep.id;
   $("live-metrics").replaceChildren();
   $("live-links").replaceChildren();
   $("live-progress").style.width = "0%";
   $("live-text").textContent = `${ep.scenario}, seed ${ep.seed}: ${ep.status}`;
   setStatus(ep.status);
+  setTimeline(false);
   highlightRow();
   if (!ACTIVE.has(ep.status)) {
     showFinished(ep.id);
@@ -231,6 +337,7 @@ function watch(ep) {
     const st = checkSchema("EpisodeStatic", withoutEpisode(JSON.parse(e.data)));
     state.current.static = st;
     state.current.series = newSeries(st);
+    map.caption = "";
     map.setStatic(st);
   });
   es.addEventListener("progress", (e) => {
@@ -245,37 +352,20 @@ function watch(ep) {
     state.framesSeen += 1;
     const f = checkSchema("Frame", withoutEpisode(JSON.parse(e.data)));
     state.lastFrame = f;
-    const s = state.current.series;
-    s.t.push(f.time);
-    for (const a of f.agents) {
-      s.distance.get(a.name)?.push(a.distance);
-      s.ret.get(a.name)?.push(a.episode_return);
-    }
+    addFrame(state.current.series, f);
     map.showFrame(f);
     if (!redrawPending) {
       redrawPending = true;
       requestAnimationFrame(() => {
         redrawPending = false;
-        drawSeries();
+        const c = state.current;
+        if (c?.static && c.series && !c.traj) drawEpisodePlots(c.static, c.series, null);
       });
     }
   });
   es.onerror = () => {
     if (mine() && es.readyState === EventSource.CLOSED) $("live-text").textContent += " (stream closed)";
   };
-}
-
-function drawSeries() {
-  const c = state.current;
-  if (!c?.static || !c.series) return;
-  const colour = new Map(c.static.agents.map((a) => [a.name, a.color]));
-  const mk = (m) => [...m].map(([name, ys]) => ({ label: name, color: colour.get(name), xs: c.series.t, ys }));
-  lineChart($("plot-distance"), mk(c.series.distance), {
-    title: "distance to the target [m]",
-    xlabel: "time [s]",
-    hline: c.static.task === "pursuit" ? { y: c.static.capture_distance, label: "capture" } : null,
-  });
-  lineChart($("plot-return"), mk(c.series.ret), { title: "return", xlabel: "time [s]" });
 }
 
 async function showFinished(id) {
@@ -305,26 +395,61 @@ async function showFinished(id) {
     if (ep.has_trajectory && c.static) {
       const traj = checkSchema("Trajectories", await api(`/episodes/${id}/trajectory?format=json`));
       if (state.current !== c) return;
-      c.series = { t: traj.time, distance: new Map(), ret: new Map() };
-      for (const a of traj.agents) {
-        c.series.distance.set(a.name, a.distance);
-        let acc = 0;
-        c.series.ret.set(a.name, a.reward.map((r) => (acc += r)));
-      }
-      map.showPaths(traj);
-      const last = traj.step.length - 1;
-      if (last >= 0) {
-        map.showFrame({
-          step: traj.step[last],
-          time: traj.time[last],
-          agents: traj.agents.map((a) => ({ name: a.name, x: a.x[last], y: a.y[last], psi: a.psi[last], active: false })),
-        });
-      }
-      drawSeries();
+      c.traj = traj;
+      c.series = seriesOfTrajectory(c.static, traj);
+      map.caption = "";
+      map.setReplay(traj);
+      setTimeline(true, traj.step.length);
+      scrubTo(traj.step.length - 1);
     }
   } catch (err) {
     $("live-text").textContent = `cannot load episode ${id}: ${err.message}`;
   }
+}
+
+/** Show row k of the current finished episode on the map and as a cursor on the plots. */
+function scrubTo(k) {
+  const c = state.current;
+  if (!c?.traj) return;
+  const n = c.traj.step.length;
+  k = Math.max(0, Math.min(n - 1, Math.round(k)));
+  $("scrub").value = String(k);
+  map.showStep(k);
+  const t = c.traj.time[k];
+  $("scrub-time").textContent = `t = ${t.toFixed(1)} s of ${c.traj.time[n - 1].toFixed(1)} s, step ${c.traj.step[k]}`;
+  drawEpisodePlots(c.static, c.series, t);
+}
+
+// playing: about 30 s for a whole episode, at least real time
+let player = null;
+
+function stopPlaying() {
+  if (player) cancelAnimationFrame(player.raf);
+  player = null;
+  $("play-button").textContent = "▶";
+  $("compare-play").textContent = "▶";
+}
+
+function play(button, get, set, n, duration) {
+  if (player) {
+    stopPlaying();
+    return;
+  }
+  const speed = Math.max(1, duration / 30); // simulated seconds per real second
+  let k = get() >= n - 1 ? 0 : get();
+  let last = performance.now();
+  button.textContent = "❚❚";
+  const tick = (now) => {
+    k += (((now - last) / 1000) * speed * (n - 1)) / Math.max(duration, 1e-9);
+    last = now;
+    set(Math.min(n - 1, k));
+    if (k >= n - 1) {
+      stopPlaying();
+      return;
+    }
+    player.raf = requestAnimationFrame(tick);
+  };
+  player = { raf: requestAnimationFrame(tick) };
 }
 
 function fmt(v, digits = 1) {
@@ -439,7 +564,22 @@ function renderList() {
         });
         actions.append(b);
       }
+      const pick = cell("");
+      const box = document.createElement("input");
+      box.type = "checkbox";
+      box.className = "pick";
+      box.title = "compare this episode";
+      box.checked = state.compareIds.has(ep.id);
+      box.disabled = !ep.has_trajectory && !state.compareIds.has(ep.id);
+      box.addEventListener("click", (e) => e.stopPropagation());
+      box.addEventListener("change", () => {
+        if (box.checked) state.compareIds.add(ep.id);
+        else state.compareIds.delete(ep.id);
+        updateCompareButton();
+      });
+      pick.append(box);
       tr.append(
+        pick,
         cell(new Date(ep.created_at).toLocaleTimeString()),
         cell(ep.id.slice(0, 8), "mono"),
         cell(ep.label ? `${ep.scenario} (${ep.label})` : ep.scenario),
@@ -456,6 +596,147 @@ function renderList() {
     }),
   );
   highlightRow();
+  updateCompareButton();
+}
+
+function updateCompareButton() {
+  const n = state.compareIds.size;
+  const b = $("compare-button");
+  b.textContent = n ? `Compare ${n}` : "Compare";
+  b.disabled = n < 2 || n > 4;
+  b.title = n > 4 ? "at most four episodes at once" : "tick two to four finished episodes";
+}
+
+// --- comparing episodes on one timeline --------------------------------------------------------
+
+/** Load episodes and show them side by side on one synchronised timeline (simulated time). */
+async function compare(ids, scroll = true) {
+  ids = [...new Set(ids)].slice(0, 4);
+  const box = $("compare-maps");
+  box.replaceChildren();
+  $("compare").hidden = false;
+  $("compare-title").textContent = "loading…";
+  history.replaceState(null, "", `#compare=${ids.join(",")}`);
+  const items = [];
+  try {
+    for (const [i, id] of ids.entries()) {
+      const [episode, st, traj] = await Promise.all([
+        api(`/episodes/${id}`),
+        api(`/episodes/${id}/static`),
+        api(`/episodes/${id}/trajectory?format=json`),
+      ]);
+      checkSchema("EpisodeStatic", st);
+      checkSchema("Trajectories", traj);
+      const fig = document.createElement("figure");
+      fig.className = "compare-item";
+      const canvas = document.createElement("canvas");
+      canvas.width = 440;
+      canvas.height = 480;
+      canvas.id = `compare-map-${i}`;
+      const cap = document.createElement("figcaption");
+      const sw = document.createElement("span");
+      sw.className = "key";
+      sw.style.setProperty("--c", EPISODE_COLORS[i]);
+      sw.textContent = String.fromCharCode(65 + i);
+      const pols = [...new Set(Object.values(episode.policies))].join(" vs ");
+      const sum = episode.summary;
+      cap.append(
+        sw,
+        ` ${episode.scenario}, seed ${episode.seed}: ${pols}` +
+          (sum ? ` — ${sum.outcome} after ${sum.sim_time.toFixed(1)} s` : ""),
+      );
+      fig.append(canvas, cap);
+      box.append(fig);
+      const m = new TopDownMap(canvas);
+      m.setStatic(st);
+      m.caption = String.fromCharCode(65 + i);
+      m.setReplay(traj);
+      items.push({ id, episode, static: st, traj, map: m });
+    }
+  } catch (err) {
+    $("compare-title").textContent = `cannot compare: ${err.message}`;
+    return;
+  }
+  // one timeline: the union of the episodes' times at the finest step
+  const dt = Math.min(...items.map((it) => it.static.dt));
+  const end = Math.max(...items.map((it) => it.traj.time[it.traj.time.length - 1]));
+  const n = Math.round(end / dt) + 1;
+  state.compare = { items, dt, n, end };
+  $("compare-title").textContent = `${items.length} episodes, one timeline of ${end.toFixed(1)} s`;
+  $("compare-scrub").max = String(n - 1);
+  $("compare-sonar").checked = true;
+  compareTable(items);
+  compareTo(n - 1);
+  if (scroll) $("compare").scrollIntoView({ behavior: "instant", block: "start" });
+}
+
+/** Show simulated time k * dt in every compared episode (an episode that ended stays at its end). */
+function compareTo(k) {
+  const c = state.compare;
+  if (!c) return;
+  k = Math.max(0, Math.min(c.n - 1, Math.round(k)));
+  $("compare-scrub").value = String(k);
+  const t = k * c.dt;
+  for (const it of c.items) {
+    const row = Math.min(it.traj.time.length - 1, Math.round(t / it.static.dt));
+    it.map.showStep(row);
+  }
+  $("compare-time").textContent = `t = ${t.toFixed(1)} s of ${c.end.toFixed(1)} s`;
+  // the nearest pursuer's distance to the evader in each episode
+  const series = c.items.map((it, i) => {
+    const pursuers = it.static.agents.filter((a) => a.role === "pursuer").map((a) => a.name);
+    const rows = it.traj.agents.filter((a) => pursuers.length === 0 || pursuers.includes(a.name));
+    const ys = it.traj.time.map((_, r) => Math.min(...rows.map((a) => a.distance[r])));
+    return {
+      label: `${String.fromCharCode(65 + i)}: ${[...new Set(Object.values(it.episode.policies))].join(" vs ")}`,
+      color: EPISODE_COLORS[i],
+      dash: EPISODE_DASHES[i],
+      xs: it.traj.time,
+      ys,
+    };
+  });
+  const st = c.items[0].static;
+  lineChart($("compare-distance"), series, {
+    title: "distance from the nearest pursuer to the evader",
+    ylabel: "distance [m]",
+    xlabel: "simulated time [s]",
+    hline: st.task === "pursuit" ? { y: st.capture_distance, label: `capture (${st.capture_distance} m)` } : null,
+    cursor: t,
+  });
+}
+
+function compareTable(items) {
+  const table = $("compare-table");
+  const head = document.createElement("tr");
+  for (const h of ["", "policies", "outcome", "time to capture [s]", "min distance [m]", "collision", "returns"]) {
+    const th = document.createElement("th");
+    th.textContent = h;
+    head.append(th);
+  }
+  const rows = items.map((it, i) => {
+    const tr = document.createElement("tr");
+    const m = it.episode.summary?.metrics || {};
+    const rets = Object.entries(m.returns || {}).map(([a, v]) => `${a} ${fmt(v, 0)}`).join(", ");
+    tr.append(
+      cell(String.fromCharCode(65 + i)),
+      cell([...new Set(Object.values(it.episode.policies))].join(" vs "), "policies"),
+      cell(it.episode.summary?.outcome || it.episode.status),
+      cell(fmt(m.time_to_capture_s)),
+      cell(fmt(m.min_distance)),
+      cell(m.collision ? "yes" : "no"),
+      cell(rets, "policies"),
+    );
+    return tr;
+  });
+  table.replaceChildren(head, ...rows);
+}
+
+function closeCompare() {
+  stopPlaying();
+  state.compare = null;
+  $("compare").hidden = true;
+  $("compare-maps").replaceChildren();
+  if (state.current) history.replaceState(null, "", `#episode=${state.current.id}`);
 }
 
 function highlightRow() {
@@ -464,20 +745,17 @@ function highlightRow() {
   }
 }
 
-let listTimer = null;
-function refreshSoon() {
-  clearTimeout(listTimer);
-  listTimer = setTimeout(refreshList, 400);
-}
-
-function followAll() {
-  // status changes of every episode keep the list fresh
-  const es = new EventSource(withKey(`${API}/events`));
-  es.addEventListener("status", refreshSoon);
-  es.onerror = () => {
-    es.close();
-    setTimeout(followAll, 5000);
-  };
+/**
+ * Keep the list fresh by polling: every 3 s while an episode in it is queued or running, else
+ * every 15 s. Polling, not a standing event stream, so the page never holds a request open while
+ * idle (a headless browser's --virtual-time-budget waits for open requests to end).
+ */
+function pollList() {
+  const busy = state.episodes.some((ep) => ACTIVE.has(ep.status));
+  setTimeout(async () => {
+    if (!document.hidden) await refreshList();
+    pollList();
+  }, busy ? 3000 : 15000);
 }
 
 // --- start ------------------------------------------------------------------------------------
@@ -488,19 +766,55 @@ async function start() {
     localStorage.setItem("hptvsim-api-key", $("api-key").value);
     location.reload();
   });
-  $("f-scenario").addEventListener("change", showScenario);
+  $("schema-version").textContent = VERSION;
+  $("f-scenario").addEventListener("change", () => showScenario(true));
   $("episode-form").addEventListener("submit", createEpisode);
   $("cancel-button").addEventListener("click", cancelCurrent);
   $("refresh-button").addEventListener("click", refreshList);
   for (const id of ["filter-status", "filter-scenario", "filter-policy"]) $(id).addEventListener("change", refreshList);
-  lineChart($("plot-distance"), [], { title: "distance to the target [m]" });
-  lineChart($("plot-return"), [], { title: "return" });
+  $("scrub").addEventListener("input", () => {
+    stopPlaying();
+    scrubTo(Number($("scrub").value));
+  });
+  $("play-button").addEventListener("click", () => {
+    const c = state.current;
+    if (!c?.traj) return;
+    const n = c.traj.step.length;
+    play($("play-button"), () => Number($("scrub").value), scrubTo, n, c.traj.time[n - 1]);
+  });
+  $("show-sonar").addEventListener("change", () => map.setSonar($("show-sonar").checked));
+  $("compare-button").addEventListener("click", () => compare([...state.compareIds]));
+  $("compare-close").addEventListener("click", closeCompare);
+  $("compare-scrub").addEventListener("input", () => {
+    stopPlaying();
+    compareTo(Number($("compare-scrub").value));
+  });
+  $("compare-play").addEventListener("click", () => {
+    const c = state.compare;
+    if (c) play($("compare-play"), () => Number($("compare-scrub").value), compareTo, c.n, c.end);
+  });
+  $("compare-sonar").addEventListener("change", () => {
+    for (const it of state.compare?.items || []) it.map.setSonar($("compare-sonar").checked);
+  });
+  lineChart($("plot-distance"), [], { title: "distance from each pursuer to the evader", xlabel: "simulated time [s]" });
+  panelChart($("plot-terms"), TERMS.map(([, title]) => ({ title, series: [] })), { xlabel: "simulated time [s]" });
   try {
     await loadConfig();
     await loadChoices();
     await refreshList();
-    followAll();
-    setInterval(refreshList, 15000);
+    // a link names what to show: #episode=ID or #compare=ID,ID
+    const hash = new URLSearchParams(location.hash.slice(1));
+    if (hash.get("episode")) {
+      const ep = await api(`/episodes/${encodeURIComponent(hash.get("episode"))}`).catch(() => null);
+      if (ep) watch(ep);
+    }
+    if (hash.get("compare")) {
+      const ids = hash.get("compare").split(",").filter(Boolean);
+      ids.forEach((id) => state.compareIds.add(id));
+      renderList();
+      await compare(ids, false);
+    }
+    pollList();
     document.body.dataset.ready = "true";
   } catch (err) {
     $("form-error").textContent = `the service did not answer: ${err.message}`;

@@ -1,231 +1,721 @@
-// Drawing on canvases: the top-down map of an episode and line plots. No libraries.
+// Drawing on canvases: the episode map (a chart: axes in metres, north arrow, scale bar, shaded
+// seabed, smooth obstacle outlines, sonar fans) and line plots. No libraries.
+// Colours come from hptvsim/palette.py through the generated module (DISPLAY).
+
+import { DISPLAY } from "./frames.gen.js";
 
 const GRID = "#2a3a50";
 const AXIS = "#93a4b8";
+const TEXT = "#d0d7e0";
 const FONT = "11px system-ui, sans-serif";
+const HIT_FRACTION = 0.98; // as hptvsim.viz.episode.HIT_FRACTION: a beam this close to its maximum saw nothing
 
-/** Canvas pixels per CSS pixel, so drawings stay sharp. */
-function prepare(canvas) {
-  const ctx = canvas.getContext("2d");
-  ctx.setTransform(1, 0, 0, 1, 0, 0);
-  ctx.clearRect(0, 0, canvas.width, canvas.height);
-  return ctx;
+/** Colours of episodes compared on one timeline (distinct from the agents' warm palette). */
+export const EPISODE_COLORS = ["#e6edf5", "#4dd0e1", "#b388ff", "#9ccc65"];
+export const EPISODE_DASHES = [[], [7, 4], [2, 3], [10, 3, 2, 3]];
+
+function rgbOf(hex) {
+  const c = hex.replace("#", "");
+  return [parseInt(c.slice(0, 2), 16), parseInt(c.slice(2, 4), 16), parseInt(c.slice(4, 6), 16)];
+}
+
+/** The seabed's colour at depth fraction t in [0, 1] (palette.DEPTH_STOPS). */
+function depthRgb(t) {
+  const stops = DISPLAY.depth_stops;
+  t = Math.min(1, Math.max(0, t));
+  for (let k = 1; k < stops.length; k++) {
+    const [t1, c1] = stops[k];
+    const [t0, c0] = stops[k - 1];
+    if (t <= t1) {
+      const f = t1 > t0 ? (t - t0) / (t1 - t0) : 0;
+      return c0.map((v, i) => v + f * (c1[i] - v));
+    }
+  }
+  return stops[stops.length - 1][1];
+}
+
+/** Sonar range colour: near red (the palette's hit colour) through orange to pale yellow. */
+export function rangeColor(frac) {
+  const near = rgbOf(DISPLAY.sonar_hit_color);
+  const mid = [255, 159, 28];
+  const far = [255, 236, 140];
+  const f = Math.min(1, Math.max(0, frac));
+  const [a, b, g] = f < 0.5 ? [near, mid, f / 0.5] : [mid, far, (f - 0.5) / 0.5];
+  const c = a.map((v, i) => Math.round(v + g * (b[i] - v)));
+  return `rgb(${c[0]},${c[1]},${c[2]})`;
+}
+
+function niceStep(raw) {
+  const mag = 10 ** Math.floor(Math.log10(raw));
+  return [1, 2, 5, 10].map((m) => m * mag).find((s) => s >= raw) || raw;
+}
+
+function niceTicks(lo, hi, n) {
+  if (!(hi > lo)) return [lo];
+  const step = niceStep((hi - lo) / n);
+  const out = [];
+  for (let v = Math.ceil(lo / step - 1e-9) * step; v <= hi + 1e-9 * step; v += step) out.push(+v.toPrecision(12));
+  return out;
+}
+
+function tickText(t) {
+  if (Math.abs(t) >= 1e6) return `${+(t / 1e6).toPrecision(3)}M`;
+  if (Math.abs(t) >= 1e4) return `${+(t / 1e3).toPrecision(3)}k`;
+  return String(+t.toPrecision(5));
+}
+
+function offscreen(w, h) {
+  const c = document.createElement("canvas");
+  c.width = Math.max(1, Math.round(w));
+  c.height = Math.max(1, Math.round(h));
+  return c;
 }
 
 /**
- * Top-down map, north up and east right (x north, y east as in the frame schema).
- * setStatic(EpisodeStatic) draws the obstacle map and the site; showFrame(Frame) adds vehicles,
- * trails and sonar hits; showPaths(Trajectories) draws whole paths.
+ * The map of an episode, drawn as a chart: north up, east right (x north, y east as in the frame
+ * schema), axes in metres, a north arrow, a scale bar and a depth colour bar.
+ *
+ * setStatic(EpisodeStatic) draws the site; showFrame(Frame) adds the vehicles, their live trails and
+ * sonar fans; setReplay(Trajectories) then showStep(k) shows step k of a finished episode.
  */
 export class TopDownMap {
-  constructor(canvas) {
+  /**
+   * @param {HTMLCanvasElement} canvas
+   * @param {{compact?: boolean}} options compact: smaller margins and no colour bar (previews).
+   */
+  constructor(canvas, options = {}) {
     this.canvas = canvas;
+    this.compact = !!options.compact;
     this.static = null;
+    this.background = null;
     this.trails = new Map();
     this.frame = null;
-    this.paths = null;
+    this.replay = null;
+    this.step = null;
+    this.sonar = true;
+    this.caption = "";
   }
 
-  setStatic(st) {
-    this.static = st;
-    this.trails = new Map(st.agents.map((a) => [a.name, []]));
-    this.frame = null;
-    this.paths = null;
-    const [lx, ly] = st.site.size;
-    const pad = 12;
-    const w = this.canvas.width - 2 * pad;
-    const h = this.canvas.height - 2 * pad;
-    this.scale = Math.min(w / ly, h / lx); // px per m
-    this.ox = pad + (w - ly * this.scale) / 2;
-    this.oy = pad + (h - lx * this.scale) / 2;
-    this.draw();
-  }
-
+  /** Canvas pixel of the point x north, y east [m]. */
   px(x, y) {
     const [x0, y0] = this.static.site.origin;
     const lx = this.static.site.size[0];
     return [this.ox + (y - y0) * this.scale, this.oy + (lx - (x - x0)) * this.scale];
   }
 
+  setStatic(st) {
+    this.static = st;
+    this.trails = new Map(st.agents.map((a) => [a.name, []]));
+    this.frame = null;
+    this.replay = null;
+    this.step = null;
+    const [lx, ly] = st.site.size;
+    const m = this.compact ? { l: 36, r: 8, t: 8, b: 30 } : { l: 50, r: 58, t: 10, b: 38 };
+    const w = this.canvas.width - m.l - m.r;
+    const h = this.canvas.height - m.t - m.b;
+    this.scale = Math.min(w / ly, h / lx); // px per m
+    this.ox = m.l + (w - ly * this.scale) / 2;
+    this.oy = m.t + (h - lx * this.scale) / 2;
+    this.siteW = ly * this.scale;
+    this.siteH = lx * this.scale;
+    this.background = this.drawBackground();
+    this.draw();
+  }
+
+  setSonar(on) {
+    this.sonar = on;
+    this.draw();
+  }
+
   showFrame(frame) {
     this.frame = frame;
+    this.replay = null;
     for (const a of frame.agents) {
       const t = this.trails.get(a.name);
       if (!t) continue;
       if (frame.step === 0) t.length = 0;
       t.push([a.x, a.y]);
-      if (t.length > 4000) t.splice(0, t.length - 4000);
+      if (t.length > 8000) t.splice(0, t.length - 8000);
     }
     this.draw();
   }
 
-  showPaths(traj) {
-    this.paths = traj;
+  /** A finished episode's trajectories (frame schema `Trajectories`), shown step by step. */
+  setReplay(traj) {
+    this.replay = traj;
+    this.showStep(traj.step.length - 1);
+  }
+
+  /** Show row k of the replay: paths up to k, vehicles and sonar fans at k. */
+  showStep(k) {
+    if (!this.replay) return;
+    const n = this.replay.step.length;
+    this.step = Math.max(0, Math.min(n - 1, k));
     this.draw();
   }
 
-  draw() {
-    const ctx = prepare(this.canvas);
+  /** Agents' states to draw now: [{name, x, y, psi, ranges, active}]. */
+  current() {
+    if (this.replay && this.step !== null) {
+      const k = this.step;
+      const last = this.replay.step.length - 1;
+      return this.replay.agents.map((a) => {
+        let ranges = null;
+        if (a.ranges) {
+          // the nearest step at or before k that carried sonar
+          for (let j = k; j >= Math.max(0, k - 50); j--) {
+            if (a.ranges[j] && a.ranges[j].length) {
+              ranges = a.ranges[j];
+              break;
+            }
+          }
+        }
+        return { name: a.name, x: a.x[k], y: a.y[k], psi: a.psi[k], ranges, active: k < last };
+      });
+    }
+    return this.frame ? this.frame.agents : [];
+  }
+
+  time() {
+    if (this.replay && this.step !== null) return [this.replay.time[this.step], this.replay.step[this.step]];
+    return this.frame ? [this.frame.time, this.frame.step] : null;
+  }
+
+  drawBackground() {
     const st = this.static;
-    if (!st) return;
-    const ob = st.obstacles;
-    const res = ob.coarse_resolution;
-    ctx.fillStyle = "#132338";
-    const [sx0, sy0] = this.px(st.site.origin[0] + st.site.size[0], st.site.origin[1]);
-    ctx.fillRect(sx0, sy0, st.site.size[1] * this.scale, st.site.size[0] * this.scale);
-    ctx.fillStyle = "#8a6e4b";
-    ob.rows.forEach((row, i) => {
-      const x = ob.extent[0] + (i + 1) * res; // north edge of the row
-      for (let j = 0; j < row.length; j++) {
-        if (row[j] !== "#") continue;
-        const [px, py] = this.px(x, ob.extent[2] + j * res);
-        ctx.fillRect(px, py, res * this.scale + 0.5, res * this.scale + 0.5);
-      }
-    });
-    ctx.strokeStyle = "#d0d7e0";
+    const bg = offscreen(this.canvas.width, this.canvas.height);
+    const ctx = bg.getContext("2d");
+    const [x0, y0] = st.site.origin;
+    const [lx, ly] = st.site.size;
+    const [sx, sy] = this.px(x0 + lx, y0); // top-left of the site
+    ctx.save();
+    ctx.beginPath();
+    ctx.rect(sx, sy, this.siteW, this.siteH);
+    ctx.clip();
+    ctx.fillStyle = "#0d1520";
+    ctx.fillRect(sx, sy, this.siteW, this.siteH);
+    const shade = this.seabedImage();
+    if (shade) {
+      ctx.imageSmoothingEnabled = true;
+      ctx.imageSmoothingQuality = "high";
+      const [ex0, ex1, ey0, ey1, dx, dy] = shade.extent;
+      const [ax, ay] = this.px(ex1 + dx / 2, ey0 - dy / 2);
+      ctx.drawImage(shade.canvas, ax, ay, (ey1 - ey0 + dy) * this.scale, (ex1 - ex0 + dx) * this.scale);
+    }
+    const obstacles = this.obstacleLayer();
+    if (obstacles) ctx.drawImage(obstacles, 0, 0);
+    ctx.restore();
+    // site outline, axes, ticks
+    ctx.strokeStyle = TEXT;
     ctx.lineWidth = 1;
-    ctx.strokeRect(sx0, sy0, st.site.size[1] * this.scale, st.site.size[0] * this.scale);
-    const colour = new Map(st.agents.map((a) => [a.name, a.color]));
+    ctx.strokeRect(sx + 0.5, sy + 0.5, this.siteW - 1, this.siteH - 1);
+    ctx.font = FONT;
+    ctx.fillStyle = AXIS;
+    ctx.strokeStyle = AXIS;
+    const nTicks = this.compact ? 3 : 5;
+    ctx.textAlign = "center";
+    ctx.textBaseline = "top";
+    for (const t of niceTicks(y0, y0 + ly, nTicks)) {
+      const [px] = this.px(x0, t);
+      ctx.beginPath();
+      ctx.moveTo(px, sy + this.siteH);
+      ctx.lineTo(px, sy + this.siteH + 4);
+      ctx.stroke();
+      ctx.fillText(tickText(t), px, sy + this.siteH + 6);
+    }
+    ctx.textAlign = "right";
+    ctx.textBaseline = "middle";
+    for (const t of niceTicks(x0, x0 + lx, nTicks)) {
+      const [, py] = this.px(t, y0);
+      ctx.beginPath();
+      ctx.moveTo(sx - 4, py);
+      ctx.lineTo(sx, py);
+      ctx.stroke();
+      ctx.fillText(tickText(t), sx - 6, py);
+    }
+    ctx.textAlign = "center";
+    ctx.textBaseline = "bottom";
+    ctx.fillText("east y [m]", sx + this.siteW / 2, this.canvas.height - 2);
+    ctx.save();
+    ctx.translate(10, sy + this.siteH / 2);
+    ctx.rotate(-Math.PI / 2);
+    ctx.textBaseline = "top";
+    ctx.fillText("north x [m]", 0, 0);
+    ctx.restore();
+    if (!this.compact && shade) this.colourBar(ctx, sx + this.siteW + 14, sy, shade.range);
+    this.northArrow(ctx, sx + this.siteW - 18, sy + 10);
+    this.scaleBar(ctx, sx + 10, sy + this.siteH - 12);
     for (const a of st.agents) {
       if (!a.goal) continue;
       const [gx, gy] = this.px(a.goal[0], a.goal[1]);
       ctx.strokeStyle = a.color;
+      ctx.lineWidth = 1.5;
       ctx.setLineDash([3, 3]);
       ctx.beginPath();
       ctx.arc(gx, gy, Math.max(3, (a.goal_radius || 1) * this.scale), 0, 2 * Math.PI);
       ctx.stroke();
       ctx.setLineDash([]);
     }
-    const polyline = (pts, color, width) => {
-      if (pts.length < 2) return;
+    return bg;
+  }
+
+  /** The seabed mesh as a small shaded-relief image (one pixel per vertex), north row first. */
+  seabedImage() {
+    const t = this.static.terrain;
+    const [mx, my] = t.shape;
+    if (!(mx > 1 && my > 1) || t.vertices.length !== mx * my) return null;
+    const z = (i, j) => t.vertices[i * my + j][2];
+    let lo = Infinity, hi = -Infinity;
+    for (const v of t.vertices) {
+      if (v[2] >= 0) { lo = Math.min(lo, v[2]); hi = Math.max(hi, v[2]); }
+    }
+    if (!Number.isFinite(lo)) { lo = 0; hi = 1; }
+    if (hi - lo < 1e-6) { lo -= 1; hi += 1; }
+    const x00 = t.vertices[0][0], y00 = t.vertices[0][1];
+    const dx = (t.vertices[(mx - 1) * my][0] - x00) / (mx - 1);
+    const dy = (t.vertices[my - 1][1] - y00) / (my - 1);
+    // relief: light from the north-west at 45 degrees, slopes exaggerated so the steep ones show
+    const slopes = [];
+    for (let i = 1; i < mx - 1; i += 2) {
+      for (let j = 1; j < my - 1; j += 2) {
+        slopes.push(Math.hypot((z(i + 1, j) - z(i - 1, j)) / (2 * dx), (z(i, j + 1) - z(i, j - 1)) / (2 * dy)));
+      }
+    }
+    slopes.sort((a, b) => a - b);
+    const steep = slopes.length ? slopes[Math.floor(0.95 * (slopes.length - 1))] : 0;
+    const exag = steep > 0 ? Math.min(3, 0.3 / steep) : 1;
+    const alt = Math.PI / 4;
+    const L = [Math.cos(alt) * Math.SQRT1_2, -Math.cos(alt) * Math.SQRT1_2, Math.sin(alt)]; // north, east, up
+    const c = offscreen(my, mx);
+    const ctx = c.getContext("2d");
+    const img = ctx.createImageData(my, mx);
+    const land = rgbOf(DISPLAY.land_color);
+    for (let i = 0; i < mx; i++) {
+      for (let j = 0; j < my; j++) {
+        const d = z(i, j);
+        const gN = (z(Math.min(mx - 1, i + 1), j) - z(Math.max(0, i - 1), j)) / (2 * dx);
+        const gE = (z(i, Math.min(my - 1, j + 1)) - z(i, Math.max(0, j - 1))) / (2 * dy);
+        // the surface is -depth: its normal is (gN, gE, 1) scaled by the exaggeration
+        const n = [gN * exag, gE * exag, 1];
+        const norm = Math.hypot(n[0], n[1], n[2]);
+        const lit = (n[0] * L[0] + n[1] * L[1] + n[2] * L[2]) / norm / L[2];
+        const f = Math.min(1.25, Math.max(0.55, 0.35 + 0.65 * lit));
+        const base = d < 0 ? land : depthRgb((d - lo) / (hi - lo));
+        const p = 4 * ((mx - 1 - i) * my + j);
+        img.data[p] = Math.min(255, base[0] * f);
+        img.data[p + 1] = Math.min(255, base[1] * f);
+        img.data[p + 2] = Math.min(255, base[2] * f);
+        img.data[p + 3] = 255;
+      }
+    }
+    ctx.putImageData(img, 0, 0);
+    return { canvas: c, extent: [x00, x00 + dx * (mx - 1), y00, y00 + dy * (my - 1), dx, dy], range: [lo, hi] };
+  }
+
+  /**
+   * The obstacles at the operating depth: the coarse cells' occupancy, interpolated bilinearly
+   * to screen resolution and cut at one half, so outlines are smooth curves rather than blocks.
+   */
+  obstacleLayer() {
+    const ob = this.static.obstacles;
+    const rows = ob.rows;
+    if (!rows.length || !rows.some((r) => r.includes("#"))) return null;
+    const nx = rows.length;
+    const ny = rows[0].length;
+    const res = ob.coarse_resolution;
+    const small = offscreen(ny + 2, nx + 2);
+    const sctx = small.getContext("2d");
+    const occ = sctx.createImageData(ny + 2, nx + 2);
+    for (let i = 0; i < nx; i++) {
+      for (let j = 0; j < ny; j++) {
+        if (rows[i][j] !== "#") continue;
+        const p = 4 * ((nx - i) * (ny + 2) + (j + 1)); // row 0 of the image is the north edge
+        occ.data[p] = occ.data[p + 1] = occ.data[p + 2] = 255;
+        occ.data[p + 3] = 255;
+      }
+    }
+    sctx.putImageData(occ, 0, 0);
+    const W = this.canvas.width, H = this.canvas.height;
+    const big = offscreen(W, H);
+    const bctx = big.getContext("2d");
+    bctx.imageSmoothingEnabled = true;
+    bctx.imageSmoothingQuality = "low"; // bilinear: no overshoot
+    // the small image's pixel centres are the coarse cells' centres; it has one cell of padding
+    const [ax, ay] = this.px(ob.extent[0] + (nx + 1) * res, ob.extent[2] - res);
+    bctx.drawImage(small, ax, ay, (ny + 2) * res * this.scale, (nx + 2) * res * this.scale);
+    const img = bctx.getImageData(0, 0, W, H);
+    const d = img.data;
+    const inside = new Uint8Array(W * H);
+    for (let k = 0; k < W * H; k++) inside[k] = d[4 * k + 3] >= 128 ? 1 : 0;
+    const fill = rgbOf(DISPLAY.obstacle_color);
+    const edge = [52, 36, 20];
+    for (let yy = 0; yy < H; yy++) {
+      for (let xx = 0; xx < W; xx++) {
+        const k = yy * W + xx;
+        const p = 4 * k;
+        if (!inside[k]) { d[p + 3] = 0; continue; }
+        const border =
+          (xx > 0 && !inside[k - 1]) || (xx < W - 1 && !inside[k + 1]) ||
+          (yy > 0 && !inside[k - W]) || (yy < H - 1 && !inside[k + W]);
+        const c = border ? edge : fill;
+        d[p] = c[0]; d[p + 1] = c[1]; d[p + 2] = c[2]; d[p + 3] = border ? 255 : 235;
+      }
+    }
+    bctx.putImageData(img, 0, 0);
+    return big;
+  }
+
+  colourBar(ctx, x, y, [lo, hi]) {
+    const h = Math.min(160, this.siteH);
+    const w = 10;
+    for (let k = 0; k < h; k++) {
+      const c = depthRgb(k / (h - 1));
+      ctx.fillStyle = `rgb(${c[0] | 0},${c[1] | 0},${c[2] | 0})`;
+      ctx.fillRect(x, y + k, w, 1.5);
+    }
+    ctx.strokeStyle = AXIS;
+    ctx.strokeRect(x + 0.5, y + 0.5, w, h);
+    ctx.fillStyle = AXIS;
+    ctx.textAlign = "left";
+    ctx.textBaseline = "middle";
+    ctx.fillText(tickText(+lo.toFixed(0)), x + w + 3, y + 4);
+    ctx.fillText(tickText(+hi.toFixed(0)), x + w + 3, y + h - 3);
+    ctx.textBaseline = "top";
+    ctx.fillText("depth", x - 2, y + h + 4);
+    ctx.fillText("[m]", x - 2, y + h + 17);
+  }
+
+  northArrow(ctx, x, y) {
+    ctx.fillStyle = "rgba(13, 21, 32, 0.65)";
+    ctx.beginPath();
+    ctx.arc(x, y + 11, 13, 0, 2 * Math.PI);
+    ctx.fill();
+    ctx.fillStyle = TEXT;
+    ctx.beginPath();
+    ctx.moveTo(x, y + 2);
+    ctx.lineTo(x + 5, y + 14);
+    ctx.lineTo(x, y + 11);
+    ctx.lineTo(x - 5, y + 14);
+    ctx.closePath();
+    ctx.fill();
+    ctx.font = "bold 10px system-ui, sans-serif";
+    ctx.textAlign = "center";
+    ctx.textBaseline = "top";
+    ctx.fillText("N", x, y + 14);
+    ctx.font = FONT;
+  }
+
+  scaleBar(ctx, x, y) {
+    const metres = niceStep(this.static.site.size[1] / 5);
+    const len = metres * this.scale;
+    ctx.fillStyle = "rgba(13, 21, 32, 0.65)";
+    ctx.fillRect(x - 4, y - 16, len + 8, 22);
+    ctx.strokeStyle = TEXT;
+    ctx.lineWidth = 2;
+    ctx.beginPath();
+    ctx.moveTo(x, y - 4);
+    ctx.lineTo(x, y);
+    ctx.lineTo(x + len, y);
+    ctx.lineTo(x + len, y - 4);
+    ctx.stroke();
+    ctx.lineWidth = 1;
+    ctx.fillStyle = TEXT;
+    ctx.textAlign = "center";
+    ctx.textBaseline = "bottom";
+    ctx.fillText(`${metres} m`, x + len / 2, y - 3);
+  }
+
+  /** One vehicle's sonar fan: a translucent coverage polygon and the beams coloured by range. */
+  drawFan(ctx, a, info) {
+    if (!a.ranges || !a.ranges.length) return;
+    const n = a.ranges.length;
+    const maxR = info.max_range;
+    const ends = a.ranges.map((r, k) => {
+      const ang = a.psi + info.beam_angles[k];
+      return [a.x + r * Math.cos(ang), a.y + r * Math.sin(ang)];
+    });
+    const [cx, cy] = this.px(a.x, a.y);
+    ctx.fillStyle = info.color + "22";
+    ctx.beginPath();
+    const full = n > 2 && Math.abs(info.beam_angles[n - 1] - info.beam_angles[0]) > 1.5 * Math.PI;
+    if (!full) ctx.moveTo(cx, cy);
+    ends.forEach(([ex, ey], k) => {
+      const [px, py] = this.px(ex, ey);
+      if (k === 0 && full) ctx.moveTo(px, py);
+      else ctx.lineTo(px, py);
+    });
+    ctx.closePath();
+    ctx.fill();
+    ctx.lineWidth = 1.6;
+    a.ranges.forEach((r, k) => {
+      const [px, py] = this.px(ends[k][0], ends[k][1]);
+      const hit = r < HIT_FRACTION * maxR;
+      ctx.strokeStyle = hit ? rangeColor(r / maxR) : "rgba(200, 215, 230, 0.22)";
+      ctx.lineWidth = hit ? 1.8 : 1;
+      ctx.beginPath();
+      ctx.moveTo(cx, cy);
+      ctx.lineTo(px, py);
+      ctx.stroke();
+      if (hit) {
+        ctx.fillStyle = rangeColor(r / maxR);
+        ctx.beginPath();
+        ctx.arc(px, py, 2.4, 0, 2 * Math.PI);
+        ctx.fill();
+      }
+    });
+  }
+
+  draw() {
+    const ctx = this.canvas.getContext("2d");
+    ctx.setTransform(1, 0, 0, 1, 0, 0);
+    ctx.clearRect(0, 0, this.canvas.width, this.canvas.height);
+    const st = this.static;
+    if (!st) return;
+    ctx.drawImage(this.background, 0, 0);
+    const info = new Map(st.agents.map((a) => [a.name, a]));
+    const [sx, sy] = this.px(st.site.origin[0] + st.site.size[0], st.site.origin[1]);
+    ctx.save();
+    ctx.beginPath();
+    ctx.rect(sx, sy, this.siteW, this.siteH);
+    ctx.clip();
+    const polyline = (xs, ys, upto, color, width, alpha = 1) => {
+      if (upto < 1) return;
+      ctx.globalAlpha = alpha;
       ctx.strokeStyle = color;
       ctx.lineWidth = width;
       ctx.beginPath();
-      pts.forEach(([x, y], k) => {
-        const [px, py] = this.px(x, y);
+      for (let k = 0; k <= upto; k++) {
+        const [px, py] = this.px(xs[k], ys[k]);
         if (k === 0) ctx.moveTo(px, py);
         else ctx.lineTo(px, py);
-      });
+      }
       ctx.stroke();
+      ctx.globalAlpha = 1;
     };
-    if (this.paths) {
-      for (const a of this.paths.agents) {
-        polyline(a.x.map((x, k) => [x, a.y[k]]), colour.get(a.name) || "#fff", 1.5);
+    if (this.replay && this.step !== null) {
+      const last = this.replay.step.length - 1;
+      for (const a of this.replay.agents) {
+        const c = info.get(a.name)?.color || "#fff";
+        polyline(a.x, a.y, last, c, 1, 0.3); // the whole path, faint
+        polyline(a.x, a.y, this.step, c, 2); // up to now
+      }
+    } else {
+      for (const [name, pts] of this.trails) {
+        polyline(pts.map((p) => p[0]), pts.map((p) => p[1]), pts.length - 1, info.get(name)?.color || "#fff", 2);
       }
     }
-    for (const [name, pts] of this.trails) polyline(pts, colour.get(name) || "#fff", 1.5);
-    const f = this.frame;
-    if (!f) return;
-    ctx.fillStyle = "#ff5a5a";
-    for (const a of f.agents) {
-      for (const [hx, hy] of a.hits || []) {
-        const [px, py] = this.px(hx, hy);
-        ctx.fillRect(px - 1, py - 1, 2, 2);
-      }
-    }
-    for (const a of f.agents) {
+    const agents = this.current();
+    if (this.sonar) for (const a of agents) if (info.has(a.name)) this.drawFan(ctx, a, info.get(a.name));
+    for (const a of agents) {
       const [px, py] = this.px(a.x, a.y);
-      const c = colour.get(a.name) || "#fff";
+      const c = info.get(a.name)?.color || "#fff";
       ctx.fillStyle = c;
-      ctx.strokeStyle = c;
+      ctx.strokeStyle = "#0d1520";
+      ctx.lineWidth = 1.5;
       ctx.beginPath();
-      ctx.arc(px, py, 4.5, 0, 2 * Math.PI);
+      ctx.arc(px, py, 5.5, 0, 2 * Math.PI);
       ctx.fill();
+      ctx.stroke();
       // heading: psi clockwise from north; on screen north is up
-      ctx.lineWidth = 2;
+      ctx.strokeStyle = c;
+      ctx.lineWidth = 2.5;
       ctx.beginPath();
       ctx.moveTo(px, py);
-      ctx.lineTo(px + 12 * Math.sin(a.psi), py - 12 * Math.cos(a.psi));
+      ctx.lineTo(px + 14 * Math.sin(a.psi), py - 14 * Math.cos(a.psi));
       ctx.stroke();
-      if (!a.active) {
+      if (a.active === false) {
         ctx.strokeStyle = "#fff";
         ctx.lineWidth = 1;
         ctx.beginPath();
-        ctx.arc(px, py, 7, 0, 2 * Math.PI);
+        ctx.arc(px, py, 8.5, 0, 2 * Math.PI);
         ctx.stroke();
       }
     }
-    ctx.fillStyle = AXIS;
+    ctx.restore();
+    const now = this.time();
     ctx.font = FONT;
-    ctx.fillText(`t = ${f.time.toFixed(1)} s, step ${f.step}`, 8, this.canvas.height - 6);
-    ctx.fillText("N ↑", this.canvas.width - 28, 14);
+    ctx.textAlign = "left";
+    ctx.textBaseline = "top";
+    const clock = now && !this.compact ? `t = ${now[0].toFixed(1)} s (step ${now[1]})` : "";
+    const label = [this.caption, clock].filter(Boolean).join(" · ");
+    if (label) {
+      const w = ctx.measureText(label).width;
+      ctx.fillStyle = "rgba(13, 21, 32, 0.7)";
+      ctx.fillRect(sx + 4, sy + 4, w + 8, 17);
+      ctx.fillStyle = TEXT;
+      ctx.fillText(label, sx + 8, sy + 7);
+    }
   }
-}
-
-function niceTicks(lo, hi, n) {
-  if (!(hi > lo)) return [lo];
-  const raw = (hi - lo) / n;
-  const mag = 10 ** Math.floor(Math.log10(raw));
-  const step = [1, 2, 5, 10].map((m) => m * mag).find((s) => s >= raw) || raw;
-  const out = [];
-  for (let v = Math.ceil(lo / step) * step; v <= hi + 1e-9; v += step) out.push(v);
-  return out;
 }
 
 /**
- * A line plot: series = [{label, color, xs, ys}], options {title, xlabel, hline: {y, label}}.
+ * Line plots on one canvas, in panels stacked vertically that share the time axis.
+ *
+ * @param {HTMLCanvasElement} canvas
+ * @param {Array<{title: string, ylabel?: string, series: Array<{label, color, xs, ys, dash?}>,
+ *   hline?: {y: number, label: string}}>} panels
+ * @param {{xlabel?: string, cursor?: number|null, empty?: string}} options cursor: a time [s] marked by a vertical line.
  */
-export function lineChart(canvas, series, options = {}) {
-  const ctx = prepare(canvas);
+export function panelChart(canvas, panels, options = {}) {
+  const ctx = canvas.getContext("2d");
+  ctx.setTransform(1, 0, 0, 1, 0, 0);
+  ctx.clearRect(0, 0, canvas.width, canvas.height);
+  ctx.font = FONT;
   const W = canvas.width;
   const H = canvas.height;
-  const m = { l: 48, r: 10, t: 20, b: 28 };
-  let x0 = Infinity, x1 = -Infinity, y0 = Infinity, y1 = -Infinity;
-  for (const s of series) {
-    for (let k = 0; k < s.xs.length; k++) {
-      const x = s.xs[k], y = s.ys[k];
-      if (!Number.isFinite(x) || !Number.isFinite(y)) continue;
-      x0 = Math.min(x0, x); x1 = Math.max(x1, x);
-      y0 = Math.min(y0, y); y1 = Math.max(y1, y);
+  // one legend for the whole canvas (series of every panel, each label once), wrapped as needed
+  const legend = [];
+  const seen = new Set();
+  for (const p of panels) {
+    for (const s of p.series) {
+      if (!s.label || seen.has(s.label)) continue;
+      seen.add(s.label);
+      legend.push(s);
     }
   }
-  if (options.hline) { y0 = Math.min(y0, options.hline.y); y1 = Math.max(y1, options.hline.y); }
-  ctx.font = FONT;
-  ctx.fillStyle = AXIS;
-  ctx.fillText(options.title || "", m.l, 13);
+  const lines = [];
+  let line = [];
+  let lw = 0;
+  for (const s of legend) {
+    const w = ctx.measureText(s.label).width + 30;
+    if (line.length && lw + w > W - 60) {
+      lines.push(line);
+      line = [];
+      lw = 0;
+    }
+    line.push([s, lw]);
+    lw += w;
+  }
+  if (line.length) lines.push(line);
+  const legendH = 16 * lines.length + 2;
+  lines.forEach((items, row) => {
+    const y = 10 + 16 * row;
+    for (const [s, x0] of items) {
+      const x = 60 + x0;
+      ctx.strokeStyle = s.color;
+      ctx.lineWidth = 2.5;
+      ctx.setLineDash(s.dash || []);
+      ctx.beginPath(); ctx.moveTo(x, y); ctx.lineTo(x + 18, y); ctx.stroke();
+      ctx.setLineDash([]);
+      ctx.fillStyle = TEXT;
+      ctx.textAlign = "left";
+      ctx.textBaseline = "middle";
+      ctx.fillText(s.label, x + 22, y);
+    }
+  });
+  const m = { l: 60, r: 14, b: 36, t: legendH };
+  const gap = 20;
+  const ph = (H - m.t - m.b - gap * panels.length) / Math.max(1, panels.length);
+  let x0 = Infinity, x1 = -Infinity;
+  for (const p of panels) for (const s of p.series) for (const x of s.xs) if (Number.isFinite(x)) { x0 = Math.min(x0, x); x1 = Math.max(x1, x); }
   if (!Number.isFinite(x0)) {
-    ctx.fillText("no data yet", W / 2 - 30, H / 2);
+    ctx.fillStyle = AXIS;
+    ctx.textAlign = "left";
+    ctx.textBaseline = "bottom";
+    panels.forEach((p, i) => ctx.fillText(p.title, m.l, m.t + gap * (i + 1) + ph * i - 4));
+    ctx.textAlign = "center";
+    ctx.fillText(options.empty || "no data yet", W / 2, H / 2);
     return;
   }
   if (x1 === x0) x1 = x0 + 1;
-  if (y1 === y0) { y1 += 1; y0 -= 1; }
-  const pad = 0.05 * (y1 - y0);
-  y0 -= pad; y1 += pad;
   const X = (x) => m.l + ((x - x0) / (x1 - x0)) * (W - m.l - m.r);
-  const Y = (y) => H - m.b - ((y - y0) / (y1 - y0)) * (H - m.t - m.b);
-  ctx.strokeStyle = GRID;
-  ctx.lineWidth = 1;
-  for (const t of niceTicks(y0, y1, 4)) {
-    ctx.beginPath(); ctx.moveTo(m.l, Y(t)); ctx.lineTo(W - m.r, Y(t)); ctx.stroke();
-    ctx.fillText(Math.abs(t) >= 1e4 ? t.toExponential(1) : String(+t.toPrecision(4)), 4, Y(t) + 4);
-  }
-  for (const t of niceTicks(x0, x1, 6)) {
-    ctx.beginPath(); ctx.moveTo(X(t), m.t); ctx.lineTo(X(t), H - m.b); ctx.stroke();
-    ctx.fillText(String(+t.toPrecision(4)), X(t) - 8, H - m.b + 13);
-  }
-  ctx.fillText(options.xlabel || "", W - m.r - 60, H - 3);
-  if (options.hline) {
-    ctx.strokeStyle = "#e0a43a";
-    ctx.setLineDash([4, 4]);
-    ctx.beginPath(); ctx.moveTo(m.l, Y(options.hline.y)); ctx.lineTo(W - m.r, Y(options.hline.y)); ctx.stroke();
-    ctx.setLineDash([]);
-    ctx.fillStyle = "#e0a43a";
-    ctx.fillText(options.hline.label || "", W - m.r - 90, Y(options.hline.y) - 3);
-  }
-  let lx = m.l + 150;
-  for (const s of series) {
-    ctx.strokeStyle = s.color;
-    ctx.lineWidth = 1.6;
-    ctx.beginPath();
-    let started = false;
-    for (let k = 0; k < s.xs.length; k++) {
-      const x = s.xs[k], y = s.ys[k];
-      if (!Number.isFinite(x) || !Number.isFinite(y)) continue;
-      if (!started) { ctx.moveTo(X(x), Y(y)); started = true; } else ctx.lineTo(X(x), Y(y));
+  panels.forEach((p, i) => {
+    const top = m.t + gap * (i + 1) + ph * i;
+    const bottom = top + ph;
+    let y0 = Infinity, y1 = -Infinity;
+    for (const s of p.series) for (const y of s.ys) if (Number.isFinite(y)) { y0 = Math.min(y0, y); y1 = Math.max(y1, y); }
+    if (p.hline) { y0 = Math.min(y0, p.hline.y); y1 = Math.max(y1, p.hline.y); }
+    if (!Number.isFinite(y0)) { y0 = 0; y1 = 1; }
+    if (y1 === y0) { y1 += 1; y0 -= 1; }
+    const pad = 0.06 * (y1 - y0);
+    y0 -= pad; y1 += pad;
+    const Y = (y) => bottom - ((y - y0) / (y1 - y0)) * ph;
+    ctx.strokeStyle = GRID;
+    ctx.fillStyle = AXIS;
+    ctx.lineWidth = 1;
+    ctx.textAlign = "right";
+    ctx.textBaseline = "middle";
+    for (const t of niceTicks(y0, y1, Math.max(3, Math.round(ph / 35)))) {
+      ctx.beginPath(); ctx.moveTo(m.l, Y(t)); ctx.lineTo(W - m.r, Y(t)); ctx.stroke();
+      ctx.fillText(tickText(t), m.l - 5, Y(t));
     }
-    ctx.stroke();
-    ctx.fillStyle = s.color;
-    ctx.fillText(s.label, lx, 13);
-    lx += ctx.measureText(s.label).width + 12;
+    for (const t of niceTicks(x0, x1, 6)) {
+      ctx.beginPath(); ctx.moveTo(X(t), top); ctx.lineTo(X(t), bottom); ctx.stroke();
+    }
+    ctx.strokeStyle = AXIS;
+    ctx.strokeRect(m.l + 0.5, top + 0.5, W - m.l - m.r - 1, ph);
+    // the panel's title above it
+    ctx.textAlign = "left";
+    ctx.textBaseline = "bottom";
+    ctx.fillStyle = TEXT;
+    ctx.fillText(p.title, m.l, top - 4);
+    if (p.hline) {
+      ctx.strokeStyle = "#e0a43a";
+      ctx.setLineDash([4, 4]);
+      ctx.lineWidth = 1;
+      ctx.beginPath(); ctx.moveTo(m.l, Y(p.hline.y)); ctx.lineTo(W - m.r, Y(p.hline.y)); ctx.stroke();
+      ctx.setLineDash([]);
+      ctx.fillStyle = "#e0a43a";
+      ctx.textAlign = "right";
+      ctx.fillText(p.hline.label || "", W - m.r - 4, Y(p.hline.y) - 2);
+    }
+    ctx.save();
+    ctx.beginPath();
+    ctx.rect(m.l, top, W - m.l - m.r, ph);
+    ctx.clip();
+    for (const s of p.series) {
+      ctx.strokeStyle = s.color;
+      ctx.lineWidth = 1.7;
+      ctx.setLineDash(s.dash || []);
+      ctx.beginPath();
+      let started = false;
+      // at most ~2 points per pixel column
+      const stride = Math.max(1, Math.floor(s.xs.length / (2 * (W - m.l - m.r))));
+      for (let k = 0; k < s.xs.length; k += stride) {
+        const x = s.xs[k], y = s.ys[k];
+        if (!Number.isFinite(x) || !Number.isFinite(y)) { started = false; continue; }
+        if (!started) { ctx.moveTo(X(x), Y(y)); started = true; } else ctx.lineTo(X(x), Y(y));
+      }
+      const k = s.xs.length - 1;
+      if (started && k % stride !== 0 && Number.isFinite(s.ys[k])) ctx.lineTo(X(s.xs[k]), Y(s.ys[k]));
+      ctx.stroke();
+      ctx.setLineDash([]);
+    }
+    if (Number.isFinite(options.cursor)) {
+      ctx.strokeStyle = "#ffffff";
+      ctx.lineWidth = 1;
+      ctx.setLineDash([2, 2]);
+      ctx.beginPath(); ctx.moveTo(X(options.cursor), top); ctx.lineTo(X(options.cursor), bottom); ctx.stroke();
+      ctx.setLineDash([]);
+    }
+    ctx.restore();
+    if (p.ylabel) {
+      ctx.save();
+      ctx.fillStyle = AXIS;
+      ctx.translate(3, top + ph / 2);
+      ctx.rotate(-Math.PI / 2);
+      ctx.textAlign = "center";
+      ctx.textBaseline = "top";
+      ctx.fillText(p.ylabel, 0, 0);
+      ctx.restore();
+    }
+  });
+  // the shared time axis under the last panel, labels kept inside the canvas
+  const bottom = H - m.b;
+  ctx.fillStyle = AXIS;
+  ctx.textBaseline = "top";
+  for (const t of niceTicks(x0, x1, 6)) {
+    const text = tickText(t);
+    const w = ctx.measureText(text).width;
+    const x = Math.min(W - 2 - w / 2, Math.max(w / 2 + 2, X(t)));
+    ctx.textAlign = "center";
+    ctx.fillText(text, x, bottom + 4);
   }
+  ctx.textAlign = "center";
+  ctx.fillText(options.xlabel || "", m.l + (W - m.l - m.r) / 2, bottom + 19);
+}
+
+/** A single-panel line plot: series = [{label, color, xs, ys}], options {title, ylabel, xlabel, hline, cursor}. */
+export function lineChart(canvas, series, options = {}) {
+  panelChart(canvas, [{ title: options.title || "", ylabel: options.ylabel, series, hline: options.hline }], options);
 }

@@ -102,10 +102,13 @@
  * @property {number} v Sway speed [m/s].
  * @property {number} r Yaw rate [rad/s].
  * @property {[number, number]} action The command applied during the step `[v, omega]` [m/s, rad/s] (Eq. 16, clipped to Eq. 15's box; zero once the agent is done and in the reset frame).
- * @property {number} reward Reward of the step (Eq. 20).
+ * @property {number} reward Reward of the step (Eq. 20: `delta_C r_C + delta_E1 r_E1 + delta_E2 r_E2`).
  * @property {number} episode_return Sum of rewards so far.
  * @property {number} distance Distance to the target [m] (pursuer: the evader; evader: the nearest pursuer; goto: the goal).
  * @property {number} min_range Smallest sonar range [m].
+ * @property {number} [r_C] The step's obstacle term (Eq. 17), before its weight `delta_C`.
+ * @property {number} [r_E1] The step's approach term (Eq. 18), before its weight `delta_E1`.
+ * @property {number} [r_E2] The step's capture term (Eq. 19), before its weight `delta_E2`.
  * @property {(Array<number> | null)} [ranges] Sonar ranges per beam [m] (None in frames without sonar, see `FrameOptions`).
  * @property {(Array<[number, number]> | null)} [hits] Points `(x, y)` [m] where beams returned an echo (None without sonar or hits).
  * @property {(Array<number> | null)} [obs] The observation vector (Eq. 14; None unless `FrameOptions.obs`).
@@ -164,9 +167,13 @@
  * @property {Array<number>} r Yaw rate [rad/s].
  * @property {Array<number>} v_cmd Commanded surge speed [m/s].
  * @property {Array<number>} omega_cmd Commanded yaw rate [rad/s].
- * @property {Array<number>} reward Reward of the step.
+ * @property {Array<number>} reward Reward of the step (Eq. 20).
  * @property {Array<number>} distance Distance to the target [m].
  * @property {Array<number>} min_range Smallest sonar range [m].
+ * @property {(Array<number> | null)} [r_C] Obstacle term of each step (Eq. 17, unweighted; None in trajectories stored before the terms were).
+ * @property {(Array<number> | null)} [r_E1] Approach term of each step (Eq. 18, unweighted; None likewise).
+ * @property {(Array<number> | null)} [r_E2] Capture term of each step (Eq. 19, unweighted; None likewise).
+ * @property {(Array<Array<number>> | null)} [ranges] Sonar ranges per beam [m] of each step; an empty tuple at steps whose frame carried no sonar (`FrameOptions.sonar_every`); None when not stored at all.
  */
 
 export const SCHEMA_VERSION = "hptvsim-frames/1";
@@ -724,7 +731,7 @@ export const FRAME_SCHEMA = {
           "maxItems": 2
         },
         "reward": {
-          "description": "Reward of the step (Eq. 20).",
+          "description": "Reward of the step (Eq. 20: `delta_C r_C + delta_E1 r_E1 + delta_E2 r_E2`).",
           "type": "number"
         },
         "episode_return": {
@@ -738,6 +745,21 @@ export const FRAME_SCHEMA = {
         "min_range": {
           "description": "Smallest sonar range [m].",
           "type": "number"
+        },
+        "r_C": {
+          "description": "The step's obstacle term (Eq. 17), before its weight `delta_C`.",
+          "type": "number",
+          "default": 0.0
+        },
+        "r_E1": {
+          "description": "The step's approach term (Eq. 18), before its weight `delta_E1`.",
+          "type": "number",
+          "default": 0.0
+        },
+        "r_E2": {
+          "description": "The step's capture term (Eq. 19), before its weight `delta_E2`.",
+          "type": "number",
+          "default": 0.0
         },
         "ranges": {
           "description": "Sonar ranges per beam [m] (None in frames without sonar, see `FrameOptions`).",
@@ -1088,7 +1110,7 @@ export const FRAME_SCHEMA = {
           }
         },
         "reward": {
-          "description": "Reward of the step.",
+          "description": "Reward of the step (Eq. 20).",
           "type": "array",
           "items": {
             "type": "number"
@@ -1107,6 +1129,69 @@ export const FRAME_SCHEMA = {
           "items": {
             "type": "number"
           }
+        },
+        "r_C": {
+          "description": "Obstacle term of each step (Eq. 17, unweighted; None in trajectories stored before the terms were).",
+          "anyOf": [
+            {
+              "type": "array",
+              "items": {
+                "type": "number"
+              }
+            },
+            {
+              "type": "null"
+            }
+          ],
+          "default": null
+        },
+        "r_E1": {
+          "description": "Approach term of each step (Eq. 18, unweighted; None likewise).",
+          "anyOf": [
+            {
+              "type": "array",
+              "items": {
+                "type": "number"
+              }
+            },
+            {
+              "type": "null"
+            }
+          ],
+          "default": null
+        },
+        "r_E2": {
+          "description": "Capture term of each step (Eq. 19, unweighted; None likewise).",
+          "anyOf": [
+            {
+              "type": "array",
+              "items": {
+                "type": "number"
+              }
+            },
+            {
+              "type": "null"
+            }
+          ],
+          "default": null
+        },
+        "ranges": {
+          "description": "Sonar ranges per beam [m] of each step; an empty tuple at steps whose frame carried no sonar (`FrameOptions.sonar_every`); None when not stored at all.",
+          "anyOf": [
+            {
+              "type": "array",
+              "items": {
+                "type": "array",
+                "items": {
+                  "type": "number"
+                }
+              }
+            },
+            {
+              "type": "null"
+            }
+          ],
+          "default": null
         }
       },
       "required": [
@@ -1127,3 +1212,6 @@ export const FRAME_SCHEMA = {
     }
   }
 };
+
+/** The display colours of every view (hptvsim/palette.py). */
+export const DISPLAY = {"pursuer_colors": ["#e8203a", "#ff7a1a", "#ff5ec8", "#a970ff", "#ff9e9e", "#c45a1b"], "evader_colors": ["#f2b400", "#9be22d", "#f2f2f2", "#ffe4a0"], "sonar_hit_color": "#ff3c3c", "depth_stops": [[0.0, [222, 196, 140]], [0.35, [120, 170, 150]], [0.7, [50, 110, 150]], [1.0, [20, 40, 90]]], "obstacle_color": "#7a5c3a", "land_color": "#d9c79a"};
