@@ -13,7 +13,6 @@ from hptvsim.palette import DEPTH_STOPS, hex_rgb
 __all__ = ["DEPTH_STOPS", "depth_colors", "hex_rgb"]
 
 
-
 def depth_colors(depth: npt.ArrayLike, depth_range: tuple[float, float]) -> npt.NDArray[np.uint8]:
     """RGB colours ``(..., 3)`` of seabed depths [m] on :data:`DEPTH_STOPS`."""
     d = np.asarray(depth, dtype=np.float64)
