@@ -23,14 +23,16 @@ setup: $(STAMP)
 # System packages the tests need (a clean CI machine has none of them): Debian's Chromium for
 # the browser tests (never a browser downloaded by a test tool), gcc for the FMU and C kernels,
 # Debian's PostgreSQL server programs, from which the database tests start throwaway clusters of
-# their own (initdb into a temporary folder, as the postgres user when run as root).
+# their own (initdb into a temporary folder, as the postgres user when run as root), MinGW-w64 to
+# cross-compile the FMUs' Windows DLLs and Wine to load and run them.
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 system-deps:
 	@command -v chromium >/dev/null 2>&1 && command -v gcc >/dev/null 2>&1 && \
-		ls /usr/lib/postgresql/*/bin/initdb >/dev/null 2>&1 || { \
+		ls /usr/lib/postgresql/*/bin/initdb >/dev/null 2>&1 && \
+		command -v x86_64-w64-mingw32-gcc >/dev/null 2>&1 && test -x /usr/lib/wine/wine64 || { \
 		$(SUDO) apt-get update -qq && \
 		DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq --no-install-recommends \
-			chromium gcc postgresql; }
+			chromium gcc postgresql gcc-mingw-w64-x86-64 wine64; }
 
 run: setup
 	$(BIN)/hptvsim serve

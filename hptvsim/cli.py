@@ -59,7 +59,13 @@ def fmu() -> None:
     help="Folder for the .fmu files (default: the repository's fmus/).",
 )
 @click.option("--type", "vehicle_types", multiple=True, help="Vehicle type(s) to build (default: all).")
-def fmu_build(out_dir: Path | None, vehicle_types: tuple[str, ...]) -> None:
+@click.option(
+    "--platform",
+    "platforms",
+    multiple=True,
+    help="FMI platform(s) to compile for (default: this machine's and win64, cross-compiled with MinGW-w64).",
+)
+def fmu_build(out_dir: Path | None, vehicle_types: tuple[str, ...], platforms: tuple[str, ...]) -> None:
     """Generate C from the CasADi model, compile it and pack one FMU per vehicle type."""
     from hptvsim._paths import checkout_dir
     from hptvsim.dynamics import VEHICLE_TYPES
@@ -73,7 +79,7 @@ def fmu_build(out_dir: Path | None, vehicle_types: tuple[str, ...]) -> None:
     target = out_dir if out_dir is not None else fmu_dir()
     for vt in vehicle_types or tuple(VEHICLE_TYPES):
         try:
-            path = build_fmu(vt, target)
+            path = build_fmu(vt, target, platforms=platforms or None)
         except FmuBuildError as exc:
             raise click.ClickException(str(exc)) from None
         click.echo(f"built {path}")
@@ -97,12 +103,16 @@ def _check_vehicle_type(vehicle_type: str) -> None:
     help="Folder holding the .fmu files (default: the repository's fmus/).",
 )
 def fmu_check(fmu_folder: Path | None) -> None:
-    """Fail when an FMU's sources drift from what the model generates, or it fails validation."""
+    """Fail when an FMU's sources drift from what the model generates, or it fails validation.
+
+    Validation: FMPy's checks of the model description, and every Windows DLL's export table
+    (a 64-bit x86 DLL exporting every FMI 2.0 Co-Simulation function).
+    """
     from fmpy.validation import validate_fmu
 
     from hptvsim.dynamics import FMU_NAMES
     from hptvsim.fmu import fmu_dir
-    from hptvsim.fmu.build import check_fmu
+    from hptvsim.fmu.build import check_binaries, check_fmu
 
     folder = fmu_folder if fmu_folder is not None else fmu_dir()
     missing = [f"{ident}.fmu" for ident in FMU_NAMES.values() if not (folder / f"{ident}.fmu").is_file()]
@@ -118,7 +128,10 @@ def fmu_check(fmu_folder: Path | None) -> None:
         click.echo(str(drift))
         for p in problems:
             click.echo(f"  validation: {p}")
-        bad = bad or not drift.ok or bool(problems)
+        binaries = check_binaries(path)
+        for p in binaries:
+            click.echo(f"  binaries: {p}")
+        bad = bad or not drift.ok or bool(problems) or bool(binaries)
     if bad:
         sys.exit(1)
 

@@ -9,8 +9,11 @@ The FMU holds:
 * ``sources/fmi2_cs.c``: the FMI 2.0 Co-Simulation wrapper (hand-written, in
   ``hptvsim/fmu/templates``);
 * ``modelDescription.xml``: generated from the same specs (names, units, descriptions);
-* ``binaries/<platform>/<id>.so|.dll|.dylib``: compiled here; any platform can rebuild it from
-  ``sources/`` (for example ``fmpy.build.build_platform_binary``), as ``<SourceFiles>`` lists them.
+* ``binaries/<platform>/<id>.so|.dll|.dylib``: compiled here, for this machine's platform and,
+  with a cross compiler, for others: :data:`CROSS_COMPILERS` (``win64`` with MinGW-w64, Debian's
+  ``gcc-mingw-w64-x86-64``; linked without timestamps and at a fixed image base, so a rebuild is
+  bit-identical). Any platform can rebuild it from ``sources/`` (for example
+  ``fmpy.build.build_platform_binary``), as ``<SourceFiles>`` lists them.
 
 Everything but the binary is a pure function of the model and the installed casadi, so
 :func:`generate_sources` doubles as the drift check: :func:`check_fmu` compares an FMU's
@@ -47,13 +50,16 @@ from hptvsim.dynamics._casadi import ca
 from hptvsim.dynamics.model import INPUTS, OUTPUTS, STATE_NAMES
 
 __all__ = [
+    "CROSS_COMPILERS",
     "DEFAULT_H_MAX",
     "DEFAULT_STEP",
     "FmuBuildError",
     "FmuDrift",
     "build_all",
     "build_fmu",
+    "check_binaries",
     "check_fmu",
+    "default_platforms",
     "fmi_platform",
     "generate_sources",
 ]
@@ -428,7 +434,9 @@ def generate_sources(vehicle_type: str, params: VehicleParameters | None = None)
     return {name: text.replace(placeholder, guid) for name, text in files.items()}
 
 
-def _shared_library_suffix() -> str:
+def _shared_library_suffix(platform: str | None = None) -> str:
+    if platform is not None:
+        return ".dll" if platform.startswith("win") else ".dylib" if platform.startswith("darwin") else ".so"
     return {"win32": ".dll", "darwin": ".dylib"}.get(sys.platform, ".so")
 
 
@@ -438,24 +446,61 @@ def _fmi_include_dir() -> Path:
     return Path(fmpy.__file__).parent / "c-code"
 
 
-def compile_binary(source_dir: Path, identifier: str, out_dir: Path, *, cc: str | None = None) -> Path:
+CROSS_COMPILERS: Final = {"win64": ("x86_64-w64-mingw32-gcc", "gcc-mingw-w64-x86-64")}
+"""Platforms built by a cross compiler: ``{platform: (compiler, Debian package)}``."""
+
+
+def default_platforms() -> tuple[str, ...]:
+    """This machine's platform and every platform of :data:`CROSS_COMPILERS` (what FMUs carry)."""
+    host = fmi_platform()
+    return (host, *(p for p in CROSS_COMPILERS if p != host))
+
+
+def compile_binary(
+    source_dir: Path, identifier: str, out_dir: Path, *, cc: str | None = None, platform: str | None = None
+) -> Path:
     """Compile the FMU sources in ``source_dir`` into ``out_dir/<identifier><suffix>``.
 
     Flags: ``-O2 -ffp-contract=off`` (no fused multiply-add, so the numbers do not depend on
-    the CPU), hidden visibility except the FMI and ``hptvsim_*`` functions.
+    the CPU), hidden visibility except the FMI and ``hptvsim_*`` functions. For ``win64``
+    (MinGW-w64): libgcc linked statically (the DLL needs only ``KERNEL32`` and ``msvcrt``), no
+    timestamp, a fixed image base and no symbols, so the same sources give the same bytes.
+
+    Args:
+        source_dir: The FMU's ``sources/``.
+        identifier: The model identifier (the library's name).
+        out_dir: Where the library goes (``binaries/<platform>``).
+        cc: The compiler (default: ``$CC`` or ``gcc`` for this machine, the platform's cross
+            compiler otherwise).
+        platform: FMI platform to build for (default: this machine's).
 
     Raises:
         FmuBuildError: The compiler is missing or fails (its output is in the message).
     """
-    compiler = cc or os.environ.get("CC", "gcc")
-    if shutil.which(compiler) is None:
-        raise FmuBuildError(f"C compiler {compiler!r} not found; install gcc or set CC")
+    host = fmi_platform()
+    cross = platform is not None and platform != host
+    if cross and platform not in CROSS_COMPILERS:
+        valid = ", ".join((host, *CROSS_COMPILERS))
+        raise FmuBuildError(f"cannot build for platform {platform!r} here; valid: {valid}")
+    if cross:
+        assert platform is not None
+        compiler, package = cc or CROSS_COMPILERS[platform][0], CROSS_COMPILERS[platform][1]
+        if shutil.which(compiler) is None:
+            raise FmuBuildError(
+                f"cross compiler {compiler!r} for {platform} not found (Debian: apt install {package}); "
+                f"or build only this machine's binary with --platform {host}"
+            )
+    else:
+        compiler = cc or os.environ.get("CC", "gcc")
+        if shutil.which(compiler) is None:
+            raise FmuBuildError(f"C compiler {compiler!r} not found; install gcc or set CC")
     out_dir.mkdir(parents=True, exist_ok=True)
-    target = out_dir / f"{identifier}{_shared_library_suffix()}"
+    windows = (platform or host).startswith("win")
+    target = out_dir / f"{identifier}{_shared_library_suffix(platform if cross else None)}"
     cmd = [
         compiler,
         "-shared",
-        "-fPIC",
+        *([] if windows else ["-fPIC"]),
         "-O2",
         "-std=c99",
         "-ffp-contract=off",
@@ -469,6 +514,7 @@ def compile_binary(source_dir: Path, identifier: str, out_dir: Path, *, cc: str 
         str(source_dir / "hptv_model.c"),
         "-o",
         str(target),
+        *(["-Wl,--no-insert-timestamp,--disable-auto-image-base", "-static-libgcc", "-s"] if windows else []),
         "-lm",
     ]
     proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
@@ -489,11 +535,26 @@ def _write_zip(root: Path, target: Path) -> None:
     tmp.replace(target)
 
 
-def build_fmu(vehicle_type: str, out_dir: Path, *, params: VehicleParameters | None = None) -> Path:
+def build_fmu(
+    vehicle_type: str,
+    out_dir: Path,
+    *,
+    params: VehicleParameters | None = None,
+    platforms: Iterable[str] | None = None,
+) -> Path:
     """Generate, compile and pack the FMU of one vehicle type into ``out_dir``.
+
+    Args:
+        vehicle_type: One of :data:`~hptvsim.dynamics.VEHICLE_TYPES`.
+        out_dir: Where the ``.fmu`` goes.
+        params: The vehicle's parameters (default: the type's).
+        platforms: FMI platforms to build binaries for (default: :func:`default_platforms`).
 
     Returns:
         The path of the written ``.fmu``.
+
+    Raises:
+        FmuBuildError: An unknown type or platform, or a compiler that is missing or fails.
     """
     identifier = FMU_NAMES.get(vehicle_type)
     if identifier is None:
@@ -506,7 +567,8 @@ def build_fmu(vehicle_type: str, out_dir: Path, *, params: VehicleParameters | N
             path = root / name
             path.parent.mkdir(parents=True, exist_ok=True)
             path.write_text(text)
-        compile_binary(root / "sources", identifier, root / "binaries" / fmi_platform())
+        for platform in platforms if platforms is not None else default_platforms():
+            compile_binary(root / "sources", identifier, root / "binaries" / platform, platform=platform)
         target = out_dir / f"{identifier}.fmu"
         _write_zip(root, target)
     return target
@@ -530,3 +592,29 @@ def check_fmu(vehicle_type: str, fmu: Path) -> FmuDrift:
     missing = tuple(sorted(n for n in expected if n not in present))
     extra = tuple(sorted(n for n in present if n not in expected))
     return FmuDrift(fmu=fmu, changed=changed, missing=missing, extra=extra)
+
+
+def check_binaries(fmu: Path) -> list[str]:
+    """Problems of an FMU's Windows binaries (empty when there are none or they are sound).
+
+    Every ``binaries/win64/*.dll`` must be a 64-bit x86 DLL named after its model identifier and
+    export every FMI 2.0 Co-Simulation function (read from its export table: no Windows needed).
+    """
+    from hptvsim.fmu.pe import PeError, missing_fmi2_exports, read_pe
+
+    problems = []
+    with zipfile.ZipFile(fmu) as zf:
+        for name in zf.namelist():
+            if not (name.startswith("binaries/win64/") and name.endswith(".dll")):
+                continue
+            try:
+                image = read_pe(zf.read(name))
+            except PeError as exc:
+                problems.append(f"{fmu.name}: {name} is not a PE image ({exc})")
+                continue
+            if not image.win64:
+                problems.append(f"{fmu.name}: {name} is not a 64-bit x86 DLL (machine {image.machine:#x})")
+            missing = missing_fmi2_exports(image)
+            if missing:
+                problems.append(f"{fmu.name}: {name} does not export {', '.join(missing)}")
+    return problems
