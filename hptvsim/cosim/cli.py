@@ -9,6 +9,41 @@ import click
 __all__ = ["register"]
 
 
+def _write(target: Path, names: tuple[str, ...], types: tuple[str, ...], rows: list[list[object]]) -> None:
+    """Write ``time`` and the outputs: CSV (Reals to 17 digits, Booleans as true/false) or Parquet.
+
+    Parquet columns carry the FMI types: float64 (Real), int32 (Integer, Enumeration), bool
+    (Boolean), string (String). Written to a temporary file first, then renamed.
+    """
+    import csv
+
+    tmp = target.with_name(target.name + ".tmp")
+    if target.suffix == ".parquet":
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        kinds = {"Real": pa.float64(), "Integer": pa.int32(), "Enumeration": pa.int32()}
+        kinds |= {"Boolean": pa.bool_(), "String": pa.string()}
+        columns = {"time": pa.array([r[0] for r in rows], pa.float64())}
+        for k, (name, vtype) in enumerate(zip(names, types, strict=True)):
+            columns[name] = pa.array([r[k + 1] for r in rows], kinds[vtype])
+        pq.write_table(pa.table(columns), tmp)
+    else:
+
+        def cell(value: object) -> str:
+            if isinstance(value, bool):
+                return "true" if value else "false"
+            if isinstance(value, float):
+                return f"{value:.17g}"
+            return str(value)
+
+        with tmp.open("w", newline="") as fh:
+            writer = csv.writer(fh)
+            writer.writerow(["time", *names])
+            writer.writerows([[cell(v) for v in r] for r in rows])
+    tmp.replace(target)
+
+
 def register(main: click.Group, bench: click.Group) -> None:
     """Add ``hptvsim cosim ...`` to ``main`` and ``hptvsim bench cosim`` to ``bench``."""
 
@@ -24,24 +59,32 @@ def register(main: click.Group, bench: click.Group) -> None:
         "out_file",
         type=click.Path(dir_okay=False, path_type=Path),
         default=None,
-        help="CSV file for the external outputs over time (default: <graph>.csv beside the graph).",
+        help="Outputs over time: .csv, or .parquet with each column in its FMI type "
+        "(default: <graph>.csv beside the graph).",
     )
     @click.option(
         "--set",
         "settings",
         multiple=True,
         metavar="INPUT=VALUE",
-        help="Hold an external input at a value (repeatable).",
+        help="Start an external input at a value in its type (number, true/false, an Enumeration "
+        "item's name, text), from t = 0 on (repeatable).",
     )
     def cosim_run(
         graph_file: Path, stop_time: float, out_file: Path | None, settings: tuple[str, ...]
     ) -> None:
-        """Run GRAPH_FILE (.toml or .json) to --stop-time and write its outputs as CSV."""
-        import numpy as np
+        """Run GRAPH_FILE (.toml or .json) to --stop-time and write its outputs (CSV or Parquet).
+
+        A component that ends the simulation itself stops the run cleanly: every row up to the
+        last complete communication point is written and the reason printed.
+        """
+        import dataclasses
+
         from tqdm import tqdm
 
+        from hptvsim.cosim.fmi2 import FmuError
         from hptvsim.cosim.graph import GraphError, load_graph
-        from hptvsim.cosim.orchestrator import Orchestrator
+        from hptvsim.cosim.orchestrator import Orchestrator, SimulationFailedError, SimulationTerminated
 
         try:
             graph = load_graph(graph_file)
@@ -54,37 +97,55 @@ def register(main: click.Group, bench: click.Group) -> None:
                 param_hint="--stop-time",
             )
         target = out_file if out_file is not None else graph_file.with_suffix(".csv")
-        held: list[tuple[str, float]] = []
+        if target.suffix not in (".csv", ".parquet"):
+            raise click.BadParameter(
+                f"{target.name}: valid suffixes are .csv and .parquet", param_hint="--out"
+            )
+        held: dict[str, str] = {}
+        names = [i.name for i in graph.inputs]
         for item in settings:
             name, eq, value = item.partition("=")
+            name = name.strip()
             if not eq:
                 raise click.BadParameter(f"{item!r} is not INPUT=VALUE", param_hint="--set")
-            try:
-                held.append((name.strip(), float(value)))
-            except ValueError:
-                raise click.BadParameter(f"{item!r}: {value!r} is not a number", param_hint="--set") from None
+            if name not in names:
+                raise click.BadParameter(
+                    f"no external input named {name!r}; inputs: {', '.join(names) or '(none)'}",
+                    param_hint="--set",
+                )
+            held[name] = value
+        # --set values are the inputs' start values: they reach initialisation and the t = 0 row
+        graph = dataclasses.replace(
+            graph,
+            inputs=tuple(dataclasses.replace(i, start=held.get(i.name, i.start)) for i in graph.inputs),
+        )
+        rows: list[list[object]] = []
+        reason = ""
         try:
             orch = Orchestrator(graph)
-        except GraphError as exc:
+        except (GraphError, FmuError, SimulationFailedError) as exc:
+            raise click.ClickException(str(exc)) from None
+        except ValueError as exc:  # a --set or start value that does not fit its input's type
             raise click.ClickException(str(exc)) from None
         with orch:
-            for name, number in held:
-                try:
-                    orch.set_input(name, number)
-                except (KeyError, ValueError) as exc:  # str() of a KeyError is the repr of its message
-                    message = str(exc.args[0]) if exc.args else repr(exc)
-                    raise click.BadParameter(message, param_hint="--set") from None
-            rows = np.empty((steps + 1, 1 + len(orch.outputs)))
-            rows[0, 0] = 0.0
-            rows[0, 1:] = orch.outputs
-            for k in tqdm(range(steps), desc=graph.name, unit="step", disable=steps < 10_000):
-                rows[k + 1, 1:] = orch.step()
-                rows[k + 1, 0] = orch.time
-        header = ",".join(["time", *orch.output_names])
-        tmp = target.with_name(target.name + ".tmp")
-        np.savetxt(tmp, rows, delimiter=",", header=header, comments="", fmt="%.17g")
-        tmp.replace(target)
-        click.echo(f"{steps} steps of {graph.step_size} s; outputs: {target.resolve()}")
+            rows.append([0.0, *orch.output_values()])
+            try:
+                for _ in tqdm(range(steps), desc=graph.name, unit="step", disable=steps < 10_000):
+                    orch.step()
+                    rows.append([orch.time, *orch.output_values()])
+            except SimulationTerminated as exc:
+                reason = str(exc)
+            except FmuError as exc:
+                _write(target, orch.output_names, orch.output_types, rows)
+                raise click.ClickException(
+                    f"{exc} (rows up to t = {orch.time:g} s are in {target})"
+                ) from None
+            names_out, types_out = orch.output_names, orch.output_types
+        _write(target, names_out, types_out, rows)
+        done = len(rows) - 1
+        if reason:
+            click.echo(f"stopped early: {reason}")
+        click.echo(f"{done} steps of {graph.step_size} s; outputs: {target.resolve()}")
 
     @bench.command("cosim")
     @click.option("--quick", is_flag=True, help="About a second instead of several.")

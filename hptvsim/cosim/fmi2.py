@@ -7,8 +7,15 @@ each call, see ``shared/notes/fmu-cosim.md``). Every call's status is checked: a
 than ``fmi2OK``/``fmi2Warning`` raises :class:`FmuError`, which names the component, the call
 and the messages the FMU logged.
 
-Nothing here is specific to the vehicle FMUs: any FMI 2.0 CS FMU with Real inputs and outputs
-works.
+Nothing here is specific to the vehicle FMUs: any FMI 2.0 CS FMU works. Every variable type is
+read and written (:func:`coerce_value` turns text and numbers into a variable's type, naming the
+valid values when it cannot); the hot path exchanges Real, Integer, Enumeration and Boolean
+variables through float64 buffers (integers and booleans exactly), Strings by name
+(:meth:`Fmu2Instance.set_values`, :meth:`Fmu2Instance.get_values`). A step the FMU discards
+(``fmi2Discard``) raises :class:`FmuDiscardError` when the FMU has terminated the simulation, and is
+retried in smaller steps (held inputs) when the FMU can handle variable communication steps.
+The capability flags are read (:class:`FmuModel`): an FMU that can be instantiated only once per
+process refuses a second instance with a clear error.
 """
 
 from __future__ import annotations
@@ -39,16 +46,30 @@ from fmpy.fmi2 import (
 )
 
 __all__ = [
+    "NUMERIC_TYPES",
     "Fmu2Instance",
+    "FmuDiscardError",
     "FmuError",
     "FmuModel",
     "FmuVariableError",
+    "Value",
     "Variable",
+    "coerce_value",
     "load_model",
+    "units_compatible",
 ]
 
 FMI2_OK: Final = 0
 FMI2_WARNING: Final = 1
+FMI2_DISCARD: Final = 2
+_LAST_SUCCESSFUL_TIME: Final = 2  # fmi2StatusKind
+_TERMINATED: Final = 3
+
+Value = float | int | bool | str
+"""A variable's value: float (Real), int (Integer, Enumeration), bool (Boolean) or str (String)."""
+
+NUMERIC_TYPES: Final = ("Real", "Integer", "Enumeration", "Boolean")
+"""Types the hot path exchanges through float64 buffers (the others: String)."""
 _STATUS_NAMES: Final = ("fmi2OK", "fmi2Warning", "fmi2Discard", "fmi2Error", "fmi2Fatal", "fmi2Pending")
 
 F64Array = npt.NDArray[np.float64]
@@ -74,6 +95,29 @@ class FmuError(RuntimeError):
         super().__init__(f"component '{component}': {call} returned {name}: {logged}")
 
 
+class FmuDiscardError(FmuError):
+    """``fmi2DoStep`` returned ``fmi2Discard`` and the step cannot be completed here.
+
+    Attributes:
+        terminated: The FMU ended the simulation itself (``fmi2GetBooleanStatus(fmi2Terminated)``).
+        last_time: The FMU's last successful time [s] (``fmi2LastSuccessfulTime``), if it says.
+    """
+
+    def __init__(
+        self,
+        component: str,
+        status: int,
+        messages: Sequence[str],
+        *,
+        terminated: bool,
+        last_time: float | None,
+        reason: str = "",
+    ) -> None:
+        super().__init__(component, "fmi2DoStep", status, [*messages, *([reason] if reason else [])])
+        self.terminated = terminated
+        self.last_time = last_time
+
+
 class FmuVariableError(KeyError):
     """A variable name is not in the FMU's model description (the message lists valid ones)."""
 
@@ -83,16 +127,123 @@ class FmuVariableError(KeyError):
 
 @dataclass(frozen=True, kw_only=True)
 class Variable:
-    """One scalar variable of an FMU's model description."""
+    """One scalar variable of an FMU's model description.
+
+    Attributes:
+        name: The variable's name.
+        value_reference: Its value reference.
+        type: ``Real``, ``Integer``, ``Boolean``, ``String`` or ``Enumeration``.
+        causality: ``parameter``, ``input``, ``output``, ``local``, ...
+        variability: ``constant``, ``fixed``, ``tunable``, ``discrete`` or ``continuous``.
+        start: The start value in the variable's type (None without one).
+        unit: The unit, its own or its declared type's (None without one).
+        description: The description.
+        display_unit: The display unit, its own or its declared type's.
+        declared_type: The name of its declared type (``<SimpleType>``), if any.
+        items: Enumeration items ``(name, value)`` of its declared type.
+    """
 
     name: str
     value_reference: int
-    type: str  # "Real", "Integer", "Boolean", "String" or "Enumeration"
+    type: str
     causality: str
     variability: str
-    start: float | None
+    start: Value | None
     unit: str | None
     description: str
+    display_unit: str | None = None
+    declared_type: str | None = None
+    items: tuple[tuple[str, int], ...] = ()
+
+
+def _parse_start(vtype: str, start: Any) -> Value | None:
+    if start is None:
+        return None
+    try:
+        if vtype == "Real":
+            return float(start)
+        if vtype in ("Integer", "Enumeration"):
+            return int(start)
+        if vtype == "Boolean":
+            return str(start).strip().lower() in ("true", "1")
+    except (TypeError, ValueError):
+        return None
+    return str(start)
+
+
+def coerce_value(var: Variable, value: Any, where: str = "") -> Value:
+    """``value`` (a number, bool or text) in ``var``'s type.
+
+    Text is parsed: numbers for Real and Integer, ``true``/``false``/``1``/``0`` for Boolean,
+    an item's name or value for Enumeration; String takes any text.
+
+    Raises:
+        ValueError: The value does not fit the type (the message names the variable, its type
+            and what would be valid).
+    """
+    label = where or repr(var.name)
+    if var.type == "String":
+        if not isinstance(value, str):
+            raise ValueError(f"{label} is a String variable; {value!r} is not text")
+        return value
+    if var.type == "Boolean":
+        if isinstance(value, bool):
+            return value
+        text = str(value).strip().lower()
+        if text in ("true", "1", "1.0"):
+            return True
+        if text in ("false", "0", "0.0"):
+            return False
+        raise ValueError(f"{label} is a Boolean variable; {value!r} is invalid (valid: true, false, 1, 0)")
+    if var.type == "Enumeration":
+        names = {n: v for n, v in var.items}
+        if isinstance(value, str) and value.strip() in names:
+            return names[value.strip()]
+        number = _integer(value)
+        if number is None or (names and number not in names.values()):
+            valid = ", ".join(f"{n} ({v})" for n, v in var.items) or "an integer"
+            raise ValueError(f"{label} is an Enumeration variable; {value!r} is invalid (valid: {valid})")
+        return number
+    if var.type == "Integer":
+        number = _integer(value)
+        if number is None or not -(2**31) <= number < 2**31:
+            raise ValueError(
+                f"{label} is an Integer variable; {value!r} is invalid (valid: a 32-bit integer)"
+            )
+        return number
+    if isinstance(value, bool):
+        raise ValueError(f"{label} is a Real variable; {value!r} is a Boolean (valid: a number)")
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{label} is a Real variable; {value!r} is invalid (valid: a number)") from None
+
+
+def _integer(value: Any) -> int | None:
+    if isinstance(value, bool):
+        return None
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        return None
+    if not math.isfinite(number) or number != int(number):
+        return None
+    return int(number)
+
+
+def units_compatible(a: Variable, model_a: FmuModel, b: Variable, model_b: FmuModel) -> bool:
+    """Whether a value in ``a``'s unit means the same in ``b``'s (a missing unit matches any).
+
+    Two unit names match if equal, or if both models define them with the same SI base-unit
+    exponents, factor and offset (``<UnitDefinitions>``); display units do not matter here.
+    """
+    if not a.unit or not b.unit or a.unit == b.unit:
+        return True
+    ua, ub = model_a.unit_definitions.get(a.unit), model_b.unit_definitions.get(b.unit)
+    if ua is None or ub is None or ua.baseUnit is None or ub.baseUnit is None:
+        return False
+    keys = ("kg", "m", "s", "A", "K", "mol", "cd", "rad", "factor", "offset")
+    return all(getattr(ua.baseUnit, k) == getattr(ub.baseUnit, k) for k in keys)
 
 
 # --- logging: FMPy's variadic-logger proxy (needed because ctypes cannot receive C varargs) is
@@ -155,27 +306,32 @@ class FmuModel:
             raise ValueError(
                 f"{self.path}: an FMI 2.0 Co-Simulation FMU is required (got FMI {md.fmiVersion})"
             )
-        self.identifier: str = md.coSimulation.modelIdentifier
+        cs = md.coSimulation
+        self.identifier: str = cs.modelIdentifier
         self.guid: str = md.guid
+        self.can_handle_variable_step = bool(cs.canHandleVariableCommunicationStepSize)
+        self.once_per_process = bool(cs.canBeInstantiatedOnlyOncePerProcess)
+        self.can_get_set_state = bool(cs.canGetAndSetFMUstate)
+        self.unit_definitions: dict[str, Any] = {u.name: u for u in md.unitDefinitions}
+        self.live: dict[int, str] = {}  # id -> instance name of the instances not yet freed
         self._tmp = tempfile.mkdtemp(prefix=f"hptvsim-{self.identifier}-")
         self.unzip_dir = Path(extract(str(self.path), unzipdir=self._tmp))
         weakref.finalize(self, shutil.rmtree, self._tmp, True)
         self.variables: dict[str, Variable] = {}
         for v in md.modelVariables:
-            start = v.start
-            try:
-                start_f = float(start) if start is not None else None
-            except (TypeError, ValueError):
-                start_f = None
+            dt = v.declaredType
             self.variables[v.name] = Variable(
                 name=v.name,
                 value_reference=int(v.valueReference),
                 type=v.type,
                 causality=v.causality,
                 variability=v.variability,
-                start=start_f,
-                unit=getattr(v, "unit", None),
+                start=_parse_start(v.type, v.start),
+                unit=getattr(v, "unit", None) or (dt.unit if dt is not None else None),
                 description=v.description or "",
+                display_unit=getattr(v, "displayUnit", None) or (dt.displayUnit if dt is not None else None),
+                declared_type=dt.name if dt is not None else None,
+                items=tuple((i.name, int(i.value)) for i in (dt.items if dt is not None else []) or []),
             )
 
     def names(self, causality: str | None = None) -> list[str]:
@@ -200,8 +356,25 @@ class FmuModel:
         return v
 
     def instantiate(self, name: str | None = None, *, logging_on: bool = False) -> Fmu2Instance:
-        """Create an instance (see :class:`Fmu2Instance`)."""
-        return Fmu2Instance(self, name or self.identifier, logging_on=logging_on)
+        """Create an instance (see :class:`Fmu2Instance`).
+
+        Raises:
+            FmuError: The FMU can be instantiated only once per process and already is.
+        """
+        name = name or self.identifier
+        if self.once_per_process and self.live:
+            other = next(iter(self.live.values()))
+            raise FmuError(
+                name,
+                "fmi2Instantiate",
+                3,
+                [
+                    f"{self.identifier} can be instantiated only once per process "
+                    f"(canBeInstantiatedOnlyOncePerProcess) and component '{other}' holds it; "
+                    "use one instance of it, or free the other first"
+                ],
+            )
+        return Fmu2Instance(self, name, logging_on=logging_on)
 
 
 def _f64_ptr(a: F64Array) -> Any:
@@ -212,12 +385,48 @@ def _vr_array(vrs: Sequence[int]) -> Any:
     return (ctypes.c_uint * len(vrs))(*vrs)
 
 
-def _require_real(model: FmuModel, variables: Sequence[Variable]) -> None:
+def _require_numeric(model: FmuModel, variables: Sequence[Variable]) -> None:
     for v in variables:
-        if v.type != "Real":
+        if v.type not in NUMERIC_TYPES:
             raise ValueError(
-                f"{model.identifier}: '{v.name}' is a {v.type} variable; only Real variables can be bound"
+                f"{model.identifier}: '{v.name}' is a {v.type} variable; only "
+                f"{', '.join(NUMERIC_TYPES)} variables can be bound (set and get Strings by name)"
             )
+
+
+class _Mixed:
+    """A bound buffer whose variables are not all Real: one typed scratch array per FMI type."""
+
+    def __init__(self, variables: Sequence[Variable], buffer: F64Array) -> None:
+        self.buffer = buffer
+        self.groups: list[tuple[str, npt.NDArray[np.intp], Any, np.ndarray, Any, int]] = []
+        for fmi_type, types, ctype, dtype in (
+            ("Real", ("Real",), ctypes.c_double, np.float64),
+            ("Integer", ("Integer", "Enumeration"), ctypes.c_int, np.int32),
+            ("Boolean", ("Boolean",), ctypes.c_int, np.int32),
+        ):
+            idx = [k for k, v in enumerate(variables) if v.type in types]
+            if not idx:
+                continue
+            scratch = np.zeros(len(idx), dtype=dtype)
+            vrs = _vr_array([variables[k].value_reference for k in idx])
+            ptr = scratch.ctypes.data_as(ctypes.POINTER(ctype))
+            self.groups.append((fmi_type, np.asarray(idx, dtype=np.intp), vrs, scratch, ptr, len(idx)))
+
+    def write(self, inst: Fmu2Instance) -> None:
+        for fmi_type, idx, vrs, scratch, ptr, n in self.groups:
+            if fmi_type == "Boolean":
+                scratch[:] = self.buffer[idx] != 0.0
+            else:
+                scratch[:] = self.buffer[idx]
+            call = f"fmi2Set{fmi_type}"
+            inst._check(call, inst._fn[call](inst._c, vrs, n, ptr))
+
+    def read(self, inst: Fmu2Instance) -> None:
+        for fmi_type, idx, vrs, scratch, ptr, n in self.groups:
+            call = f"fmi2Get{fmi_type}"
+            inst._check(call, inst._fn[call](inst._c, vrs, n, ptr))
+            self.buffer[idx] = scratch != 0 if fmi_type == "Boolean" else scratch
 
 
 def _own_or_check(buffer: F64Array | None, size: int, what: str) -> F64Array:
@@ -291,7 +500,12 @@ class Fmu2Instance:
         self._out_ptr = _f64_ptr(self.outputs)
         self._n_in = 0
         self._n_out = 0
+        self._mixed_in: _Mixed | None = None
+        self._mixed_out: _Mixed | None = None
         self._freed = False
+        self.initialized = False  # after fmi2ExitInitializationMode, until a reset
+        self.terminated = False  # after fmi2Terminate (ours) or the FMU ending the simulation
+        model.live[id(self)] = name
 
     # -- error handling ------------------------------------------------------------------------
 
@@ -303,43 +517,42 @@ class Fmu2Instance:
 
     # -- lifecycle ----------------------------------------------------------------------------
 
-    def set_values(self, values: Mapping[str, float]) -> None:
-        """Set parameters or inputs by name (Real and Integer variables).
+    def set_values(self, values: Mapping[str, Any]) -> None:
+        """Set parameters, start values or inputs by name, in their own types.
+
+        Values are coerced by :func:`coerce_value` (so text works for every type). One call per
+        FMI type, Reals first: an FMU that checks its values rejects the call before it applies any.
 
         Raises:
             FmuVariableError: Unknown name (the message lists the valid parameters and inputs).
+            ValueError: A value does not fit its variable's type (names the valid values).
             FmuError: The FMU rejected a value (non-finite, out of range).
         """
-        real_vr: list[int] = []
-        real_val: list[float] = []
-        other: list[tuple[str, Variable, float]] = []
+        groups: dict[str, tuple[list[int], list[Any]]] = {}
         for name, value in values.items():
             var = self.model.variable(name, causality=("parameter", "input"))
-            if var.type == "Real":
-                real_vr.append(var.value_reference)
-                real_val.append(float(value))
-            elif var.type in ("Integer", "Enumeration", "Boolean"):
-                other.append((name, var, float(value)))
-            else:
-                raise FmuVariableError(f"{name!r} is a {var.type} variable; only numbers can be set")
-        if real_vr:  # one call: the FMU checks every value before it applies any
-            n = len(real_vr)
-            vals = (ctypes.c_double * n)(*real_val)
-            self._check("fmi2SetReal", self._fn["fmi2SetReal"](self._c, _vr_array(real_vr), n, vals))
-        for name, var, value in other:
-            vr = (ctypes.c_uint * 1)(var.value_reference)
-            if var.type == "Boolean":
-                bval = (ctypes.c_int * 1)(int(bool(value)))
-                self._check("fmi2SetBoolean", self._fn["fmi2SetBoolean"](self._c, vr, 1, bval))
+            typed = coerce_value(var, value, f"{self.name}.{name}")
+            fmi_type = "Integer" if var.type == "Enumeration" else var.type
+            vrs, vals = groups.setdefault(fmi_type, ([], []))
+            vrs.append(var.value_reference)
+            vals.append(typed)
+        for fmi_type in ("Real", "Integer", "Boolean", "String"):
+            if fmi_type not in groups:
                 continue
-            if not math.isfinite(value) or value != int(value):
-                raise FmuError(self.name, "fmi2SetInteger", 3, [f"{name} = {value} is not an integer"])
-            ival = (ctypes.c_int * 1)(int(value))
-            self._check("fmi2SetInteger", self._fn["fmi2SetInteger"](self._c, vr, 1, ival))
+            vrs, vals = groups[fmi_type]
+            n = len(vrs)
+            if fmi_type == "Real":
+                arr: Any = (ctypes.c_double * n)(*vals)
+            elif fmi_type == "String":
+                arr = (ctypes.c_char_p * n)(*(v.encode("utf-8") for v in vals))
+            else:
+                arr = (ctypes.c_int * n)(*(int(v) for v in vals))
+            call = f"fmi2Set{fmi_type}"
+            self._check(call, self._fn[call](self._c, _vr_array(vrs), n, arr))
 
-    def get_values(self, names: Sequence[str]) -> dict[str, float]:
-        """Read Real or Integer variables by name."""
-        out: dict[str, float] = {}
+    def get_values(self, names: Sequence[str]) -> dict[str, Value]:
+        """Read variables by name, each in its own type (float, int, bool or str)."""
+        out: dict[str, Value] = {}
         for name in names:
             var = self.model.variable(name)
             vr = (ctypes.c_uint * 1)(var.value_reference)
@@ -347,29 +560,54 @@ class Fmu2Instance:
                 val = (ctypes.c_double * 1)()
                 self._check("fmi2GetReal", self._fn["fmi2GetReal"](self._c, vr, 1, val))
                 out[name] = float(val[0])
+            elif var.type == "String":
+                sval = (ctypes.c_char_p * 1)()
+                self._check("fmi2GetString", self._fn["fmi2GetString"](self._c, vr, 1, sval))
+                out[name] = (sval[0] or b"").decode("utf-8", "replace")
             else:
                 ival = (ctypes.c_int * 1)()
                 fn = "fmi2GetBoolean" if var.type == "Boolean" else "fmi2GetInteger"
                 self._check(fn, self._fn[fn](self._c, vr, 1, ival))
-                out[name] = float(ival[0])
+                out[name] = bool(ival[0]) if var.type == "Boolean" else int(ival[0])
         return out
 
-    def initialize(self, values: Mapping[str, float] | None = None, *, start_time: float = 0.0) -> None:
-        """Set parameters and start values, then enter and exit initialisation mode."""
+    def setup(self, values: Mapping[str, Any] | None = None, *, start_time: float = 0.0) -> None:
+        """``fmi2SetupExperiment``, then parameters and start values (the instantiated state)."""
         self._check(
             "fmi2SetupExperiment", self._fn["fmi2SetupExperiment"](self._c, 0, 0.0, start_time, 0, 0.0)
         )
         if values:
             self.set_values(values)
-        self._check("fmi2EnterInitializationMode", self._fn["fmi2EnterInitializationMode"](self._c))
-        self._check("fmi2ExitInitializationMode", self._fn["fmi2ExitInitializationMode"](self._c))
         self.time = start_time
+
+    def enter_initialization(self) -> None:
+        """``fmi2EnterInitializationMode``: inputs may now be set and outputs read until exit."""
+        self._check("fmi2EnterInitializationMode", self._fn["fmi2EnterInitializationMode"](self._c))
+
+    def exit_initialization(self) -> None:
+        """``fmi2ExitInitializationMode``: the instance is ready to step."""
+        self._check("fmi2ExitInitializationMode", self._fn["fmi2ExitInitializationMode"](self._c))
+        self.initialized = True
+
+    def initialize(self, values: Mapping[str, Any] | None = None, *, start_time: float = 0.0) -> None:
+        """Set parameters and start values, then enter and exit initialisation mode."""
+        self.setup(values, start_time=start_time)
+        self.enter_initialization()
+        self.exit_initialization()
+
+    def terminate(self) -> None:
+        """``fmi2Terminate`` an initialised instance (once; a no-op otherwise)."""
+        if self.initialized and not self.terminated and not self._freed:
+            self.terminated = True
+            self._check("fmi2Terminate", self._fn["fmi2Terminate"](self._c))
 
     def reset(self) -> None:
         """``fmi2Reset``: back to the instantiated state and the start values (no reload)."""
         self._check("fmi2Reset", self._fn["fmi2Reset"](self._c))
         self.log.clear()
         self.time = 0.0
+        self.initialized = False
+        self.terminated = False
 
     @property
     def freed(self) -> bool:
@@ -382,6 +620,7 @@ class Fmu2Instance:
             self._freed = True
             self._fn["fmi2FreeInstance"](self._c)
             self._slave.freeLibrary()
+            self.model.live.pop(id(self), None)
             with _LOG_LOCK:
                 _LOG_SINKS.pop(self._env_id, None)
 
@@ -405,11 +644,13 @@ class Fmu2Instance:
             ValueError: ``buffer`` has the wrong size, dtype or layout.
         """
         vars_ = [self.model.variable(n, causality=("input", "parameter")) for n in names]
-        _require_real(self.model, vars_)
+        _require_numeric(self.model, vars_)
         self.inputs = _own_or_check(buffer, len(vars_), "input")
         self._in_vr = _vr_array([v.value_reference for v in vars_])
         self._in_ptr = _f64_ptr(self.inputs)
         self._n_in = len(vars_)
+        mixed = any(v.type != "Real" for v in vars_)
+        self._mixed_in = _Mixed(vars_, self.inputs) if mixed else None
         return self.inputs
 
     def bind_outputs(self, names: Sequence[str], *, buffer: F64Array | None = None) -> F64Array:
@@ -422,53 +663,152 @@ class Fmu2Instance:
 
         Raises:
             FmuVariableError: Unknown name.
-            ValueError: A variable is not Real, or ``buffer`` has the wrong size, dtype or layout.
+            ValueError: A variable is a String, or ``buffer`` has the wrong size, dtype or layout.
         """
         vars_ = [self.model.variable(n) for n in names]
-        _require_real(self.model, vars_)
+        _require_numeric(self.model, vars_)
         self.outputs = _own_or_check(buffer, len(vars_), "output")
         self._out_vr = _vr_array([v.value_reference for v in vars_])
         self._out_ptr = _f64_ptr(self.outputs)
         self._n_out = len(vars_)
+        mixed = any(v.type != "Real" for v in vars_)
+        self._mixed_out = _Mixed(vars_, self.outputs) if mixed else None
         return self.outputs
 
     def write_inputs(self) -> None:
-        """Send the input buffer to the FMU (``fmi2SetReal``)."""
-        if self._n_in:
+        """Send the input buffer to the FMU (``fmi2SetReal``; Integer and Boolean ones by type)."""
+        if self._mixed_in is not None:
+            self._mixed_in.write(self)
+        elif self._n_in:
             self._check(
                 "fmi2SetReal", self._fn["fmi2SetReal"](self._c, self._in_vr, self._n_in, self._in_ptr)
             )
 
     def read_outputs(self) -> F64Array:
-        """Read the bound outputs into the output buffer (``fmi2GetReal``) and return it."""
-        if self._n_out:
+        """Read the bound outputs into the output buffer (``fmi2GetReal``, ...) and return it."""
+        if self._mixed_out is not None:
+            self._mixed_out.read(self)
+        elif self._n_out:
             self._check(
                 "fmi2GetReal", self._fn["fmi2GetReal"](self._c, self._out_vr, self._n_out, self._out_ptr)
             )
         return self.outputs
 
     def do_step(self, h: float) -> None:
-        """``fmi2DoStep`` from the current time over ``h`` [s]."""
-        self._check("fmi2DoStep", self._fn["fmi2DoStep"](self._c, self.time, h, 1))
-        self.time += h
+        """``fmi2DoStep`` from the current time over ``h`` [s] (see :meth:`step` for a discard)."""
+        status = self._fn["fmi2DoStep"](self._c, self.time, h, 1)
+        if status > FMI2_WARNING:
+            self._step_not_done(status, h)
+        else:
+            self.time += h
 
     def step(self, h: float) -> F64Array:
-        """Write the input buffer, advance by ``h`` [s], read the outputs; returns the output buffer."""
+        """Write the input buffer, advance by ``h`` [s], read the outputs; returns the output buffer.
+
+        A step the FMU discards is retried in smaller steps with the same inputs, if the FMU can
+        handle variable communication steps; otherwise, or when it has terminated the
+        simulation, :class:`FmuDiscardError` is raised (see :meth:`_step_not_done`).
+        """
         fn = self._fn
         c = self._c
-        if self._n_in:
+        if self._mixed_in is not None:
+            self._mixed_in.write(self)
+        elif self._n_in:
             status = fn["fmi2SetReal"](c, self._in_vr, self._n_in, self._in_ptr)
             if status > FMI2_WARNING:
                 self._check("fmi2SetReal", status)
         status = fn["fmi2DoStep"](c, self.time, h, 1)
         if status > FMI2_WARNING:
-            self._check("fmi2DoStep", status)
-        self.time += h
-        if self._n_out:
+            self._step_not_done(status, h)
+        else:
+            self.time += h
+        if self._mixed_out is not None:
+            self._mixed_out.read(self)
+        elif self._n_out:
             status = fn["fmi2GetReal"](c, self._out_vr, self._n_out, self._out_ptr)
             if status > FMI2_WARNING:
                 self._check("fmi2GetReal", status)
         return self.outputs
+
+    def _discard_status(self) -> tuple[bool, float | None]:
+        """``(terminated, last successful time)`` after a discarded step, as far as the FMU says."""
+        flag = ctypes.c_int(0)
+        terminated = self._fn["fmi2GetBooleanStatus"](
+            self._c, _TERMINATED, ctypes.byref(flag)
+        ) <= FMI2_WARNING and bool(flag.value)
+        t = ctypes.c_double(math.nan)
+        ok = self._fn["fmi2GetRealStatus"](self._c, _LAST_SUCCESSFUL_TIME, ctypes.byref(t)) <= FMI2_WARNING
+        return terminated, (float(t.value) if ok and math.isfinite(t.value) else None)
+
+    def _step_not_done(self, status: int, h: float, *, min_step: float = 1e-9) -> None:
+        """After a failed ``fmi2DoStep`` over ``h`` from :attr:`time`: finish the step or raise.
+
+        ``fmi2Error``/``fmi2Fatal``: :class:`FmuError`. ``fmi2Discard`` with the FMU terminated:
+        :class:`FmuDiscardError` (``terminated``), :attr:`time` set to its last successful time. Else,
+        if the FMU can handle variable communication steps, the rest of the step is taken in
+        halved steps (the inputs stay as set) down to ``min_step`` [s]; otherwise
+        :class:`FmuDiscardError` saying so.
+        """
+        if status != FMI2_DISCARD:
+            self._check("fmi2DoStep", status)
+        messages = list(self.log)
+        self.log.clear()
+        t_end = self.time + h
+        while True:
+            terminated, last = self._discard_status()
+            if terminated:
+                self.terminated = True
+                if last is not None:
+                    self.time = last
+                raise FmuDiscardError(
+                    self.name,
+                    status,
+                    messages,
+                    terminated=True,
+                    last_time=last,
+                    reason="the FMU ended the simulation",
+                )
+            if last is not None and last > self.time:
+                self.time = last  # the FMU got part of the way
+            if not self.model.can_handle_variable_step:
+                raise FmuDiscardError(
+                    self.name,
+                    status,
+                    messages,
+                    terminated=False,
+                    last_time=last,
+                    reason=(
+                        f"it rejected the step from t = {self.time:g} s over {h:g} s and cannot take smaller "
+                        "steps (canHandleVariableCommunicationStepSize = false); use a smaller step_size"
+                    ),
+                )
+            sub = (t_end - self.time) / 2.0
+            while True:
+                if sub < min_step:
+                    raise FmuDiscardError(
+                        self.name,
+                        status,
+                        messages,
+                        terminated=False,
+                        last_time=last,
+                        reason=f"it rejected the step from t = {self.time:g} s even over {2 * sub:.3g} s",
+                    )
+                status = self._fn["fmi2DoStep"](self._c, self.time, sub, 1)
+                if status <= FMI2_WARNING:
+                    self.time += sub
+                    if t_end - self.time <= 1e-12 * max(1.0, abs(t_end)):
+                        self.time = t_end
+                        return
+                    sub = min(2.0 * sub, t_end - self.time)
+                    continue
+                if status != FMI2_DISCARD:
+                    self._check("fmi2DoStep", status)
+                messages += list(self.log)
+                self.log.clear()
+                terminated, _ = self._discard_status()
+                if terminated:
+                    break  # reported by the outer loop
+                sub /= 2.0
 
     # -- FMU state ---------------------------------------------------------------------------
 

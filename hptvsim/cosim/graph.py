@@ -36,8 +36,8 @@ File format: TOML (read) or JSON (read and write), the same keys either way::
 
 Ports are written ``component.variable``; the component name may not contain a dot (the
 variable name may: FMI structured names). Unknown keys are errors naming the key. Whether a
-variable exists, is Real, and has the right causality is checked when an orchestrator loads
-the FMUs, since only the FMU's model description knows.
+variable exists, has the right causality, and a type and unit that fit is checked when an
+orchestrator loads the FMUs, since only the FMU's model description knows.
 """
 
 from __future__ import annotations
@@ -93,6 +93,23 @@ def _as_str(where: str, value: Any) -> str:
     return value
 
 
+def _as_value(where: str, value: Any) -> float | int | bool | str:
+    """A parameter or start value: a number, a Boolean or text (checked against the FMU later)."""
+    if isinstance(value, bool | int | float | str):
+        return value
+    raise GraphError(f"{where} must be a number, true/false or a string (got {value!r})")
+
+
+def _toml_value(value: float | int | bool | str) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, str):
+        return _toml_str(value)
+    return _toml_float(value)
+
+
 def _as_float(where: str, value: Any) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise GraphError(f"{where} must be a number (got {value!r})")
@@ -131,18 +148,19 @@ class Component:
         fmu: Path of the ``.fmu`` (relative to the graph's ``base_dir``) or
             ``"vehicle:<type>"`` for a shipped vehicle FMU.
         parameters: Values set before every initialisation (parameters or input start
-            values), by FMI variable name.
+            values), by FMI variable name: numbers, true/false or strings, each checked against
+            its variable's type when the FMU is loaded.
     """
 
     name: str
     fmu: str
-    parameters: Mapping[str, float] = field(default_factory=dict)
+    parameters: Mapping[str, float | int | bool | str] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if not self.name or "." in self.name:
             raise GraphError(f"component name {self.name!r} must be non-empty and contain no '.'")
         params = {
-            str(k): _as_float(f"component {self.name!r} parameter {k!r}", v)
+            str(k): _as_value(f"component {self.name!r} parameter {k!r}", v)
             for k, v in self.parameters.items()
         }
         object.__setattr__(self, "parameters", MappingProxyType(params))
@@ -163,12 +181,13 @@ class ExternalInput:
     Attributes:
         name: Unique name among the external inputs.
         targets: The inputs it drives.
-        start: Value until the caller sets another (also after a reset).
+        start: Value until the caller sets another (also after a reset), in the targets' type
+            (a number, true/false or a string).
     """
 
     name: str
     targets: tuple[Port, ...]
-    start: float = 0.0
+    start: float | int | bool | str = 0.0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "targets", tuple(self.targets))
@@ -283,7 +302,7 @@ class Graph:
             _check_keys(at, c, ("name", "fmu", "parameters"), ("name", "fmu"))
             params = c.get("parameters", {})
             if not isinstance(params, Mapping):
-                raise GraphError(f"{at}.parameters must be a table of name = number")
+                raise GraphError(f"{at}.parameters must be a table of name = value")
             components.append(
                 Component(
                     name=_as_str(f"{at}.name", c["name"]),
@@ -311,7 +330,7 @@ class Graph:
                 ExternalInput(
                     name=_as_str(f"{at}.name", c["name"]),
                     targets=tuple(Port.parse(_as_str(f"{at}.to", t)) for t in targets),
-                    start=_as_float(f"{at}.start", c.get("start", 0.0)),
+                    start=_as_value(f"{at}.start", c.get("start", 0.0)),
                 )
             )
         outputs = []
@@ -362,14 +381,14 @@ class Graph:
         for c in d["components"]:
             lines += ["", "[[components]]", f"name = {_toml_str(c['name'])}", f"fmu = {_toml_str(c['fmu'])}"]
             if c["parameters"]:
-                items = ", ".join(f"{_toml_key(k)} = {_toml_float(v)}" for k, v in c["parameters"].items())
+                items = ", ".join(f"{_toml_key(k)} = {_toml_value(v)}" for k, v in c["parameters"].items())
                 lines.append(f"parameters = {{ {items} }}")
         for c in d["connections"]:
             lines += ["", "[[connections]]", f"from = {_toml_str(c['from'])}", f"to = {_toml_str(c['to'])}"]
         for i in d["inputs"]:
             targets = ", ".join(_toml_str(t) for t in i["to"])
             lines += ["", "[[inputs]]", f"name = {_toml_str(i['name'])}", f"to = [{targets}]"]
-            lines.append(f"start = {_toml_float(i['start'])}")
+            lines.append(f"start = {_toml_value(i['start'])}")
         for o in d["outputs"]:
             lines += ["", "[[outputs]]", f"name = {_toml_str(o['name'])}", f"from = {_toml_str(o['from'])}"]
         return "\n".join(lines) + "\n"

@@ -7,14 +7,29 @@ Master algorithm
     independent within a step, so the order does not matter. ``gauss-seidel``: components step
     one after another in the order the graph lists them, each gathering its inputs just before
     its step, so it sees the outputs its predecessors have just produced. Inputs are held
-    constant over a step (zero-order hold); there is no step rejection and no iteration.
+    constant over a step (zero-order hold). A component that discards a step (``fmi2Discard``)
+    takes it in smaller steps with the same inputs if it can handle variable communication
+    steps (:meth:`~hptvsim.cosim.fmi2.Fmu2Instance.step`); one that ends the simulation itself
+    ends the run: :class:`SimulationTerminated` names it and its last successful time, and the
+    communication points before stay valid.
+
+Types
+    Ports of every FMI 2.0 type: Real, Integer, Enumeration and Boolean values travel in the
+    float64 signal array (integers and booleans exactly); Strings travel by name, outside the
+    hot path. A connection must join variables of one type (Enumerations of one declared type)
+    and compatible units (declared types' units included, see
+    :func:`~hptvsim.cosim.fmi2.units_compatible`).
 
 Initialisation
-    :meth:`Orchestrator.reset` puts every component through ``fmi2Reset`` (no reload; the FMUs
-    are extracted and instantiated once, in the constructor), sets its parameters, enters and
-    exits initialisation mode and reads its outputs; then one exchange at the start time: every
-    input is set from the outputs and external inputs, and the outputs are read again, so that
-    direct feedthrough is visible at ``t = 0``.
+    :meth:`Orchestrator.reset` follows FMI 2.0's order for every component: ``fmi2Reset`` (no
+    reload; the FMUs are extracted and instantiated once, in the constructor),
+    ``fmi2SetupExperiment``, parameters and start values, the external inputs' values,
+    ``fmi2EnterInitializationMode``; then, still in initialisation mode, connected inputs are
+    set from the outputs they are connected to, repeatedly until no output changes (a loop of
+    connections is iterated, at most :data:`INIT_ITERATIONS` times); then
+    ``fmi2ExitInitializationMode`` and one exchange at the start time, so that direct
+    feedthrough is visible at ``t = 0``. :meth:`Orchestrator.close` calls ``fmi2Terminate``
+    before ``fmi2FreeInstance``.
 
 Hot path
     All values live in one float64 signal array: the external inputs first, then every
@@ -39,6 +54,7 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import json
+import math
 import struct
 import weakref
 from collections.abc import Iterable, Mapping, Sequence
@@ -48,10 +64,30 @@ from typing import Final
 import numpy as np
 import numpy.typing as npt
 
-from hptvsim.cosim.fmi2 import F64Array, Fmu2Instance, FmuError, Variable, load_model
+from hptvsim.cosim.fmi2 import (
+    F64Array,
+    Fmu2Instance,
+    FmuDiscardError,
+    FmuError,
+    Value,
+    Variable,
+    coerce_value,
+    load_model,
+    units_compatible,
+)
 from hptvsim.cosim.graph import Graph, GraphError, Port
 
-__all__ = ["Orchestrator", "SimulationFailedError", "SimulationPausedError", "Snapshot"]
+__all__ = [
+    "INIT_ITERATIONS",
+    "Orchestrator",
+    "SimulationFailedError",
+    "SimulationPausedError",
+    "SimulationTerminated",
+    "Snapshot",
+]
+
+INIT_ITERATIONS: Final = 100
+"""Most exchanges in initialisation mode before a loop of connections counts as not settling."""
 
 _SNAPSHOT_MAGIC: Final = b"HPTVSNAP"
 _SNAPSHOT_VERSION: Final = 1
@@ -63,6 +99,29 @@ class SimulationPausedError(RuntimeError):
 
 class SimulationFailedError(RuntimeError):
     """A previous step failed; the system must be reset or restored before it steps again."""
+
+
+class SimulationTerminated(RuntimeError):  # noqa: N818  # an end, not an error
+    """A component ended the simulation (``fmi2Discard`` with ``fmi2Terminated``).
+
+    The communication points up to :attr:`time` are complete; the system must be reset or
+    restored before it steps again.
+
+    Attributes:
+        component: The component that ended it.
+        time: The last complete communication point [s].
+        component_time: The component's own last successful time [s], if it said.
+    """
+
+    def __init__(self, component: str, time: float, component_time: float | None, cause: FmuError) -> None:
+        self.component = component
+        self.time = time
+        self.component_time = component_time
+        at = f" at t = {component_time:g} s" if component_time is not None else ""
+        super().__init__(
+            f"component '{component}' ended the simulation{at}; the run stops at the last complete "
+            f"communication point, t = {time:g} s ({'; '.join(cause.messages) or 'no message'})"
+        )
 
 
 class Snapshot:
@@ -162,12 +221,10 @@ class Orchestrator:
     def _variable(self, port: Port, causalities: tuple[str, ...], what: str) -> Variable:
         inst = self._instances[self._index[port.component]]
         var = inst.model.variables.get(port.variable)
-        if var is None or var.causality not in causalities or var.type != "Real":
-            valid = [
-                n for n, v in inst.model.variables.items() if v.causality in causalities and v.type == "Real"
-            ]
+        if var is None or var.causality not in causalities:
+            valid = [f"{n} ({v.type})" for n, v in inst.model.variables.items() if v.causality in causalities]
             raise GraphError(
-                f"{what} {port}: {inst.model.identifier} has no Real {'/'.join(causalities)} named "
+                f"{what} {port}: {inst.model.identifier} has no {'/'.join(causalities)} named "
                 f"{port.variable!r} (valid: {', '.join(valid)})"
             )
         if var.causality == "parameter" and var.variability != "tunable":
@@ -182,20 +239,47 @@ class Orchestrator:
         n_ext = len(g.inputs)
         # Which outputs are read: by connections and external outputs, in model-description order.
         read: list[set[str]] = [set() for _ in g.components]
+        # String values travel by name: (source port or external input index, target component, variable)
+        self._string_links: list[tuple[Port | int, int, str]] = []
+        self._string_reads: list[list[str]] = [[] for _ in g.components]
+        self._strings: dict[Port, str] = {}
         for conn in g.connections:
             src = self._variable(conn.source, ("output",), "connection source")
             dst = self._variable(conn.target, ("input", "parameter"), "connection target")
-            if src.unit and dst.unit and src.unit != dst.unit:
-                raise GraphError(
-                    f"connection {conn.source} -> {conn.target}: units differ ({src.unit} vs {dst.unit})"
+            self._check_link(conn.source, src, conn.target, dst)
+            if src.type == "String":
+                self._string_links.append(
+                    (conn.source, self._index[conn.target.component], conn.target.variable)
                 )
-            read[self._index[conn.source.component]].add(conn.source.variable)
-        for ext_out in g.outputs:
-            self._variable(ext_out.source, ("output",), f"external output {ext_out.name!r}")
-            read[self._index[ext_out.source.component]].add(ext_out.source.variable)
-        for ext_in in g.inputs:
-            for port in ext_in.targets:
-                self._variable(port, ("input", "parameter"), f"external input {ext_in.name!r} target")
+                self._add_string_read(conn.source)
+            else:
+                read[self._index[conn.source.component]].add(conn.source.variable)
+        self.output_types: tuple[str, ...] = tuple(
+            self._variable(o.source, ("output",), f"external output {o.name!r}").type for o in g.outputs
+        )
+        for ext_out, vtype in zip(g.outputs, self.output_types, strict=True):
+            if vtype == "String":
+                self._add_string_read(ext_out.source)
+            else:
+                read[self._index[ext_out.source.component]].add(ext_out.source.variable)
+        self._input_vars: list[Variable] = []
+        for e, ext_in in enumerate(g.inputs):
+            targets = [
+                self._variable(p, ("input", "parameter"), f"external input {ext_in.name!r} target")
+                for p in ext_in.targets
+            ]
+            kinds = {(v.type, v.declared_type if v.type == "Enumeration" else None) for v in targets}
+            if len(kinds) > 1:
+                listed = ", ".join(f"{p} ({v.type})" for p, v in zip(ext_in.targets, targets, strict=True))
+                raise GraphError(f"external input {ext_in.name!r} drives inputs of different types: {listed}")
+            self._input_vars.append(targets[0])
+            for p, v in zip(ext_in.targets, targets, strict=True):
+                if v.type == "String":
+                    self._string_links.append((e, self._index[p.component], p.variable))
+        self.input_types: tuple[str, ...] = tuple(v.type for v in self._input_vars)
+        starts = [self._coerce_input(k, ext.start) for k, ext in enumerate(g.inputs)]
+        self._string_inputs: dict[int, str] = {k: v for k, v in enumerate(starts) if isinstance(v, str)}
+        self._string_input_start = dict(self._string_inputs)
 
         out_names: list[list[str]] = []
         out_offset: list[int] = []
@@ -210,17 +294,27 @@ class Orchestrator:
             offset += len(names)
         self._signals: F64Array = np.zeros(offset)
         self._inputs: F64Array = self._signals[:n_ext]
-        self._input_start = np.array([i.start for i in g.inputs], dtype=np.float64)
+        self._input_start = np.array(
+            [math.nan if isinstance(v, str) else float(v) for v in starts], dtype=np.float64
+        )
         self.input_names: tuple[str, ...] = tuple(i.name for i in g.inputs)
         self.output_names: tuple[str, ...] = tuple(o.name for o in g.outputs)
-        self._output_gather = np.array([position[o.source] for o in g.outputs], dtype=np.intp)
+        self._output_gather = np.array(
+            [position.get(o.source, 0) for o in g.outputs], dtype=np.intp
+        )  # String outputs: a placeholder, set to NaN after every gather
+        self._string_outputs = np.array([t == "String" for t in self.output_types], dtype=bool)
         self._outputs: F64Array = np.zeros(len(g.outputs))
 
-        # Inputs: each component's driven inputs with the signal index that drives them.
+        # Inputs: each component's driven numeric inputs with the signal index that drives them.
         driven: list[list[tuple[str, int]]] = [[] for _ in g.components]
         for conn in g.connections:
-            driven[self._index[conn.target.component]].append((conn.target.variable, position[conn.source]))
+            if conn.source in position:
+                driven[self._index[conn.target.component]].append(
+                    (conn.target.variable, position[conn.source])
+                )
         for e, ext_in in enumerate(g.inputs):
+            if self._input_vars[e].type == "String":
+                continue
             for port in ext_in.targets:
                 driven[self._index[port.component]].append((port.variable, e))
         n_in = sum(len(d) for d in driven)
@@ -239,6 +333,56 @@ class Orchestrator:
             slots.append(_Slot(instance=inst, gather=self._gather[start:stop].copy(), inputs=buf))
             start = stop
         self._slots: tuple[_Slot, ...] = tuple(slots)
+        self._has_strings = bool(self._string_links or any(self._string_reads))
+
+    def _check_link(self, sp: Port, src: Variable, dp: Port, dst: Variable) -> None:
+        """A connection joins one type (and one declared Enumeration type) with compatible units."""
+        link = f"connection {sp} -> {dp}"
+        if src.type != dst.type:
+            raise GraphError(
+                f"{link}: types differ ({src.type} -> {dst.type}); connect variables of one type"
+            )
+        if src.type == "Enumeration" and src.declared_type != dst.declared_type and src.items != dst.items:
+            raise GraphError(
+                f"{link}: Enumerations of different types ({src.declared_type} -> {dst.declared_type})"
+            )
+        ms = self._instances[self._index[sp.component]].model
+        md = self._instances[self._index[dp.component]].model
+        if not units_compatible(src, ms, dst, md):
+            raise GraphError(f"{link}: units differ ({src.unit} vs {dst.unit})")
+
+    def _add_string_read(self, port: Port) -> None:
+        k = self._index[port.component]
+        if port.variable not in self._string_reads[k]:
+            self._string_reads[k].append(port.variable)
+
+    def _coerce_input(self, k: int, value: object) -> Value:
+        name = self.graph.inputs[k].name
+        return coerce_value(self._input_vars[k], value, f"external input {name!r}")
+
+    def _read_strings(self, idx: Iterable[int]) -> None:
+        for k in idx:
+            names = self._string_reads[k]
+            if names:
+                comp = self.graph.components[k].name
+                for name, value in self._slots[k].instance.get_values(names).items():
+                    self._strings[Port(component=comp, variable=name)] = str(value)
+
+    def _write_strings(self, idx: Iterable[int]) -> None:
+        wanted = set(idx)
+        per: dict[int, dict[str, str]] = {}
+        for source, k, var in self._string_links:
+            if k not in wanted:
+                continue
+            value = self._string_inputs[source] if isinstance(source, int) else self._strings.get(source, "")
+            per.setdefault(k, {})[var] = value
+        for k, values in per.items():
+            self._slots[k].instance.set_values(values)
+
+    def _gather_outputs(self) -> None:
+        np.take(self._signals, self._output_gather, out=self._outputs)
+        if self._has_strings:
+            self._outputs[self._string_outputs] = math.nan
 
     # -- properties ---------------------------------------------------------------------------------
 
@@ -330,6 +474,7 @@ class Orchestrator:
             self._failure = None
             self._steps = 0
             self._inputs[:] = self._input_start
+            self._string_inputs = dict(self._string_input_start)
         try:
             for k in idx:
                 comp = self.graph.components[k]
@@ -337,18 +482,61 @@ class Orchestrator:
                 values = dict(comp.parameters)
                 values.update(parameters.get(comp.name, {}))
                 inst.reset()
-                inst.initialize(values)
-                inst.read_outputs()
+                inst.setup(values)
+            # the external inputs' values, then initialisation mode
             for k in idx:
                 slot = self._slots[k]
                 np.take(self._signals, slot.gather, out=slot.inputs)
                 slot.instance.write_inputs()
+            if self._has_strings:
+                self._write_strings(idx)
             for k in idx:
-                self._slots[k].instance.read_outputs()
+                self._slots[k].instance.enter_initialization()
+            self._settle(idx)
+            for k in idx:
+                self._slots[k].instance.exit_initialization()
+            self._exchange(idx)
         except FmuError as exc:
             self._failure = exc  # some components are not initialised: refuse to step
             raise
-        np.take(self._signals, self._output_gather, out=self._outputs)
+        self._gather_outputs()
+
+    def _exchange(self, idx: Sequence[int]) -> None:
+        """Read the outputs, set every input from them, read the outputs again."""
+        for k in idx:
+            self._slots[k].instance.read_outputs()
+        if self._has_strings:
+            self._read_strings(idx)
+        for k in idx:
+            slot = self._slots[k]
+            np.take(self._signals, slot.gather, out=slot.inputs)
+            slot.instance.write_inputs()
+        if self._has_strings:
+            self._write_strings(idx)
+        for k in idx:
+            self._slots[k].instance.read_outputs()
+        if self._has_strings:
+            self._read_strings(idx)
+
+    def _settle(self, idx: Sequence[int]) -> None:
+        """In initialisation mode: exchange until no connected output changes (loops iterate)."""
+        if not self._gather.size and not self._string_links:
+            return
+        before = np.full_like(self._signals, np.nan)
+        strings_before: dict[Port, str] = {}
+        for _ in range(INIT_ITERATIONS):
+            self._exchange(idx)
+            now = self._signals
+            same = np.all((now == before) | (np.abs(now - before) <= 1e-12 * (1.0 + np.abs(now))))
+            if same and self._strings == strings_before:
+                return
+            before[:] = now
+            strings_before = dict(self._strings)
+        worst = int(np.nanargmax(np.abs(self._signals - before)))
+        raise SimulationFailedError(
+            f"initialisation: the connected outputs did not settle in {INIT_ITERATIONS} exchanges (a loop "
+            f"of connections without a fixed point?); signal {worst} still changes"
+        )
 
     def step(self) -> F64Array:
         """Advance every component by one macro step; returns :attr:`outputs`.
@@ -368,20 +556,35 @@ class Orchestrator:
             self._check_open()
         h = self.graph.step_size
         signals = self._signals
+        current = -1
         try:
             if self._jacobi:
                 np.take(signals, self._gather, out=self._input_values)
-                for slot in self._slots:
+                if self._has_strings:
+                    self._write_strings(range(len(self._slots)))
+                for current, slot in enumerate(self._slots):  # noqa: B007  # the except clause reads it
                     slot.instance.step(h)
             else:
-                for slot in self._slots:
+                for current, slot in enumerate(self._slots):
                     np.take(signals, slot.gather, out=slot.inputs)
+                    if self._has_strings:
+                        self._write_strings((current,))
                     slot.instance.step(h)
+                    if self._has_strings:
+                        self._read_strings((current,))
+            if self._has_strings:
+                self._read_strings(range(len(self._slots)))
+        except FmuDiscardError as exc:
+            self._failure = exc
+            if exc.terminated:
+                name = self.graph.components[current].name if current >= 0 else exc.component
+                raise SimulationTerminated(name, self.time, exc.last_time, exc) from None
+            raise
         except FmuError as exc:
             self._failure = exc
             raise
         self._steps += 1
-        np.take(signals, self._output_gather, out=self._outputs)
+        self._gather_outputs()
         return self._outputs
 
     def run(self, steps: int) -> F64Array:
@@ -396,23 +599,50 @@ class Orchestrator:
             out[k + 1] = self.step()
         return out
 
-    def set_input(self, name: str, value: float) -> None:
-        """Set an external input by name (the hot path writes into :attr:`inputs` instead)."""
+    def set_input(self, name: str, value: Value) -> None:
+        """Set an external input by name, in its targets' type; the hot path writes :attr:`inputs`.
+
+        Text is parsed (see :func:`~hptvsim.cosim.fmi2.coerce_value`).
+
+        Raises:
+            KeyError: No such input (the message lists them).
+            ValueError: The value does not fit the input's type (names the valid values).
+        """
         try:
-            self.inputs[self.input_names.index(name)] = value
+            k = self.input_names.index(name)
         except ValueError:
             raise KeyError(
                 f"no external input named {name!r}; inputs: {', '.join(self.input_names)}"
             ) from None
+        typed = self._coerce_input(k, value)
+        if isinstance(typed, str):
+            self._string_inputs[k] = typed
+        else:
+            self.inputs[k] = float(typed)
 
-    def output(self, name: str) -> float:
-        """Read an external output by name."""
+    def output(self, name: str) -> Value:
+        """Read an external output by name, in its own type."""
         try:
-            return float(self.outputs[self.output_names.index(name)])
+            k = self.output_names.index(name)
         except ValueError:
             raise KeyError(
                 f"no external output named {name!r}; outputs: {', '.join(self.output_names)}"
             ) from None
+        return self.output_values()[k]
+
+    def output_values(self) -> list[Value]:
+        """Every external output in its own type (float, int, bool or str), graph order."""
+        out: list[Value] = []
+        for k, (vtype, value) in enumerate(zip(self.output_types, self._outputs, strict=True)):
+            if vtype == "String":
+                out.append(self._strings.get(self.graph.outputs[k].source, ""))
+            elif vtype == "Boolean":
+                out.append(bool(value))
+            elif vtype in ("Integer", "Enumeration"):
+                out.append(int(value))
+            else:
+                out.append(float(value))
+        return out
 
     def set_parameters(self, component: str, values: Mapping[str, float]) -> None:
         """Set tunable parameters (or inputs) of one component between steps."""
@@ -476,7 +706,9 @@ class Orchestrator:
         self._signals[:] = snapshot.signals
         self._steps = snapshot.steps
         self._failure = None
-        np.take(self._signals, self._output_gather, out=self._outputs)
+        if self._has_strings:
+            self._read_strings(range(len(self._slots)))
+        self._gather_outputs()
 
     def serialize(self, snapshot: Snapshot) -> bytes:
         """Turn a snapshot into bytes (``fmi2SerializeFMUstate``), e.g. to survive a restart."""
@@ -541,13 +773,15 @@ class Orchestrator:
         return snap
 
     def close(self) -> None:
-        """Release snapshots and free every instance (idempotent)."""
+        """Release snapshots, ``fmi2Terminate`` and free every instance (idempotent)."""
         if self._closed:
             return
         self._closed = True
         for snap in list(self._snapshots):
             snap.release()
         for inst in self._instances:
+            with contextlib.suppress(Exception):
+                inst.terminate()
             with contextlib.suppress(Exception):
                 inst.free()
 

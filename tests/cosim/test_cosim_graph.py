@@ -112,7 +112,10 @@ def test_fmu_references_resolve(tmp_path: Path) -> None:
         ({"step_size": 0.0}, "step_size"),
         ({"step_size": "fast"}, "must be a number"),
         ({"components": [{"name": "a.b", "fmu": "x.fmu"}]}, "contain no '.'"),
-        ({"components": [{"name": "a", "fmu": "x.fmu", "parameters": {"T": "slow"}}]}, "must be a number"),
+        (
+            {"components": [{"name": "a", "fmu": "x.fmu", "parameters": {"T": [1, 2]}}]},
+            "must be a number, true/false or a string",
+        ),
     ],
 )
 def test_bad_files_name_the_key(tmp_path: Path, edit: dict[str, object], message: str) -> None:

@@ -324,8 +324,8 @@ def test_bad_inputs_and_ports_are_named() -> None:
             orch.reset(["nope"])
     base = fleet_graph()
     bad_graphs = {
-        "has no Real output named 'speed'": Connection(source=P("uuv_a.speed"), target=P("uuv_b.v_cmd")),
-        "has no Real input/parameter named 'x'": Connection(source=P("uuv_a.u"), target=P("uuv_b.x")),
+        "has no output named 'speed'": Connection(source=P("uuv_a.speed"), target=P("uuv_b.v_cmd")),
+        "has no input/parameter named 'x'": Connection(source=P("uuv_a.u"), target=P("uuv_b.x")),
         r"units differ \(m vs N\)": Connection(source=P("uuv_a.x"), target=P("uuv_c.tau_X_cmd")),
     }
     for message, conn in bad_graphs.items():
