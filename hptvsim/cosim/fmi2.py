@@ -503,6 +503,8 @@ class Fmu2Instance:
         self._mixed_in: _Mixed | None = None
         self._mixed_out: _Mixed | None = None
         self._freed = False
+        self.keep_state = False  # save the FMU state before every step, to redo a discarded one
+        self._saved = ctypes.c_void_p()
         self.initialized = False  # after fmi2ExitInitializationMode, until a reset
         self.terminated = False  # after fmi2Terminate (ours) or the FMU ending the simulation
         model.live[id(self)] = name
@@ -529,9 +531,15 @@ class Fmu2Instance:
             FmuError: The FMU rejected a value (non-finite, out of range).
         """
         groups: dict[str, tuple[list[int], list[Any]]] = {}
+        variables = self.model.variables
         for name, value in values.items():
-            var = self.model.variable(name, causality=("parameter", "input"))
-            typed = coerce_value(var, value, f"{self.name}.{name}")
+            var = variables.get(name)
+            if var is None or var.causality not in ("parameter", "input"):
+                var = self.model.variable(name, causality=("parameter", "input"))  # raises, listing them
+            if var.type == "Real" and type(value) is float:  # the common case, no parsing needed
+                typed: Value = value
+            else:
+                typed = coerce_value(var, value, f"'{self.name}.{name}'")
             fmi_type = "Integer" if var.type == "Enumeration" else var.type
             vrs, vals = groups.setdefault(fmi_type, ([], []))
             vrs.append(var.value_reference)
@@ -618,6 +626,9 @@ class Fmu2Instance:
         """Free the instance; the object is unusable afterwards."""
         if not self._freed:
             self._freed = True
+            if self._saved.value:
+                with contextlib.suppress(Exception):
+                    self._fn["fmi2FreeFMUstate"](self._c, ctypes.byref(self._saved))
             self._fn["fmi2FreeInstance"](self._c)
             self._slave.freeLibrary()
             self.model.live.pop(id(self), None)
@@ -696,6 +707,8 @@ class Fmu2Instance:
 
     def do_step(self, h: float) -> None:
         """``fmi2DoStep`` from the current time over ``h`` [s] (see :meth:`step` for a discard)."""
+        if self.keep_state:
+            self._check("fmi2GetFMUstate", self._fn["fmi2GetFMUstate"](self._c, ctypes.byref(self._saved)))
         status = self._fn["fmi2DoStep"](self._c, self.time, h, 1)
         if status > FMI2_WARNING:
             self._step_not_done(status, h)
@@ -717,6 +730,8 @@ class Fmu2Instance:
             status = fn["fmi2SetReal"](c, self._in_vr, self._n_in, self._in_ptr)
             if status > FMI2_WARNING:
                 self._check("fmi2SetReal", status)
+        if self.keep_state:
+            self._check("fmi2GetFMUstate", fn["fmi2GetFMUstate"](c, ctypes.byref(self._saved)))
         status = fn["fmi2DoStep"](c, self.time, h, 1)
         if status > FMI2_WARNING:
             self._step_not_done(status, h)
@@ -744,71 +759,76 @@ class Fmu2Instance:
         """After a failed ``fmi2DoStep`` over ``h`` from :attr:`time`: finish the step or raise.
 
         ``fmi2Error``/``fmi2Fatal``: :class:`FmuError`. ``fmi2Discard`` with the FMU terminated:
-        :class:`FmuDiscardError` (``terminated``), :attr:`time` set to its last successful time. Else,
-        if the FMU can handle variable communication steps, the rest of the step is taken in
-        halved steps (the inputs stay as set) down to ``min_step`` [s]; otherwise
-        :class:`FmuDiscardError` saying so.
+        :class:`FmuDiscardError` (``terminated``), :attr:`time` set to its last successful time.
+        Else the FMU is in FMI 2.0's "step failed" state, from which only a saved FMU state leads
+        back: with :attr:`keep_state` (the master saved one before the step) and an FMU that can
+        handle variable communication steps, the state is restored and the step taken in halved
+        sub-steps, the inputs as set, down to ``min_step`` [s]; otherwise
+        :class:`FmuDiscardError` saying what would allow it.
         """
         if status != FMI2_DISCARD:
             self._check("fmi2DoStep", status)
         messages = list(self.log)
         self.log.clear()
+        terminated, last = self._discard_status()
+        if terminated:
+            self.terminated = True
+            if last is not None:
+                self.time = last
+            reason = "the FMU ended the simulation"
+            raise FmuDiscardError(self.name, status, messages, terminated=True, last_time=last, reason=reason)
+        rejected = f"it rejected the step from t = {self.time:g} s over {h:g} s (fmi2Discard)"
+        if not self.model.can_handle_variable_step:
+            reason = (
+                f"{rejected} and cannot take smaller steps (canHandleVariableCommunicationStepSize = false); "
+                "use a smaller step_size"
+            )
+            raise FmuDiscardError(
+                self.name, status, messages, terminated=False, last_time=last, reason=reason
+            )
+        if not self.keep_state:
+            reason = (
+                f"{rejected}; set retry_rejected_steps = true in the graph to have the master save the FMU "
+                "state before each step and retry in smaller steps"
+                + ("" if self.model.can_get_set_state else " (this FMU cannot get and set its state, though)")
+            )
+            raise FmuDiscardError(
+                self.name, status, messages, terminated=False, last_time=last, reason=reason
+            )
+        fn = self._fn
+        self._check("fmi2SetFMUstate", fn["fmi2SetFMUstate"](self._c, self._saved))
         t_end = self.time + h
+        sub = h / 2.0
         while True:
+            if sub < min_step:
+                reason = f"{rejected}, and again in sub-steps down to {2 * sub:.3g} s"
+                raise FmuDiscardError(
+                    self.name, status, messages, terminated=False, last_time=last, reason=reason
+                )
+            self._check("fmi2GetFMUstate", fn["fmi2GetFMUstate"](self._c, ctypes.byref(self._saved)))
+            status = fn["fmi2DoStep"](self._c, self.time, sub, 1)
+            if status <= FMI2_WARNING:
+                self.time += sub
+                if t_end - self.time <= 1e-12 * max(1.0, abs(t_end)):
+                    self.time = t_end
+                    return
+                sub = min(2.0 * sub, t_end - self.time)
+                continue
+            if status != FMI2_DISCARD:
+                self._check("fmi2DoStep", status)
+            messages += list(self.log)
+            self.log.clear()
             terminated, last = self._discard_status()
             if terminated:
                 self.terminated = True
                 if last is not None:
                     self.time = last
+                reason = "the FMU ended the simulation"
                 raise FmuDiscardError(
-                    self.name,
-                    status,
-                    messages,
-                    terminated=True,
-                    last_time=last,
-                    reason="the FMU ended the simulation",
+                    self.name, status, messages, terminated=True, last_time=last, reason=reason
                 )
-            if last is not None and last > self.time:
-                self.time = last  # the FMU got part of the way
-            if not self.model.can_handle_variable_step:
-                raise FmuDiscardError(
-                    self.name,
-                    status,
-                    messages,
-                    terminated=False,
-                    last_time=last,
-                    reason=(
-                        f"it rejected the step from t = {self.time:g} s over {h:g} s and cannot take smaller "
-                        "steps (canHandleVariableCommunicationStepSize = false); use a smaller step_size"
-                    ),
-                )
-            sub = (t_end - self.time) / 2.0
-            while True:
-                if sub < min_step:
-                    raise FmuDiscardError(
-                        self.name,
-                        status,
-                        messages,
-                        terminated=False,
-                        last_time=last,
-                        reason=f"it rejected the step from t = {self.time:g} s even over {2 * sub:.3g} s",
-                    )
-                status = self._fn["fmi2DoStep"](self._c, self.time, sub, 1)
-                if status <= FMI2_WARNING:
-                    self.time += sub
-                    if t_end - self.time <= 1e-12 * max(1.0, abs(t_end)):
-                        self.time = t_end
-                        return
-                    sub = min(2.0 * sub, t_end - self.time)
-                    continue
-                if status != FMI2_DISCARD:
-                    self._check("fmi2DoStep", status)
-                messages += list(self.log)
-                self.log.clear()
-                terminated, _ = self._discard_status()
-                if terminated:
-                    break  # reported by the outer loop
-                sub /= 2.0
+            self._check("fmi2SetFMUstate", fn["fmi2SetFMUstate"](self._c, self._saved))
+            sub /= 2.0
 
     # -- FMU state ---------------------------------------------------------------------------
 

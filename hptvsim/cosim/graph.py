@@ -11,6 +11,7 @@ File format: TOML (read) or JSON (read and write), the same keys either way::
     name = "filtered-uuv"
     step_size = 0.25          # s, the macro (communication) step
     algorithm = "jacobi"      # or "gauss-seidel"
+    retry_rejected_steps = false   # true: redo a step an FMU discards, in smaller steps
 
     [[components]]
     name = "filter"
@@ -90,6 +91,12 @@ def _check_keys(where: str, data: Mapping[str, Any], allowed: Iterable[str], req
 def _as_str(where: str, value: Any) -> str:
     if not isinstance(value, str) or not value:
         raise GraphError(f"{where} must be a non-empty string (got {value!r})")
+    return value
+
+
+def _as_bool(where: str, value: Any) -> bool:
+    if not isinstance(value, bool):
+        raise GraphError(f"{where} must be true or false (got {value!r})")
     return value
 
 
@@ -215,6 +222,10 @@ class Graph:
         step_size: Macro (communication) step [s].
         algorithm: ``"jacobi"`` or ``"gauss-seidel"`` (:data:`ALGORITHMS`).
         name: A label.
+        retry_rejected_steps: Let the master redo a step that a component discards
+            (``fmi2Discard``) in smaller steps: it then saves each component's FMU state before
+            every step (one state copy per step; components whose FMU cannot handle variable
+            steps or get and set its state still fail with a message saying so).
         base_dir: Folder that relative FMU paths are resolved against (not written to files).
 
     Raises:
@@ -229,6 +240,7 @@ class Graph:
     step_size: float = 0.25  # s
     algorithm: str = "jacobi"
     name: str = "graph"
+    retry_rejected_steps: bool = False
     base_dir: Path | None = None
 
     def __post_init__(self) -> None:
@@ -293,7 +305,16 @@ class Graph:
         _check_keys(
             where,
             data,
-            ("name", "step_size", "algorithm", "components", "connections", "inputs", "outputs"),
+            (
+                "name",
+                "step_size",
+                "algorithm",
+                "retry_rejected_steps",
+                "components",
+                "connections",
+                "inputs",
+                "outputs",
+            ),
             ("components",),
         )
         components = []
@@ -350,6 +371,9 @@ class Graph:
             step_size=_as_float(f"{where}.step_size", data.get("step_size", 0.25)),
             algorithm=_as_str(f"{where}.algorithm", data.get("algorithm", "jacobi")),
             name=_as_str(f"{where}.name", data.get("name", "graph")),
+            retry_rejected_steps=_as_bool(
+                f"{where}.retry_rejected_steps", data.get("retry_rejected_steps", False)
+            ),
             base_dir=base_dir,
         )
 
@@ -359,6 +383,7 @@ class Graph:
             "name": self.name,
             "step_size": self.step_size,
             "algorithm": self.algorithm,
+            "retry_rejected_steps": self.retry_rejected_steps,
             "components": [
                 {"name": c.name, "fmu": c.fmu, "parameters": dict(c.parameters)} for c in self.components
             ],
@@ -378,6 +403,7 @@ class Graph:
         d = self.to_dict()
         lines = [f"name = {_toml_str(d['name'])}", f"step_size = {_toml_float(d['step_size'])}  # s"]
         lines.append(f"algorithm = {_toml_str(d['algorithm'])}")
+        lines.append(f"retry_rejected_steps = {_toml_value(d['retry_rejected_steps'])}")
         for c in d["components"]:
             lines += ["", "[[components]]", f"name = {_toml_str(c['name'])}", f"fmu = {_toml_str(c['fmu'])}"]
             if c["parameters"]:

@@ -8,8 +8,9 @@ Master algorithm
     one after another in the order the graph lists them, each gathering its inputs just before
     its step, so it sees the outputs its predecessors have just produced. Inputs are held
     constant over a step (zero-order hold). A component that discards a step (``fmi2Discard``)
-    takes it in smaller steps with the same inputs if it can handle variable communication
-    steps (:meth:`~hptvsim.cosim.fmi2.Fmu2Instance.step`); one that ends the simulation itself
+    takes it again in smaller steps with the same inputs, from its FMU state saved before the
+    step, if the graph asks for it (``retry_rejected_steps``) and the FMU can handle variable
+    communication steps (:meth:`~hptvsim.cosim.fmi2.Fmu2Instance.step`); one that ends the simulation itself
     ends the run: :class:`SimulationTerminated` names it and its last successful time, and the
     communication points before stay valid.
 
@@ -209,7 +210,9 @@ class Orchestrator:
         try:
             for comp in graph.components:
                 model = load_model(paths[comp.name])
-                self._instances.append(model.instantiate(comp.name, logging_on=logging_on))
+                inst = model.instantiate(comp.name, logging_on=logging_on)
+                inst.keep_state = graph.retry_rejected_steps and model.can_get_set_state
+                self._instances.append(inst)
             self._wire()
             self.reset()
         except BaseException:
@@ -312,11 +315,13 @@ class Orchestrator:
                 driven[self._index[conn.target.component]].append(
                     (conn.target.variable, position[conn.source])
                 )
+        self._external_targets: list[list[tuple[str, int]]] = [[] for _ in g.components]
         for e, ext_in in enumerate(g.inputs):
             if self._input_vars[e].type == "String":
                 continue
             for port in ext_in.targets:
                 driven[self._index[port.component]].append((port.variable, e))
+                self._external_targets[self._index[port.component]].append((port.variable, e))
         n_in = sum(len(d) for d in driven)
         self._input_values: F64Array = np.zeros(n_in)
         self._gather: npt.NDArray[np.intp] = np.zeros(n_in, dtype=np.intp)
@@ -334,6 +339,8 @@ class Orchestrator:
             start = stop
         self._slots: tuple[_Slot, ...] = tuple(slots)
         self._has_strings = bool(self._string_links or any(self._string_reads))
+        self._only_external = [len(self._external_targets[k]) == len(driven[k]) for k in range(len(slots))]
+        self._connected = bool(g.connections)
 
     def _check_link(self, sp: Port, src: Variable, dp: Port, dst: Variable) -> None:
         """A connection joins one type (and one declared Enumeration type) with compatible units."""
@@ -483,11 +490,17 @@ class Orchestrator:
                 values.update(parameters.get(comp.name, {}))
                 inst.reset()
                 inst.setup(values)
-            # the external inputs' values, then initialisation mode
+            # the external inputs' values (connected inputs wait for initialisation mode)
             for k in idx:
                 slot = self._slots[k]
-                np.take(self._signals, slot.gather, out=slot.inputs)
-                slot.instance.write_inputs()
+                if self._only_external[k]:  # every bound input is external: one C call
+                    np.take(self._signals, slot.gather, out=slot.inputs)
+                    slot.instance.write_inputs()
+                elif self._external_targets[k]:
+                    variables = self._instances[k].model.variables
+                    slot.instance.set_values(
+                        {v: coerce_value(variables[v], self._inputs[e]) for v, e in self._external_targets[k]}
+                    )
             if self._has_strings:
                 self._write_strings(idx)
             for k in idx:
@@ -495,7 +508,11 @@ class Orchestrator:
             self._settle(idx)
             for k in idx:
                 self._slots[k].instance.exit_initialization()
-            self._exchange(idx)
+            if self._connected or self._has_strings:
+                self._exchange(idx)
+            else:  # the inputs are external only and already set: read the outputs
+                for k in idx:
+                    self._slots[k].instance.read_outputs()
         except FmuError as exc:
             self._failure = exc  # some components are not initialised: refuse to step
             raise
@@ -520,19 +537,21 @@ class Orchestrator:
 
     def _settle(self, idx: Sequence[int]) -> None:
         """In initialisation mode: exchange until no connected output changes (loops iterate)."""
-        if not self._gather.size and not self._string_links:
-            return
+        if not self._connected:
+            return  # nothing to settle: no input depends on another component's output
         before = np.full_like(self._signals, np.nan)
         strings_before: dict[Port, str] = {}
         for _ in range(INIT_ITERATIONS):
             self._exchange(idx)
             now = self._signals
-            same = np.all((now == before) | (np.abs(now - before) <= 1e-12 * (1.0 + np.abs(now))))
+            close = np.abs(now - before) <= 1e-12 * (1.0 + np.abs(now))
+            same = np.all((now == before) | close | (np.isnan(now) & np.isnan(before)))
             if same and self._strings == strings_before:
                 return
             before[:] = now
             strings_before = dict(self._strings)
-        worst = int(np.nanargmax(np.abs(self._signals - before)))
+        change = np.abs(self._signals - before)
+        worst = int(np.nanargmax(np.where(np.isnan(change), -1.0, change)))
         raise SimulationFailedError(
             f"initialisation: the connected outputs did not settle in {INIT_ITERATIONS} exchanges (a loop "
             f"of connections without a fixed point?); signal {worst} still changes"
