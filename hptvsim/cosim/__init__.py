@@ -1,6 +1,8 @@
-"""Co-simulation: FMI 2.0 CS FMUs wired by a graph, the vehicle composition, a batched backend.
+"""Co-simulation: FMI 2.0 and 3.0 CS FMUs wired by a graph, the vehicle composition, a batched backend.
 
-* :mod:`hptvsim.cosim.fmi2`: lean, checked FMI 2.0 calls on preallocated buffers;
+* :mod:`hptvsim.cosim.fmi2`: lean, checked FMI 2.0 calls on preallocated buffers; the model
+  description of FMI 2.0 and 3.0 FMUs, value types and units;
+* :mod:`hptvsim.cosim.fmi3`: FMI 3.0 instances with the same interface;
 * :mod:`hptvsim.cosim.graph`: the graph description (dataclasses; TOML/JSON files);
 * :mod:`hptvsim.cosim.orchestrator`: the master (fixed macro steps, Jacobi or Gauss-Seidel);
 * :mod:`hptvsim.cosim.system`: B sub-environments x N vehicles (reset, pause, resume,

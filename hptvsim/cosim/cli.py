@@ -12,8 +12,9 @@ __all__ = ["register"]
 def _write(target: Path, names: tuple[str, ...], types: tuple[str, ...], rows: list[list[object]]) -> None:
     """Write ``time`` and the outputs: CSV (Reals to 17 digits, Booleans as true/false) or Parquet.
 
-    Parquet columns carry the FMI types: float64 (Real), int32 (Integer, Enumeration), bool
-    (Boolean), string (String). Written to a temporary file first, then renamed.
+    Parquet columns carry the FMI types: float64 (Real, Float64), float32, int32 (Integer), the
+    FMI 3 integer types as they are (its Enumerations as int64), bool (Boolean), string (String).
+    Written to a temporary file first, then renamed.
     """
     import csv
 
@@ -22,8 +23,16 @@ def _write(target: Path, names: tuple[str, ...], types: tuple[str, ...], rows: l
         import pyarrow as pa
         import pyarrow.parquet as pq
 
-        kinds = {"Real": pa.float64(), "Integer": pa.int32(), "Enumeration": pa.int32()}
-        kinds |= {"Boolean": pa.bool_(), "String": pa.string()}
+        kinds = {"Real": pa.float64(), "Float64": pa.float64(), "Float32": pa.float32()}
+        kinds |= {
+            "Integer": pa.int32(),
+            "Enumeration": pa.int32(),
+            "Boolean": pa.bool_(),
+            "String": pa.string(),
+        }
+        for t in ("Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32"):
+            kinds[t] = getattr(pa, t.lower())()
+        kinds |= {"Int64": pa.int64(), "UInt64": pa.uint64()}
         columns = {"time": pa.array([r[0] for r in rows], pa.float64())}
         for k, (name, vtype) in enumerate(zip(names, types, strict=True)):
             columns[name] = pa.array([r[k + 1] for r in rows], kinds[vtype])
@@ -49,7 +58,7 @@ def register(main: click.Group, bench: click.Group) -> None:
 
     @main.group("cosim")
     def cosim() -> None:
-        """Co-simulate FMI 2.0 CS FMUs wired by a graph file."""
+        """Co-simulate FMI 2.0 and 3.0 CS FMUs wired by a graph file."""
 
     @cosim.command("run")
     @click.argument("graph_file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
@@ -136,11 +145,11 @@ def register(main: click.Group, bench: click.Group) -> None:
             except SimulationTerminated as exc:
                 reason = str(exc)
             except FmuError as exc:
-                _write(target, orch.output_names, orch.output_types, rows)
+                _write(target, orch.output_names, orch.output_fmi_types, rows)
                 raise click.ClickException(
                     f"{exc} (rows up to t = {orch.time:g} s are in {target})"
                 ) from None
-            names_out, types_out = orch.output_names, orch.output_types
+            names_out, types_out = orch.output_names, orch.output_fmi_types
         _write(target, names_out, types_out, rows)
         done = len(rows) - 1
         if reason:

@@ -46,6 +46,8 @@ from fmpy.fmi2 import (
 )
 
 __all__ = [
+    "FMI2_DISCARD",
+    "FMI2_WARNING",
     "NUMERIC_TYPES",
     "Fmu2Instance",
     "FmuDiscardError",
@@ -55,6 +57,7 @@ __all__ = [
     "Value",
     "Variable",
     "coerce_value",
+    "kind_of",
     "load_model",
     "units_compatible",
 ]
@@ -141,6 +144,9 @@ class Variable:
         display_unit: The display unit, its own or its declared type's.
         declared_type: The name of its declared type (``<SimpleType>``), if any.
         items: Enumeration items ``(name, value)`` of its declared type.
+        kind: What the master exchanges it as: ``Real`` (FMI 3: ``Float32``, ``Float64``),
+            ``Integer`` (FMI 3: ``Int8`` to ``UInt64``), ``Enumeration``, ``Boolean``, ``String``,
+            or the FMI type itself for what it does not exchange (``Binary``, ``Clock``, arrays).
     """
 
     name: str
@@ -154,11 +160,26 @@ class Variable:
     display_unit: str | None = None
     declared_type: str | None = None
     items: tuple[tuple[str, int], ...] = ()
+    kind: str = ""
+
+    def __post_init__(self) -> None:
+        if not self.kind:
+            object.__setattr__(self, "kind", kind_of(self.type))
+
+
+def kind_of(fmi_type: str) -> str:
+    """The kind the master exchanges an FMI 2.0 or 3.0 type as (see :attr:`Variable.kind`)."""
+    if fmi_type in ("Float32", "Float64"):
+        return "Real"
+    if fmi_type.startswith(("Int", "UInt")) and fmi_type != "Integer":
+        return "Integer"
+    return fmi_type
 
 
 def _parse_start(vtype: str, start: Any) -> Value | None:
     if start is None:
         return None
+    vtype = kind_of(vtype)
     try:
         if vtype == "Real":
             return float(start)
@@ -182,11 +203,11 @@ def coerce_value(var: Variable, value: Any, where: str = "") -> Value:
             and what would be valid).
     """
     label = where or repr(var.name)
-    if var.type == "String":
+    if var.kind == "String":
         if not isinstance(value, str):
             raise ValueError(f"{label} is a String variable; {value!r} is not text")
         return value
-    if var.type == "Boolean":
+    if var.kind == "Boolean":
         if isinstance(value, bool):
             return value
         text = str(value).strip().lower()
@@ -195,7 +216,7 @@ def coerce_value(var: Variable, value: Any, where: str = "") -> Value:
         if text in ("false", "0", "0.0"):
             return False
         raise ValueError(f"{label} is a Boolean variable; {value!r} is invalid (valid: true, false, 1, 0)")
-    if var.type == "Enumeration":
+    if var.kind == "Enumeration":
         names = {n: v for n, v in var.items}
         if isinstance(value, str) and value.strip() in names:
             return names[value.strip()]
@@ -204,19 +225,36 @@ def coerce_value(var: Variable, value: Any, where: str = "") -> Value:
             valid = ", ".join(f"{n} ({v})" for n, v in var.items) or "an integer"
             raise ValueError(f"{label} is an Enumeration variable; {value!r} is invalid (valid: {valid})")
         return number
-    if var.type == "Integer":
+    if var.kind == "Integer":
         number = _integer(value)
-        if number is None or not -(2**31) <= number < 2**31:
+        lo, hi = _INTEGER_RANGES.get(var.type, (-(2**31), 2**31))
+        if number is None or not lo <= number < hi:
             raise ValueError(
-                f"{label} is an Integer variable; {value!r} is invalid (valid: a 32-bit integer)"
+                f"{label} is an {var.type} variable; {value!r} is invalid "
+                f"(valid: an integer in [{lo}, {hi - 1}])"
             )
         return number
+    if var.kind != "Real":
+        raise ValueError(f"{label} is a {var.type} variable; hptvsim does not exchange those yet")
     if isinstance(value, bool):
         raise ValueError(f"{label} is a Real variable; {value!r} is a Boolean (valid: a number)")
     try:
         return float(value)
     except (TypeError, ValueError):
         raise ValueError(f"{label} is a Real variable; {value!r} is invalid (valid: a number)") from None
+
+
+_INTEGER_RANGES: Final = {
+    "Integer": (-(2**31), 2**31),
+    "Int8": (-(2**7), 2**7),
+    "UInt8": (0, 2**8),
+    "Int16": (-(2**15), 2**15),
+    "UInt16": (0, 2**16),
+    "Int32": (-(2**31), 2**31),
+    "UInt32": (0, 2**32),
+    "Int64": (-(2**63), 2**63),
+    "UInt64": (0, 2**64),
+}
 
 
 def _integer(value: Any) -> int | None:
@@ -302,10 +340,12 @@ class FmuModel:
             raise FileNotFoundError(f"FMU not found: {self.path}")
         self.model_description = read_model_description(str(self.path))
         md = self.model_description
-        if md.fmiVersion != "2.0" or md.coSimulation is None:
+        if md.fmiVersion not in ("2.0", "3.0") or md.coSimulation is None:
             raise ValueError(
-                f"{self.path}: an FMI 2.0 Co-Simulation FMU is required (got FMI {md.fmiVersion})"
+                f"{self.path}: an FMI 2.0 or 3.0 Co-Simulation FMU is required "
+                f"(got FMI {md.fmiVersion}{'' if md.coSimulation else ' without Co-Simulation'})"
             )
+        self.fmi_version: str = md.fmiVersion
         cs = md.coSimulation
         self.identifier: str = cs.modelIdentifier
         self.guid: str = md.guid
@@ -320,6 +360,7 @@ class FmuModel:
         self.variables: dict[str, Variable] = {}
         for v in md.modelVariables:
             dt = v.declaredType
+            array = bool(getattr(v, "dimensions", None))
             self.variables[v.name] = Variable(
                 name=v.name,
                 value_reference=int(v.valueReference),
@@ -332,6 +373,7 @@ class FmuModel:
                 display_unit=getattr(v, "displayUnit", None) or (dt.displayUnit if dt is not None else None),
                 declared_type=dt.name if dt is not None else None,
                 items=tuple((i.name, int(i.value)) for i in (dt.items if dt is not None else []) or []),
+                kind=f"{v.type} array" if array else "",
             )
 
     def names(self, causality: str | None = None) -> list[str]:
@@ -374,6 +416,10 @@ class FmuModel:
                     "use one instance of it, or free the other first"
                 ],
             )
+        if self.fmi_version == "3.0":
+            from hptvsim.cosim.fmi3 import Fmu3Instance
+
+            return Fmu3Instance(self, name, logging_on=logging_on)  # type: ignore[return-value]  # same interface
         return Fmu2Instance(self, name, logging_on=logging_on)
 
 
@@ -387,7 +433,7 @@ def _vr_array(vrs: Sequence[int]) -> Any:
 
 def _require_numeric(model: FmuModel, variables: Sequence[Variable]) -> None:
     for v in variables:
-        if v.type not in NUMERIC_TYPES:
+        if v.kind not in NUMERIC_TYPES:
             raise ValueError(
                 f"{model.identifier}: '{v.name}' is a {v.type} variable; only "
                 f"{', '.join(NUMERIC_TYPES)} variables can be bound (set and get Strings by name)"

@@ -1,4 +1,4 @@
-"""A co-simulation master for FMI 2.0 Co-Simulation FMUs wired by a :class:`~hptvsim.cosim.graph.Graph`.
+"""A co-simulation master for FMI 2.0 and 3.0 CS FMUs wired by a :class:`~hptvsim.cosim.graph.Graph`.
 
 Master algorithm
     Fixed macro steps of ``graph.step_size`` seconds. ``jacobi`` (the default): at each
@@ -250,15 +250,19 @@ class Orchestrator:
             src = self._variable(conn.source, ("output",), "connection source")
             dst = self._variable(conn.target, ("input", "parameter"), "connection target")
             self._check_link(conn.source, src, conn.target, dst)
-            if src.type == "String":
+            if src.kind == "String":
                 self._string_links.append(
                     (conn.source, self._index[conn.target.component], conn.target.variable)
                 )
                 self._add_string_read(conn.source)
             else:
                 read[self._index[conn.source.component]].add(conn.source.variable)
-        self.output_types: tuple[str, ...] = tuple(
-            self._variable(o.source, ("output",), f"external output {o.name!r}").type for o in g.outputs
+        out_vars = [self._variable(o.source, ("output",), f"external output {o.name!r}") for o in g.outputs]
+        self.output_types: tuple[str, ...] = tuple(v.kind for v in out_vars)
+        models = [self._instances[self._index[o.source.component]].model for o in g.outputs]
+        self.output_fmi_types: tuple[str, ...] = tuple(
+            "Int64" if v.type == "Enumeration" and m.fmi_version == "3.0" else v.type  # FMI 3: Int64 values
+            for v, m in zip(out_vars, models, strict=True)
         )
         for ext_out, vtype in zip(g.outputs, self.output_types, strict=True):
             if vtype == "String":
@@ -271,15 +275,15 @@ class Orchestrator:
                 self._variable(p, ("input", "parameter"), f"external input {ext_in.name!r} target")
                 for p in ext_in.targets
             ]
-            kinds = {(v.type, v.declared_type if v.type == "Enumeration" else None) for v in targets}
+            kinds = {(v.kind, v.declared_type if v.kind == "Enumeration" else None) for v in targets}
             if len(kinds) > 1:
                 listed = ", ".join(f"{p} ({v.type})" for p, v in zip(ext_in.targets, targets, strict=True))
                 raise GraphError(f"external input {ext_in.name!r} drives inputs of different types: {listed}")
             self._input_vars.append(targets[0])
             for p, v in zip(ext_in.targets, targets, strict=True):
-                if v.type == "String":
+                if v.kind == "String":
                     self._string_links.append((e, self._index[p.component], p.variable))
-        self.input_types: tuple[str, ...] = tuple(v.type for v in self._input_vars)
+        self.input_types: tuple[str, ...] = tuple(v.kind for v in self._input_vars)
         starts = [self._coerce_input(k, ext.start) for k, ext in enumerate(g.inputs)]
         self._string_inputs: dict[int, str] = {k: v for k, v in enumerate(starts) if isinstance(v, str)}
         self._string_input_start = dict(self._string_inputs)
@@ -317,7 +321,7 @@ class Orchestrator:
                 )
         self._external_targets: list[list[tuple[str, int]]] = [[] for _ in g.components]
         for e, ext_in in enumerate(g.inputs):
-            if self._input_vars[e].type == "String":
+            if self._input_vars[e].kind == "String":
                 continue
             for port in ext_in.targets:
                 driven[self._index[port.component]].append((port.variable, e))
@@ -345,11 +349,16 @@ class Orchestrator:
     def _check_link(self, sp: Port, src: Variable, dp: Port, dst: Variable) -> None:
         """A connection joins one type (and one declared Enumeration type) with compatible units."""
         link = f"connection {sp} -> {dp}"
-        if src.type != dst.type:
+        exchanged = ("Real", "Integer", "Enumeration", "Boolean", "String")
+        if src.kind != dst.kind:
             raise GraphError(
-                f"{link}: types differ ({src.type} -> {dst.type}); connect variables of one type"
+                f"{link}: types differ ({src.type} -> {dst.type}); connect variables of one kind"
             )
-        if src.type == "Enumeration" and src.declared_type != dst.declared_type and src.items != dst.items:
+        if src.kind not in exchanged:
+            raise GraphError(
+                f"{link}: {src.type} variables are not exchanged (valid: {', '.join(exchanged)})"
+            )
+        if src.kind == "Enumeration" and src.declared_type != dst.declared_type and src.items != dst.items:
             raise GraphError(
                 f"{link}: Enumerations of different types ({src.declared_type} -> {dst.declared_type})"
             )
