@@ -292,8 +292,8 @@ class GameCore:
                 {"sonar": {"fidelity": sensor_fidelity}} if g.sonar else {} for g in sc.vehicles
             ]
         if max_steps is not None:
-            if max_steps < 1:
-                raise ValueError(f"max_steps = {max_steps} is invalid; valid: an integer >= 1")
+            if isinstance(max_steps, bool) or not float(max_steps).is_integer() or max_steps < 1:
+                raise ValueError(f"max_steps = {max_steps!r} is invalid; valid: an integer >= 1")
             overrides["simulation"] = {"max_steps": int(max_steps)}
         if vehicle_parameters:
             roles = {"pursuer", "evader"}

@@ -66,3 +66,11 @@ def test_vector_entry_point_and_render() -> None:
     env.reset(seed=0)
     frame = np.asarray(env.render())
     assert frame.ndim == 3 and frame.shape[2] == 3 and frame.dtype == np.uint8
+
+
+@pytest.mark.parametrize("bad", [0, -3, 2.5, True])
+def test_a_step_limit_that_is_not_a_positive_integer_is_refused(bad: object) -> None:
+    from hptvsim.envs import parallel_env
+
+    with pytest.raises(ValueError, match=r"max_steps = .* is invalid; valid: an integer >= 1"):
+        parallel_env("goto_tiny", max_steps=bad)
