@@ -141,6 +141,7 @@ CASES: dict[str, tuple[list[str], tuple[str, ...]]] = {
     "fmu-check": (["fmu", "check", "--dir", "empty"], ("empty", "WorkClassUUV.fmu")),
     "cosim-run-broken": (["cosim", "run", "bad.toml"], ("bad.toml", "line 1")),
     "cosim-run-missing": (["cosim", "run", "missing.toml"], ("missing.toml", "does not exist")),
+    "cosim-export-ssp": (["cosim", "export-ssp", "bad.toml", "--out", "x.ssp"], ("bad.toml", "line 1")),
     "scenario-validate": (["scenario", "validate", "nosuch"], ("nosuch", "target")),
     "scenario-show": (["scenario", "show", "nosuch"], ("nosuch", "target")),
     "scenario-list": (["scenario", "list", "--nosuch"], ("--nosuch", "No such option")),

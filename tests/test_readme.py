@@ -325,6 +325,21 @@ COMMANDS: dict[str, tuple[Run | Help, ...]] = {
             ("{tmp}/follow-the-turn.csv",),
         ),
     ),
+    "hptvsim cosim export-ssp GRAPH.toml --out SYSTEM.ssp": (
+        Run(
+            "hptvsim cosim export-ssp {repo}/configs/cosim/follow-the-turn.toml --out {shared}/turn.ssp",
+            r"turn\.ssp",
+            ("{shared}/turn.ssp",),
+        ),
+    ),
+    "hptvsim cosim run SYSTEM.ssp": (
+        Run(
+            "hptvsim cosim run {shared}/turn.ssp --stop-time 5 --set turn=0.3 --out {tmp}/turn.csv",
+            r"20 steps of 0\.25 s",
+            ("{tmp}/turn.csv",),
+            after="hptvsim cosim export-ssp GRAPH.toml --out SYSTEM.ssp",
+        ),
+    ),
     "hptvsim scenario list | validate FILE | show FILE --out PNG | schema": (
         Run("hptvsim scenario list", r"(?m)^target +Irregular"),
         Run("hptvsim scenario validate {repo}/scenarios/target.toml", r"ok: .*target\.toml"),

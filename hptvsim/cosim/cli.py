@@ -79,10 +79,20 @@ def register(main: click.Group, bench: click.Group) -> None:
         help="Start an external input at a value in its type (number, true/false, an Enumeration "
         "item's name, text), from t = 0 on (repeatable).",
     )
+    @click.option(
+        "--step-size",
+        type=click.FloatRange(min=0.0, min_open=True),
+        default=None,
+        help="Macro step [s] for an .ssp that states none (its own step size wins).",
+    )
     def cosim_run(
-        graph_file: Path, stop_time: float, out_file: Path | None, settings: tuple[str, ...]
+        graph_file: Path,
+        stop_time: float,
+        out_file: Path | None,
+        settings: tuple[str, ...],
+        step_size: float | None,
     ) -> None:
-        """Run GRAPH_FILE (.toml or .json) to --stop-time and write its outputs (CSV or Parquet).
+        """Run GRAPH_FILE (.toml, .json or an SSP 1.0 .ssp) to --stop-time and write its outputs.
 
         A component that ends the simulation itself stops the run cleanly: every row up to the
         last complete communication point is written and the reason printed.
@@ -96,7 +106,14 @@ def register(main: click.Group, bench: click.Group) -> None:
         from hptvsim.cosim.orchestrator import Orchestrator, SimulationFailedError, SimulationTerminated
 
         try:
-            graph = load_graph(graph_file)
+            if graph_file.suffix.lower() == ".ssp":
+                from hptvsim.cosim.ssp import load_ssp
+
+                graph = load_ssp(graph_file, step_size=step_size)
+            elif step_size is not None:
+                raise click.BadParameter("only for an .ssp graph", param_hint="--step-size")
+            else:
+                graph = load_graph(graph_file)
         except GraphError as exc:
             raise click.ClickException(str(exc)) from None
         steps = round(stop_time / graph.step_size)
@@ -155,6 +172,35 @@ def register(main: click.Group, bench: click.Group) -> None:
         if reason:
             click.echo(f"stopped early: {reason}")
         click.echo(f"{done} steps of {graph.step_size} s; outputs: {target.resolve()}")
+
+    @cosim.command("export-ssp")
+    @click.argument("graph_file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+    @click.option(
+        "--out",
+        "out_file",
+        type=click.Path(dir_okay=False, path_type=Path),
+        default=None,
+        help="The .ssp to write (default: <graph>.ssp beside the graph).",
+    )
+    @click.option(
+        "--libcosim",
+        is_flag=True,
+        help="Leave out the connections to system connectors, which OSP libcosim refuses (the "
+        "wiring then lives in the hptvsim annotation only).",
+    )
+    def cosim_export_ssp(graph_file: Path, out_file: Path | None, libcosim: bool) -> None:
+        """Write GRAPH_FILE (.toml or .json) as an SSP 1.0 archive with its FMUs."""
+        from hptvsim.cosim.graph import GraphError, load_graph
+        from hptvsim.cosim.ssp import export_ssp
+
+        target = out_file if out_file is not None else graph_file.with_suffix(".ssp")
+        if target.suffix.lower() != ".ssp":
+            raise click.BadParameter(f"{target.name}: the suffix must be .ssp", param_hint="--out")
+        try:
+            export_ssp(load_graph(graph_file), target, libcosim=libcosim)
+        except GraphError as exc:
+            raise click.ClickException(str(exc)) from None
+        click.echo(f"wrote {target.resolve()}")
 
     @bench.command("cosim")
     @click.option("--quick", is_flag=True, help="About a second instead of several.")
