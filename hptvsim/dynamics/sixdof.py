@@ -59,6 +59,7 @@ from typing import Any, Final
 
 from hptvsim.dynamics._casadi import ca
 from hptvsim.dynamics.fossen import G_N
+from hptvsim.dynamics.parameters import ParameterError
 from hptvsim.dynamics.parameters6 import SIXDOF_PARAMETER_NAMES, SixDofParameters
 
 __all__ = [
@@ -70,6 +71,7 @@ __all__ = [
     "S",
     "SixDofModel",
     "T_theta",
+    "check_mass_matrix",
     "coriolis",
     "coriolis_rigid_body",
     "current_in_body",
@@ -510,16 +512,41 @@ def sixdof_model(held: tuple[int, ...] = ()) -> SixDofModel:
     )
 
 
+def check_mass_matrix(params: SixDofParameters) -> None:
+    """Refuse a parameter set whose mass matrix ``M = M_RB + M_A`` is not positive definite.
+
+    Each parameter is checked against its own range when the set is built; this is the check
+    of the set as a whole (Fossen 2021, Property 3.1 and ch. 6: ``M = M^T > 0``, without which the
+    kinetic energy is not positive and ``nu_dot`` is not defined).
+
+    Raises:
+        ParameterError: ``M`` is not positive definite (the message gives its smallest eigenvalue).
+    """
+    import numpy as np
+
+    M = np.array(sixdof_model(()).mass_matrix(ca.DM(params.to_vector()))[0])
+    smallest = float(np.linalg.eigvalsh(0.5 * (M + M.T)).min())
+    if not smallest > 0.0:
+        raise ParameterError(
+            f"the mass matrix M = M_RB + M_A is not positive definite (smallest eigenvalue {smallest:.6g}); "
+            "check the mass, the inertia and the added-mass derivatives (X_udot etc. are usually <= 0)"
+        )
+
+
 def sixdof_dynamics(params: SixDofParameters, held: tuple[int, ...] = ()) -> Any:
     """The 6-DOF model of one vehicle as a CasADi function with its parameters built in.
 
     Args:
-        params: The vehicle's 6-DOF parameters.
+        params: The vehicle's 6-DOF parameters (checked by :func:`check_mass_matrix`).
         held: DOFs held by constraint forces, as in :func:`sixdof_model`.
 
     Returns:
         ``(eta_dot, nu_dot) = f(eta, nu, tau, v_c)``, a ``casadi.Function``.
+
+    Raises:
+        ParameterError: The mass matrix is not positive definite.
     """
+    check_mass_matrix(params)
     model = sixdof_model(held)
     eta = ca.SX.sym("eta", 6)
     nu = ca.SX.sym("nu", 6)

@@ -528,3 +528,16 @@ def test_sixdof_dynamics_bakes_in_the_parameters() -> None:
     b = [np.array(v) for v in MODEL.dynamics(eta, nu, tau, v_c, params.to_vector())]
     for u, v in zip(a, b, strict=True):
         np.testing.assert_allclose(u, v, rtol=1e-13, atol=1e-13)
+
+
+def test_a_set_whose_mass_matrix_is_not_positive_definite_is_refused() -> None:
+    from hptvsim.dynamics.parameters import ParameterError
+    from hptvsim.dynamics.sixdof import check_mass_matrix, sixdof_dynamics
+
+    for six in SIXDOF_VEHICLE_TYPES.values():
+        check_mass_matrix(six)  # the shipped sets pass
+    base = SIXDOF_VEHICLE_TYPES["work_class"]
+    # an added-mass coupling larger than the diagonal it couples makes M indefinite
+    bad = base.replace(Z_qdot=-1e5)
+    with pytest.raises(ParameterError, match=r"not positive definite .*smallest eigenvalue -"):
+        sixdof_dynamics(bad)
