@@ -27,7 +27,7 @@ from typing import Any
 
 from hptvsim._paths import shipped_dir
 from hptvsim.envs.core import GameCore
-from hptvsim.envs.policies import POLICY_NAMES, Limits, Policy, make_policy
+from hptvsim.envs.policies import POLICY_NAMES, POLICY_ROLES, Limits, Policy, make_policy
 
 __all__ = [
     "PolicyInfo",
@@ -98,13 +98,7 @@ def policy_dir() -> Path:
     return shipped_dir("policies", env="HPTVSIM_POLICY_DIR")
 
 
-_SCRIPTED_ROLES = {
-    "pure_pursuit": ("pursuer", "evader"),
-    "proportional_navigation": ("pursuer",),
-    "potential_field": ("evader",),
-    "stationary": ("pursuer", "evader"),
-    "random": ("pursuer", "evader"),
-}
+_SCRIPTED_ROLES = POLICY_ROLES  # one table, in the layer that defines the scripted policies
 
 
 def list_policies(folder: Path | None = None) -> list[PolicyInfo]:

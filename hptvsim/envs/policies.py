@@ -26,6 +26,7 @@ from hptvsim.envs.task import ObsLayout, wrap
 
 __all__ = [
     "POLICY_NAMES",
+    "POLICY_ROLES",
     "Limits",
     "Policy",
     "PotentialField",
@@ -288,6 +289,15 @@ POLICY_NAMES: tuple[str, ...] = (
     "random",
 )
 """Names of the scripted policies, as scenario files, the CLI and the service use them."""
+
+POLICY_ROLES: dict[str, tuple[str, ...]] = {
+    "pure_pursuit": ("pursuer", "evader"),  # heads for its target (an evader's: the nearest pursuer)
+    "proportional_navigation": ("pursuer",),
+    "potential_field": ("evader",),
+    "stationary": ("pursuer", "evader"),
+    "random": ("pursuer", "evader"),
+}
+"""The roles each scripted policy is made for (the zoo and the single-agent views check it)."""
 
 
 def make_policy(

@@ -24,7 +24,7 @@ import numpy.typing as npt
 from gymnasium.vector import AutoresetMode
 
 from hptvsim.envs.core import Backend, GameCore, StepResult
-from hptvsim.envs.policies import Limits, Policy, make_policy
+from hptvsim.envs.policies import POLICY_ROLES, Limits, Policy, make_policy
 from hptvsim.world.scenario import Scenario
 
 __all__ = ["PolicySpec", "SB3VecEnv", "UPEGSingleAgentEnv", "UPEGVectorEnv", "build_policies"]
@@ -60,6 +60,15 @@ def build_policies(
         spec = given.get(agent, default_policy_name(core, agent))
         if isinstance(spec, str):
             i = core.agents.index(agent)
+            role = "pursuer" if core.pursuer[i] else "evader"
+            name = spec.removeprefix("scripted:")
+            if name in POLICY_ROLES and role not in POLICY_ROLES[name] and not core.goto:
+                fits = [n for n, roles in POLICY_ROLES.items() if role in roles]
+                raise ValueError(
+                    f"policy {spec!r} drives {' and '.join(POLICY_ROLES[name])}, not {agent} ({role}); "
+                    f"valid for {agent}: {', '.join(fits)}"
+                )
+            spec = name
             v_min, v_max, om = core.robots.limits[i]
             out[agent] = make_policy(
                 spec,

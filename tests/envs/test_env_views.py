@@ -107,3 +107,21 @@ def test_vehicle_parameters_per_role_change_limits_and_are_validated() -> None:
         parallel_env("source", vehicle_parameters={"uuv": {"v_max": 1.0}})
     with pytest.raises(ScenarioError, match="v_max"):
         parallel_env("source", vehicle_parameters={"pursuer": {"v_max": -1.0}})
+
+
+def test_a_scripted_policy_for_the_wrong_role_is_refused() -> None:
+    import gymnasium
+
+    with pytest.raises(
+        ValueError, match=r"'potential_field' drives evader, not pursuer_0 .*valid for pursuer_0: pure"
+    ):
+        gymnasium.make("hptvsim/UPEG-Evader-v0", scenario="source", policies={"pursuer_0": "potential_field"})
+    with pytest.raises(ValueError, match=r"'proportional_navigation' drives pursuer, not evader_0"):
+        gymnasium.make(
+            "hptvsim/UPEG-Pursuer-v0", scenario="source", policies={"evader_0": "proportional_navigation"}
+        )
+    # the zoo's spelling works as well
+    env = gymnasium.make(
+        "hptvsim/UPEG-Evader-v0", scenario="source", policies={"pursuer_0": "scripted:pure_pursuit"}
+    )
+    env.close()
