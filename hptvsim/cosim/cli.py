@@ -9,11 +9,18 @@ import click
 __all__ = ["register"]
 
 
-def _write(target: Path, names: tuple[str, ...], types: tuple[str, ...], rows: list[list[object]]) -> None:
+def _write(
+    target: Path,
+    names: tuple[str, ...],
+    types: tuple[str, ...],
+    rows: list[list[object]],
+    units: tuple[tuple[str | None, str | None], ...] = (),
+) -> None:
     """Write ``time`` and the outputs: CSV (Reals to 17 digits, Booleans as true/false) or Parquet.
 
     Parquet columns carry the FMI types: float64 (Real, Float64), float32, int32 (Integer), the
     FMI 3 integer types as they are (its Enumerations as int64), bool (Boolean), string (String).
+    Parquet fields carry each output's ``unit`` and ``display_unit`` as metadata (``time``: s).
     Written to a temporary file first, then renamed.
     """
     import csv
@@ -33,10 +40,14 @@ def _write(target: Path, names: tuple[str, ...], types: tuple[str, ...], rows: l
         for t in ("Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32"):
             kinds[t] = getattr(pa, t.lower())()
         kinds |= {"Int64": pa.int64(), "UInt64": pa.uint64()}
-        columns = {"time": pa.array([r[0] for r in rows], pa.float64())}
+        fields = [pa.field("time", pa.float64(), metadata={"unit": "s"})]
+        arrays = [pa.array([r[0] for r in rows], pa.float64())]
         for k, (name, vtype) in enumerate(zip(names, types, strict=True)):
-            columns[name] = pa.array([r[k + 1] for r in rows], kinds[vtype])
-        pq.write_table(pa.table(columns), tmp)
+            unit, display = units[k] if k < len(units) else (None, None)
+            meta = {key: v for key, v in (("unit", unit), ("display_unit", display)) if v}
+            fields.append(pa.field(name, kinds[vtype], metadata=meta or None))
+            arrays.append(pa.array([r[k + 1] for r in rows], kinds[vtype]))
+        pq.write_table(pa.Table.from_arrays(arrays, schema=pa.schema(fields)), tmp)
     else:
 
         def cell(value: object) -> str:
@@ -162,12 +173,12 @@ def register(main: click.Group, bench: click.Group) -> None:
             except SimulationTerminated as exc:
                 reason = str(exc)
             except FmuError as exc:
-                _write(target, orch.output_names, orch.output_fmi_types, rows)
+                _write(target, orch.output_names, orch.output_fmi_types, rows, orch.output_units)
                 raise click.ClickException(
                     f"{exc} (rows up to t = {orch.time:g} s are in {target})"
                 ) from None
-            names_out, types_out = orch.output_names, orch.output_fmi_types
-        _write(target, names_out, types_out, rows)
+            names_out, types_out, units_out = orch.output_names, orch.output_fmi_types, orch.output_units
+        _write(target, names_out, types_out, rows, units_out)
         done = len(rows) - 1
         if reason:
             click.echo(f"stopped early: {reason}")

@@ -259,6 +259,9 @@ class Orchestrator:
                 read[self._index[conn.source.component]].add(conn.source.variable)
         out_vars = [self._variable(o.source, ("output",), f"external output {o.name!r}") for o in g.outputs]
         self.output_types: tuple[str, ...] = tuple(v.kind for v in out_vars)
+        self.output_units: tuple[tuple[str | None, str | None], ...] = tuple(
+            (v.unit, v.display_unit) for v in out_vars
+        )  # (unit, display unit) of each external output, declared types' included
         models = [self._instances[self._index[o.source.component]].model for o in g.outputs]
         self.output_fmi_types: tuple[str, ...] = tuple(
             "Int64" if v.type == "Enumeration" and m.fmi_version == "3.0" else v.type  # FMI 3: Int64 values
@@ -695,10 +698,22 @@ class Orchestrator:
 
         Raises:
             SimulationFailedError: The last step failed (the system is between communication points).
+            FmuError: A component's FMU cannot get and set its state (``canGetAndSetFMUstate``).
         """
         self._check_open()
         if self._failure is not None:
             raise SimulationFailedError("cannot snapshot after a failed step; reset() or restore() first")
+        for slot in self._slots:
+            if not slot.instance.model.can_get_set_state:
+                raise FmuError(
+                    slot.instance.name,
+                    "fmi2GetFMUstate",
+                    3,
+                    [
+                        f"{slot.instance.model.identifier} cannot get and set its FMU state "
+                        "(canGetAndSetFMUstate = false), so the system cannot be snapshot"
+                    ],
+                )
         states: list[ctypes.c_void_p] = []
         try:
             for slot in self._slots:

@@ -107,6 +107,11 @@ def test_every_type_runs_through_the_master_as_in_fmpy(typed_fmus: dict[str, Pat
         "s_out": "string",
         "pos": "double",
     }
+    # units travel with the columns: pos is a Length [m] shown in cm, r_out has none
+    pos = table.schema.field("pos").metadata
+    assert pos == {b"unit": b"m", b"display_unit": b"cm"}
+    assert table.schema.field("r_out").metadata is None
+    assert table.schema.field("time").metadata == {b"unit": b"s"}
     ours = table.to_pydict()
     start = {"r_in": 2.0, "i_in": 3, "b_in": False, "e_in": 3, "s_in": "xyz", "speed_in": 0.25}
     start |= {"gain": 3.0, "offset": -4, "invert": True, "prefix": "p-"}
@@ -322,3 +327,25 @@ def test_close_terminates_every_instance(typed_fmus: dict[str, Path]) -> None:
     before = inst.terminated
     orch.close()
     assert (before, inst.terminated, inst.freed) == (False, True, True)
+
+
+def test_a_snapshot_needs_fmus_that_can_get_and_set_their_state(
+    typed_fmus: dict[str, Path], tmp_path: Path
+) -> None:
+    """An FMU declaring canGetAndSetFMUstate = false: the master says why it cannot snapshot."""
+    import zipfile
+
+    src = typed_fmus["InitUser"]
+    fmu = tmp_path / "InitUserNoState.fmu"
+    with zipfile.ZipFile(src) as zin, zipfile.ZipFile(fmu, "w") as zout:
+        for item in zin.infolist():
+            data = zin.read(item.filename)
+            if item.filename == "modelDescription.xml":
+                data = data.replace(b'canGetAndSetFMUstate="true"', b'canGetAndSetFMUstate="false"')
+                assert b'canGetAndSetFMUstate="false"' in data
+            zout.writestr(item, data)
+    graph = Graph(components=(Component(name="a", fmu=str(fmu)),), step_size=0.1)
+    with Orchestrator(graph) as orch:
+        orch.step()
+        with pytest.raises(FmuError, match=r"component 'a'.*cannot get and set its FMU state"):
+            orch.snapshot()
