@@ -165,7 +165,7 @@ COMMANDS: dict[str, tuple[Run | Help, ...]] = {
     ),
     "make test": (
         Help(
-            "installs system packages and runs the whole suite (about 12 minutes)",
+            "installs system packages and runs the whole suite (about 11 minutes)",
             "make -n test",
             r"ruff check[\s\S]*mypy[\s\S]*pytest -n",
         ),
