@@ -32,7 +32,7 @@ from collections import deque
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Final
+from typing import Any, ClassVar, Final
 
 import numpy as np
 import numpy.typing as npt
@@ -511,7 +511,99 @@ def load_model(path: str | Path) -> FmuModel:
     return model
 
 
-class Fmu2Instance:
+class _Lifecycle:
+    """What FMI 2.0 and 3.0 instances share, with each version's function names.
+
+    Status checks, the initialisation order, terminate, reset and free (``_PREFIX``,
+    ``_FREE_STATE`` name the functions).
+
+    Subclasses set ``name``, ``model``, ``log``, ``time``, ``_fn``, ``_c``, ``_slave``,
+    ``_saved``, ``initialized``, ``terminated``, ``_freed`` and implement ``setup`` and
+    ``enter_initialization`` (their calls differ between the versions).
+    """
+
+    _PREFIX: ClassVar[str]
+    _FREE_STATE: ClassVar[str]
+    name: str
+    model: FmuModel
+    log: deque[str]
+    time: float
+    _fn: Any
+    _c: Any
+    _slave: Any
+    _saved: ctypes.c_void_p
+    initialized: bool
+    terminated: bool
+    _freed: bool
+
+    def _check(self, call: str, status: int) -> None:
+        if status > FMI2_WARNING:
+            messages = list(self.log)
+            self.log.clear()
+            raise FmuError(self.name, call, status, messages)
+
+    def setup(self, values: Mapping[str, Any] | None = None, *, start_time: float = 0.0) -> None:
+        """Parameters and start values, in the instantiated state."""
+        raise NotImplementedError
+
+    def enter_initialization(self) -> None:
+        """Enter initialisation mode."""
+        raise NotImplementedError
+
+    def exit_initialization(self) -> None:
+        """Exit initialisation mode: the instance is ready to step."""
+        call = f"{self._PREFIX}ExitInitializationMode"
+        self._check(call, self._fn[call](self._c))
+        self.initialized = True
+
+    def initialize(self, values: Mapping[str, Any] | None = None, *, start_time: float = 0.0) -> None:
+        """Set parameters and start values, then enter and exit initialisation mode."""
+        self.setup(values, start_time=start_time)
+        self.enter_initialization()
+        self.exit_initialization()
+
+    def terminate(self) -> None:
+        """Terminate an initialised instance (once; a no-op otherwise)."""
+        if self.initialized and not self.terminated and not self._freed:
+            self.terminated = True
+            call = f"{self._PREFIX}Terminate"
+            self._check(call, self._fn[call](self._c))
+
+    def reset(self) -> None:
+        """Reset: back to the instantiated state and the start values (no reload)."""
+        call = f"{self._PREFIX}Reset"
+        self._check(call, self._fn[call](self._c))
+        self.log.clear()
+        self.time = 0.0
+        self.initialized = False
+        self.terminated = False
+
+    @property
+    def freed(self) -> bool:
+        """Whether :meth:`free` has released the instance."""
+        return self._freed
+
+    def _released(self) -> None:
+        """What a subclass releases after the instance is freed."""
+
+    def free(self) -> None:
+        """Free the instance (and the state saved for redoing steps); unusable afterwards."""
+        if not self._freed:
+            self._freed = True
+            if self._saved.value:
+                with contextlib.suppress(Exception):
+                    self._fn[self._FREE_STATE](self._c, ctypes.byref(self._saved))
+            self._fn[f"{self._PREFIX}FreeInstance"](self._c)
+            self._slave.freeLibrary()
+            self.model.live.pop(id(self), None)
+            self._released()
+
+    def __del__(self) -> None:
+        with contextlib.suppress(Exception):
+            self.free()
+
+
+class Fmu2Instance(_Lifecycle):
     """One instance of an FMI 2.0 CS FMU with checked, allocation-free hot-path calls.
 
     Lifecycle: :meth:`initialize` (set parameters, enter and exit initialisation), then
@@ -522,6 +614,9 @@ class Fmu2Instance:
     exchanges and return numpy buffers; :meth:`step` copies the input buffer into the FMU,
     advances it and copies the outputs into the output buffer.
     """
+
+    _PREFIX: ClassVar[str] = "fmi2"
+    _FREE_STATE: ClassVar[str] = "fmi2FreeFMUstate"
 
     def __init__(self, model: FmuModel, name: str, *, logging_on: bool = False) -> None:
         self.model = model
@@ -556,12 +651,6 @@ class Fmu2Instance:
         model.live[id(self)] = name
 
     # -- error handling ------------------------------------------------------------------------
-
-    def _check(self, call: str, status: int) -> None:
-        if status > FMI2_WARNING:
-            messages = list(self.log)
-            self.log.clear()
-            raise FmuError(self.name, call, status, messages)
 
     # -- lifecycle ----------------------------------------------------------------------------
 
@@ -638,52 +727,9 @@ class Fmu2Instance:
         """``fmi2EnterInitializationMode``: inputs may now be set and outputs read until exit."""
         self._check("fmi2EnterInitializationMode", self._fn["fmi2EnterInitializationMode"](self._c))
 
-    def exit_initialization(self) -> None:
-        """``fmi2ExitInitializationMode``: the instance is ready to step."""
-        self._check("fmi2ExitInitializationMode", self._fn["fmi2ExitInitializationMode"](self._c))
-        self.initialized = True
-
-    def initialize(self, values: Mapping[str, Any] | None = None, *, start_time: float = 0.0) -> None:
-        """Set parameters and start values, then enter and exit initialisation mode."""
-        self.setup(values, start_time=start_time)
-        self.enter_initialization()
-        self.exit_initialization()
-
-    def terminate(self) -> None:
-        """``fmi2Terminate`` an initialised instance (once; a no-op otherwise)."""
-        if self.initialized and not self.terminated and not self._freed:
-            self.terminated = True
-            self._check("fmi2Terminate", self._fn["fmi2Terminate"](self._c))
-
-    def reset(self) -> None:
-        """``fmi2Reset``: back to the instantiated state and the start values (no reload)."""
-        self._check("fmi2Reset", self._fn["fmi2Reset"](self._c))
-        self.log.clear()
-        self.time = 0.0
-        self.initialized = False
-        self.terminated = False
-
-    @property
-    def freed(self) -> bool:
-        """Whether :meth:`free` has released the instance."""
-        return self._freed
-
-    def free(self) -> None:
-        """Free the instance; the object is unusable afterwards."""
-        if not self._freed:
-            self._freed = True
-            if self._saved.value:
-                with contextlib.suppress(Exception):
-                    self._fn["fmi2FreeFMUstate"](self._c, ctypes.byref(self._saved))
-            self._fn["fmi2FreeInstance"](self._c)
-            self._slave.freeLibrary()
-            self.model.live.pop(id(self), None)
-            with _LOG_LOCK:
-                _LOG_SINKS.pop(self._env_id, None)
-
-    def __del__(self) -> None:
-        with contextlib.suppress(Exception):
-            self.free()
+    def _released(self) -> None:
+        with _LOG_LOCK:
+            _LOG_SINKS.pop(self._env_id, None)
 
     # -- hot path ----------------------------------------------------------------------------
 

@@ -22,11 +22,10 @@ communication steps, as for FMI 2.0.
 
 from __future__ import annotations
 
-import contextlib
 import ctypes
 from collections import deque
 from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING, Any, Final
+from typing import TYPE_CHECKING, Any, ClassVar, Final
 
 import numpy as np
 import numpy.typing as npt
@@ -40,6 +39,7 @@ from hptvsim.cosim.fmi2 import (
     FmuError,
     Value,
     Variable,
+    _Lifecycle,
     coerce_value,
 )
 
@@ -99,8 +99,11 @@ class _Groups:
             self.buffer[idx] = scratch
 
 
-class Fmu3Instance:
+class Fmu3Instance(_Lifecycle):
     """One instance of an FMI 3.0 Co-Simulation FMU (the interface of ``Fmu2Instance``)."""
+
+    _PREFIX: ClassVar[str] = "fmi3"
+    _FREE_STATE: ClassVar[str] = "fmi3FreeFMUState"
 
     def __init__(self, model: FmuModel, name: str, *, logging_on: bool = False) -> None:
         self.model = model
@@ -135,12 +138,6 @@ class Fmu3Instance:
 
     def _on_log(self, env: Any, status: int, category: bytes | None, message: bytes | None) -> None:
         self.log.append((message or b"").decode("utf-8", "replace"))
-
-    def _check(self, call: str, status: int) -> None:
-        if status > FMI2_WARNING:
-            messages = list(self.log)
-            self.log.clear()
-            raise FmuError(self.name, call, status, messages)
 
     # -- values ------------------------------------------------------------------------------------
 
@@ -203,51 +200,6 @@ class Fmu3Instance:
             "fmi3EnterInitializationMode",
             self._fn["fmi3EnterInitializationMode"](self._c, False, 0.0, self.time, False, 0.0),
         )
-
-    def exit_initialization(self) -> None:
-        """``fmi3ExitInitializationMode``: into step mode."""
-        self._check("fmi3ExitInitializationMode", self._fn["fmi3ExitInitializationMode"](self._c))
-        self.initialized = True
-
-    def initialize(self, values: Mapping[str, Any] | None = None, *, start_time: float = 0.0) -> None:
-        """Set parameters and start values, then enter and exit initialisation mode."""
-        self.setup(values, start_time=start_time)
-        self.enter_initialization()
-        self.exit_initialization()
-
-    def terminate(self) -> None:
-        """``fmi3Terminate`` an initialised instance (once)."""
-        if self.initialized and not self.terminated and not self._freed:
-            self.terminated = True
-            self._check("fmi3Terminate", self._fn["fmi3Terminate"](self._c))
-
-    def reset(self) -> None:
-        """``fmi3Reset``: back to the instantiated state and the start values."""
-        self._check("fmi3Reset", self._fn["fmi3Reset"](self._c))
-        self.log.clear()
-        self.time = 0.0
-        self.initialized = False
-        self.terminated = False
-
-    @property
-    def freed(self) -> bool:
-        """Whether :meth:`free` has released the instance."""
-        return self._freed
-
-    def free(self) -> None:
-        """Free the instance; the object is unusable afterwards."""
-        if not self._freed:
-            self._freed = True
-            if self._saved.value:
-                with contextlib.suppress(Exception):
-                    self._fn["fmi3FreeFMUState"](self._c, ctypes.byref(self._saved))
-            self._fn["fmi3FreeInstance"](self._c)
-            self._slave.freeLibrary()
-            self.model.live.pop(id(self), None)
-
-    def __del__(self) -> None:
-        with contextlib.suppress(Exception):
-            self.free()
 
     # -- hot path ------------------------------------------------------------------------------------
 

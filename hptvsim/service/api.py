@@ -14,7 +14,8 @@ import asyncio
 import hmac
 import io
 import json
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Awaitable, Callable
+from pathlib import Path as FsPath
 from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Depends, Path, Query, Request, Security, WebSocket, WebSocketDisconnect
@@ -115,6 +116,24 @@ def _trajectory_table(svc: Service, row: EpisodeRow) -> Any:
     if path is None:
         raise ApiError(404, f"episode {row.id} has no trajectory ({row.status}: {row.error or 'no steps'})")
     return pq.read_table(path)
+
+
+async def _prepared(
+    svc: Service, name: str, suffix: str, make: Callable[[str, FsPath], Awaitable[None]]
+) -> FsPath:
+    """A shipped scenario's derived file (map, preview), made once per version of its TOML.
+
+    ``make(name, path)`` writes it in a preparation process (never on the API's threads); the
+    cache key holds the scenario file's modification time, so an edited scenario is redone.
+    """
+    from hptvsim.world.scenario import scenario_dir
+
+    source = scenario_dir() / f"{name}.toml"
+    cache = svc.settings.data_dir / "maps" / f"{name}-{source.stat().st_mtime_ns}.{suffix}"
+    if not cache.is_file():
+        cache.parent.mkdir(parents=True, exist_ok=True)
+        await make(name, cache)
+    return cache
 
 
 def trajectory_json(table: Any) -> dict[str, Any]:
@@ -282,13 +301,7 @@ def build_routers(settings: Settings) -> tuple[APIRouter, APIRouter]:
         svc: Svc,
     ) -> Response:
         """A map of the scenario (seabed, obstacles, spawn regions, goals, currents) as a PNG."""
-        from hptvsim.world.scenario import scenario_dir
-
-        source = scenario_dir() / f"{name}.toml"
-        cache = svc.settings.data_dir / "maps" / f"{name}-{source.stat().st_mtime_ns}.png"
-        if not cache.is_file():
-            cache.parent.mkdir(parents=True, exist_ok=True)
-            await svc.render_map(str(name), cache)
+        cache = await _prepared(svc, str(name), "png", svc.render_map)
         return FileResponse(cache, media_type="image/png", headers={"Cache-Control": "max-age=3600"})
 
     @router.get("/scenarios/{name}/preview", tags=["scenarios"])
@@ -302,13 +315,7 @@ def build_routers(settings: Settings) -> tuple[APIRouter, APIRouter]:
         their sonars), ``frame`` the frame after reset with the spawn poses of the scenario's
         seed. The dashboard draws its scenario preview from it.
         """
-        from hptvsim.world.scenario import scenario_dir
-
-        source = scenario_dir() / f"{name}.toml"
-        cache = svc.settings.data_dir / "maps" / f"{name}-{source.stat().st_mtime_ns}.json"
-        if not cache.is_file():
-            cache.parent.mkdir(parents=True, exist_ok=True)
-            await svc.scenario_preview(str(name), cache)
+        cache = await _prepared(svc, str(name), "json", svc.scenario_preview)
         return FileResponse(cache, media_type="application/json", headers={"Cache-Control": "max-age=3600"})
 
     @router.get("/policies", response_model=list[PolicyOut], tags=["policies"])
