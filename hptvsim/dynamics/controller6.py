@@ -78,13 +78,20 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Any, Final
+from typing import Any, ClassVar, Final
 
 from hptvsim.dynamics._casadi import ca
 from hptvsim.dynamics.controller import _sat, control_law
 from hptvsim.dynamics.fossen import G_N
 from hptvsim.dynamics.model import Signal, wrap_angle
-from hptvsim.dynamics.parameters import ParameterError, ParameterSpec, VehicleParameters, _p
+from hptvsim.dynamics.parameters import (
+    ParameterError,
+    ParameterSet,
+    ParameterSpec,
+    VehicleParameters,
+    _p,
+    _v_limits,
+)
 from hptvsim.dynamics.parameters6 import SIXDOF_PARAMETER_NAMES, SIXDOF_VEHICLE_TYPES, SixDofParameters
 from hptvsim.dynamics.sixdof import R_zyx, mass_added, mass_rigid_body, restoring, sixdof_model
 from hptvsim.dynamics.vehicles import ACCEL_TIME, SPEED_MARGIN, VEHICLE_TYPES
@@ -130,7 +137,7 @@ def _planar(name: str) -> Any:
 
 
 @dataclass(frozen=True, kw_only=True)
-class SixDofControllerParameters:
+class SixDofControllerParameters(ParameterSet):
     """Parameters of the 6-DOF low-level controller: the planar controller's plus the heave channel's.
 
     The defaults describe no particular vehicle; use :data:`WORK_CLASS_UUV_6DOF_CONTROLLER`,
@@ -162,52 +169,13 @@ class SixDofControllerParameters:
     tau_Z_max: float = _p(1.0, "N", "Heave force limit of the actuators", lower=0.0, lower_open=True)
     tau_N_max: float = _planar("tau_N_max")
 
-    def __post_init__(self) -> None:
-        problems = [
-            msg
-            for spec in SIXDOF_CONTROLLER_PARAMETER_SPECS
-            if (msg := spec.check(float(getattr(self, spec.name))))
-        ]
-        if self.v_min > self.v_max:
-            problems.append(f"parameter 'v_min' = {self.v_min:g} exceeds 'v_max' = {self.v_max:g}")
-        if problems:
-            raise ParameterError("; ".join(problems))
+    _LABEL: ClassVar[str] = "6-DOF controller parameter"
 
-    @classmethod
-    def from_mapping(
-        cls, values: Mapping[str, float], *, base: SixDofControllerParameters | None = None
-    ) -> SixDofControllerParameters:
-        """Build parameters from a name-to-value mapping, over ``base`` (or the defaults).
-
-        Raises:
-            ParameterError: A name is unknown (the message lists the valid names) or a value is
-                invalid.
-        """
-        unknown = sorted(set(values) - set(SIXDOF_CONTROLLER_PARAMETER_NAMES))
-        if unknown:
-            raise ParameterError(
-                f"unknown 6-DOF controller parameter(s) {unknown}; "
-                f"valid names: {', '.join(SIXDOF_CONTROLLER_PARAMETER_NAMES)}"
-            )
-        start = base if base is not None else cls()
-        return dataclasses.replace(start, **{k: float(v) for k, v in values.items()})
-
-    def replace(self, **changes: float) -> SixDofControllerParameters:
-        """Return a copy with some parameters changed (validated like :meth:`from_mapping`)."""
-        return SixDofControllerParameters.from_mapping(changes, base=self)
-
-    def to_vector(self) -> list[float]:
-        """Return the controller vector ``c`` in field order."""
-        return [float(getattr(self, name)) for name in SIXDOF_CONTROLLER_PARAMETER_NAMES]
-
-    def as_dict(self) -> dict[str, float]:
-        """Return the parameters as an ordered name-to-value dictionary."""
-        return {name: float(getattr(self, name)) for name in SIXDOF_CONTROLLER_PARAMETER_NAMES}
+    def _more_problems(self) -> list[str]:
+        return _v_limits(self)
 
 
-SIXDOF_CONTROLLER_PARAMETER_SPECS: Final[tuple[ParameterSpec, ...]] = tuple(
-    ParameterSpec(name=f.name, **f.metadata["spec"]) for f in dataclasses.fields(SixDofControllerParameters)
-)
+SIXDOF_CONTROLLER_PARAMETER_SPECS: Final[tuple[ParameterSpec, ...]] = SixDofControllerParameters.specs()
 """Specs of all 6-DOF controller parameters, in the order of the controller vector ``c``."""
 
 SIXDOF_CONTROLLER_PARAMETER_NAMES: Final[tuple[str, ...]] = tuple(

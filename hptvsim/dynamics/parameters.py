@@ -17,7 +17,7 @@ import dataclasses
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Final
+from typing import Any, ClassVar, Final, Self, cast
 
 __all__ = [
     "MODEL_PARAMETER_NAMES",
@@ -107,8 +107,80 @@ def _p(
     )
 
 
+class ParameterSet:
+    """What the frozen parameter dataclasses share (vehicle, 6-DOF, 6-DOF controller sets).
+
+    Each field carries a :class:`ParameterSpec` (made by :func:`_p`); the set checks every value
+    against its spec on construction (plus :meth:`_more_problems`), builds from mappings with
+    unknown names refused, and gives the vector in field order (the order of the generated C).
+    ``_LABEL`` names the set in messages ("vehicle parameter", ...).
+    """
+
+    _LABEL: ClassVar[str] = "parameter"
+
+    @classmethod
+    def specs(cls) -> tuple[ParameterSpec, ...]:
+        """The specs of every field, in field order."""
+        cached: tuple[ParameterSpec, ...] | None = cls.__dict__.get("_spec_cache")
+        if cached is None:
+            cached = tuple(
+                ParameterSpec(name=f.name, **f.metadata["spec"]) for f in dataclasses.fields(cast(Any, cls))
+            )
+            cls._spec_cache = cached  # type: ignore[attr-defined]  # one per subclass
+        return cached
+
+    @classmethod
+    def names(cls) -> tuple[str, ...]:
+        """The parameter names, in the order of the vector."""
+        return tuple(s.name for s in cls.specs())
+
+    def _more_problems(self) -> list[str]:
+        """Checks across parameters (each class adds its own)."""
+        return []
+
+    def __post_init__(self) -> None:
+        problems = [msg for spec in self.specs() if (msg := spec.check(float(getattr(self, spec.name))))]
+        problems += self._more_problems()
+        if problems:
+            raise ParameterError("; ".join(problems))
+
+    @classmethod
+    def from_mapping(cls, values: Mapping[str, float], *, base: Self | None = None) -> Self:
+        """Build parameters from a name-to-value mapping, over ``base`` (or the defaults).
+
+        Raises:
+            ParameterError: A name is unknown (the message lists the valid names) or a value is
+                invalid.
+        """
+        names = cls.names()
+        unknown = sorted(set(values) - set(names))
+        if unknown:
+            raise ParameterError(f"unknown {cls._LABEL}(s) {unknown}; valid names: {', '.join(names)}")
+        start = base if base is not None else cls()
+        return cast(Self, dataclasses.replace(cast(Any, start), **{k: float(v) for k, v in values.items()}))
+
+    def replace(self, **changes: float) -> Self:
+        """Return a copy with some parameters changed (validated like :meth:`from_mapping`)."""
+        return self.from_mapping(changes, base=self)
+
+    def to_vector(self) -> list[float]:
+        """Return the parameter vector in field order."""
+        return [float(getattr(self, name)) for name in self.names()]
+
+    def as_dict(self) -> dict[str, float]:
+        """Return the parameters as an ordered name-to-value dictionary."""
+        return {name: float(getattr(self, name)) for name in self.names()}
+
+
+def _v_limits(p: Any) -> list[str]:
+    """``v_min <= v_max`` (the command limits of Eq. 15)."""
+    if p.v_min > p.v_max:
+        return [f"parameter 'v_min' = {p.v_min:g} exceeds 'v_max' = {p.v_max:g}"]
+    return []
+
+
 @dataclass(frozen=True, kw_only=True)
-class VehicleParameters:
+class VehicleParameters(ParameterSet):
     """All parameters of one vehicle: rigid body, hydrodynamics, restoring terms, controller.
 
     The defaults describe no particular vehicle; use :data:`hptvsim.dynamics.WORK_CLASS_UUV`
@@ -168,53 +240,13 @@ class VehicleParameters:
         integer=True,
     )
 
-    def __post_init__(self) -> None:
-        problems = [msg for spec in PARAMETER_SPECS if (msg := spec.check(float(getattr(self, spec.name))))]
-        if self.v_min > self.v_max:
-            problems.append(f"parameter 'v_min' = {self.v_min:g} exceeds 'v_max' = {self.v_max:g}")
-        if problems:
-            raise ParameterError("; ".join(problems))
+    _LABEL: ClassVar[str] = "vehicle parameter"
 
-    @classmethod
-    def from_mapping(
-        cls, values: Mapping[str, float], *, base: VehicleParameters | None = None
-    ) -> VehicleParameters:
-        """Build parameters from a name-to-value mapping, over ``base`` (or the defaults).
-
-        Raises:
-            ParameterError: A name is unknown (the message lists the valid names) or a value is
-                invalid.
-        """
-        unknown = sorted(set(values) - set(MODEL_PARAMETER_NAMES))
-        if unknown:
-            raise ParameterError(
-                f"unknown vehicle parameter(s) {unknown}; valid names: {', '.join(MODEL_PARAMETER_NAMES)}"
-            )
-        start = base if base is not None else cls()
-        return dataclasses.replace(start, **{k: float(v) for k, v in values.items()})
-
-    def replace(self, **changes: float) -> VehicleParameters:
-        """Return a copy with some parameters changed (validated like :meth:`from_mapping`)."""
-        return VehicleParameters.from_mapping(changes, base=self)
-
-    def to_vector(self) -> list[float]:
-        """Return the parameter vector ``p`` in field order (the order of the generated C)."""
-        return [float(getattr(self, name)) for name in MODEL_PARAMETER_NAMES]
-
-    def as_dict(self) -> dict[str, float]:
-        """Return the parameters as an ordered name-to-value dictionary."""
-        return {name: float(getattr(self, name)) for name in MODEL_PARAMETER_NAMES}
+    def _more_problems(self) -> list[str]:
+        return _v_limits(self)
 
 
-def _specs() -> tuple[ParameterSpec, ...]:
-    specs = []
-    for f in dataclasses.fields(VehicleParameters):
-        meta = f.metadata["spec"]
-        specs.append(ParameterSpec(name=f.name, **meta))
-    return tuple(specs)
-
-
-PARAMETER_SPECS: Final[tuple[ParameterSpec, ...]] = _specs()
+PARAMETER_SPECS: Final[tuple[ParameterSpec, ...]] = VehicleParameters.specs()
 """Specs of all parameters, in the order of the parameter vector ``p``."""
 
 MODEL_PARAMETER_NAMES: Final[tuple[str, ...]] = tuple(s.name for s in PARAMETER_SPECS)

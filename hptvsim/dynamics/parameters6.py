@@ -59,12 +59,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
-from typing import Final
+from typing import ClassVar, Final
 
-from hptvsim.dynamics.parameters import ParameterError, ParameterSpec, VehicleParameters, _p
+from hptvsim.dynamics.parameters import ParameterError, ParameterSet, ParameterSpec, VehicleParameters, _p
 from hptvsim.dynamics.vehicles import MU_SEA, RHO_SEA, SPHERICAL_UUV, WORK_CLASS_UUV
 
 __all__ = [
@@ -80,7 +79,7 @@ __all__ = [
 
 
 @dataclass(frozen=True, kw_only=True)
-class SixDofParameters:
+class SixDofParameters(ParameterSet):
     """All parameters of the 6-DOF model: rigid body, added mass, damping, restoring terms.
 
     The defaults describe no particular vehicle; use :data:`WORK_CLASS_UUV_6DOF`,
@@ -149,51 +148,10 @@ class SixDofParameters:
     y_b: float = _p(0.0, "m", "y coordinate of the centre of buoyancy in {b}")
     z_b: float = _p(0.0, "m", "z coordinate of the centre of buoyancy in {b} (down)")
 
-    def __post_init__(self) -> None:
-        problems = [
-            msg for spec in SIXDOF_PARAMETER_SPECS if (msg := spec.check(float(getattr(self, spec.name))))
-        ]
-        if problems:
-            raise ParameterError("; ".join(problems))
-
-    @classmethod
-    def from_mapping(
-        cls, values: Mapping[str, float], *, base: SixDofParameters | None = None
-    ) -> SixDofParameters:
-        """Build parameters from a name-to-value mapping, over ``base`` (or the defaults).
-
-        Raises:
-            ParameterError: A name is unknown (the message lists the valid names) or a value is
-                invalid.
-        """
-        unknown = sorted(set(values) - set(SIXDOF_PARAMETER_NAMES))
-        if unknown:
-            raise ParameterError(
-                f"unknown 6-DOF parameter(s) {unknown}; valid names: {', '.join(SIXDOF_PARAMETER_NAMES)}"
-            )
-        start = base if base is not None else cls()
-        return dataclasses.replace(start, **{k: float(v) for k, v in values.items()})
-
-    def replace(self, **changes: float) -> SixDofParameters:
-        """Return a copy with some parameters changed (validated like :meth:`from_mapping`)."""
-        return SixDofParameters.from_mapping(changes, base=self)
-
-    def to_vector(self) -> list[float]:
-        """Return the parameter vector ``p`` in field order."""
-        return [float(getattr(self, name)) for name in SIXDOF_PARAMETER_NAMES]
-
-    def as_dict(self) -> dict[str, float]:
-        """Return the parameters as an ordered name-to-value dictionary."""
-        return {name: float(getattr(self, name)) for name in SIXDOF_PARAMETER_NAMES}
+    _LABEL: ClassVar[str] = "6-DOF parameter"
 
 
-def _specs() -> tuple[ParameterSpec, ...]:
-    return tuple(
-        ParameterSpec(name=f.name, **f.metadata["spec"]) for f in dataclasses.fields(SixDofParameters)
-    )
-
-
-SIXDOF_PARAMETER_SPECS: Final[tuple[ParameterSpec, ...]] = _specs()
+SIXDOF_PARAMETER_SPECS: Final[tuple[ParameterSpec, ...]] = SixDofParameters.specs()
 """Specs of all 6-DOF parameters, in the order of the parameter vector ``p``."""
 
 SIXDOF_PARAMETER_NAMES: Final[tuple[str, ...]] = tuple(s.name for s in SIXDOF_PARAMETER_SPECS)
