@@ -60,26 +60,54 @@ def fmu() -> None:
 )
 @click.option("--type", "vehicle_types", multiple=True, help="Vehicle type(s) to build (default: all).")
 @click.option(
+    "--vehicle-file",
+    "vehicle_files",
+    multiple=True,
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Your own vehicle type's file (TOML, Fossen parameters); needs --out.",
+)
+@click.option(
     "--platform",
     "platforms",
     multiple=True,
     help="FMI platform(s) to compile for (default: this machine's and win64, cross-compiled with MinGW-w64).",
 )
-def fmu_build(out_dir: Path | None, vehicle_types: tuple[str, ...], platforms: tuple[str, ...]) -> None:
+def fmu_build(
+    out_dir: Path | None,
+    vehicle_types: tuple[str, ...],
+    vehicle_files: tuple[Path, ...],
+    platforms: tuple[str, ...],
+) -> None:
     """Generate C from the CasADi model, compile it and pack one FMU per vehicle type."""
     from hptvsim._paths import checkout_dir
-    from hptvsim.dynamics import VEHICLE_TYPES
+    from hptvsim.cosim.vehicles import ExternalVehicleType, VehicleFileError, load_vehicle_file
+    from hptvsim.dynamics import VEHICLE_TYPES, VehicleType
     from hptvsim.fmu import fmu_dir
     from hptvsim.fmu.build import FmuBuildError, build_fmu
 
+    if vehicle_files and out_dir is None:
+        raise click.UsageError("give the output folder with --out when building from a vehicle file")
     if out_dir is None and checkout_dir() is None and not os.environ.get("HPTVSIM_FMU_DIR"):
         raise click.UsageError("this is an installed copy, not a checkout: give the output folder with --out")
     for vt in vehicle_types:
         _check_vehicle_type(vt)
-    target = out_dir if out_dir is not None else fmu_dir()
-    for vt in vehicle_types or tuple(VEHICLE_TYPES):
+    todo: list[str | VehicleType] = []
+    for f in vehicle_files:
         try:
-            path = build_fmu(vt, target, platforms=platforms or None)
+            loaded = load_vehicle_file(f)
+        except VehicleFileError as exc:
+            raise click.BadParameter(str(exc), param_hint="--vehicle-file") from None
+        if isinstance(loaded, ExternalVehicleType):
+            raise click.BadParameter(
+                f"{f} brings its own FMU ({loaded.fmu}); there is nothing to generate",
+                param_hint="--vehicle-file",
+            )
+        todo.append(loaded)
+    todo += list(vehicle_types or (() if vehicle_files else tuple(VEHICLE_TYPES)))
+    target = out_dir if out_dir is not None else fmu_dir()
+    for item in todo:
+        try:
+            path = build_fmu(item, target, platforms=platforms or None)
         except FmuBuildError as exc:
             raise click.ClickException(str(exc)) from None
         click.echo(f"built {path}")

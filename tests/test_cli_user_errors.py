@@ -138,6 +138,10 @@ CASES: dict[str, tuple[list[str], tuple[str, ...]]] = {
     "viz-schema": (["viz", "schema", "--out", "bad.toml/web"], ("bad.toml/web", "cannot make")),
     "demo-duration": (["demo", "--duration", "-1"], ("-1", "x>0")),
     "fmu-build": (["fmu", "build", "--type", "nosuch", "--out", "fmus"], ("nosuch", "work_class")),
+    "fmu-build-vehicle-file": (
+        ["fmu", "build", "--vehicle-file", "bad.toml", "--out", "fmus"],
+        ("bad.toml", "not valid TOML"),
+    ),
     "fmu-check": (["fmu", "check", "--dir", "empty"], ("empty", "WorkClassUUV.fmu")),
     "cosim-run-broken": (["cosim", "run", "bad.toml"], ("bad.toml", "line 1")),
     "cosim-run-missing": (["cosim", "run", "missing.toml"], ("missing.toml", "does not exist")),

@@ -75,6 +75,9 @@ PYTHON_SUBSTITUTIONS: dict[str, str] = {
 """README text -> what runs in the test; every key must be in a ``python`` block."""
 
 PYTHON_OUTPUT: dict[str, str] = {
+    "from hptvsim.cosim.vehicles import load_vehicle_file  # your own vehicle type on both backends": (
+        r"fmu (\[[^\]]+\])\s+batched \1"  # the same numbers on both backends
+    ),
     "from hptvsim.envs import parallel_env  # PettingZoo ParallelEnv, 3 vs 1": (
         r"ep_rew_mean[\s\S]*return -?\d+, captured: (True|False), collision: (True|False)\s+\(8, 20\)"
     ),
@@ -316,6 +319,13 @@ COMMANDS: dict[str, tuple[Run | Help, ...]] = {
             ("{tmp}/WorkClassUUV.fmu", "{tmp}/SphericalUUV.fmu"),
         ),
         Run("hptvsim fmu check", r"WorkClassUUV\.fmu: up to date[\s\S]*SphericalUUV\.fmu: up to date"),
+    ),
+    "hptvsim fmu build --vehicle-file FILE --out DIR": (
+        Run(
+            "hptvsim fmu build --vehicle-file {repo}/scenarios/vehicles/bluerov2_heavy.toml --out {tmp}",
+            r"built .*BlueROV2Heavy\.fmu",
+            ("{tmp}/BlueROV2Heavy.fmu",),
+        ),
     ),
     "hptvsim cosim run GRAPH.toml": (
         Run(  # the README's example graph, on the next line of the block

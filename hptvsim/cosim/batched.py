@@ -50,7 +50,8 @@ import numpy.typing as npt
 from hptvsim.cosim.fmi2 import F64Array, FmuModel, load_model
 from hptvsim.cosim.orchestrator import SimulationFailedError
 from hptvsim.cosim.system import INIT_NAMES, SystemSpec, VehicleSystem
-from hptvsim.dynamics import INPUT_NAMES, MODEL_PARAMETER_NAMES, OUTPUT_NAMES, ParameterError
+from hptvsim.cosim.vehicles import ExternalVehicleType
+from hptvsim.dynamics import INPUT_NAMES, MODEL_PARAMETER_NAMES, OUTPUT_NAMES, ParameterError, VehicleType
 
 __all__ = ["BatchedSnapshot", "BatchedVehicleSystem", "NonFiniteStateError", "VehicleLibrary"]
 
@@ -131,6 +132,13 @@ class VehicleLibrary:
         from hptvsim.fmu import fmu_path
 
         return cls.for_path(fmu_path(vehicle_type))
+
+    @classmethod
+    def for_vehicle(cls, vehicle: VehicleType) -> VehicleLibrary:
+        """The library of any vehicle type's FMU (:func:`hptvsim.fmu.fmu_for`: shipped or generated)."""
+        from hptvsim.fmu import fmu_for
+
+        return cls.for_path(fmu_for(vehicle))
 
     @classmethod
     def for_path(cls, path: Path) -> VehicleLibrary:
@@ -216,11 +224,18 @@ class BatchedVehicleSystem(VehicleSystem):
         self._outputs = np.zeros((B, n_all, NY))
         self._failed = np.zeros(B, dtype=bool)
         self._pool: ThreadPoolExecutor | None = None
-        types = list(dict.fromkeys(v.type for v in spec.vehicles))
+        external = [v.name for v in spec.vehicles if isinstance(v.vehicle, ExternalVehicleType)]
+        if external:
+            raise ValueError(
+                f"vehicle(s) {', '.join(external)} run an external FMU, which only the FMU backend "
+                "runs (backend='fmu'); the batched backend steps the generated C of hptvsim's model"
+            )
+        types = list(dict.fromkeys(v.vehicle for v in spec.vehicles))
         self._groups: list[_Group] = []
-        for t in types:
-            lib = VehicleLibrary.for_type(t)
-            vehicles = np.array([k for k, v in enumerate(spec.vehicles) if v.type == t], dtype=np.intp)
+        for vt in types:
+            t = vt.name
+            lib = VehicleLibrary.for_vehicle(vt)
+            vehicles = np.array([k for k, v in enumerate(spec.vehicles) if v.vehicle == vt], dtype=np.intp)
             n = len(vehicles)
             contiguous = bool(np.all(np.diff(vehicles) == 1))
             sel: slice | npt.NDArray[np.intp] = (

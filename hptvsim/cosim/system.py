@@ -52,14 +52,15 @@ import numpy.typing as npt
 from hptvsim.cosim.fmi2 import F64Array
 from hptvsim.cosim.graph import Component, ExternalInput, ExternalOutput, Graph, Port
 from hptvsim.cosim.orchestrator import Orchestrator, SimulationFailedError, SimulationPausedError, Snapshot
+from hptvsim.cosim.vehicles import ExternalVehicleType
 from hptvsim.dynamics import (
+    BUILTIN_VEHICLES,
     INPUT_NAMES,
     MODEL_PARAMETER_NAMES,
     OUTPUT_NAMES,
-    VEHICLE_TYPES,
     ParameterError,
     VehicleParameters,
-    vehicle_parameters,
+    VehicleType,
 )
 
 __all__ = [
@@ -91,9 +92,12 @@ class VehicleSpec:
 
     Attributes:
         name: Unique name (letters, digits, ``_`` and ``-``).
-        type: Vehicle type (``"work_class"`` or ``"spherical"``).
+        type: A built-in vehicle type's name (``"work_class"``, ``"spherical"``) or a
+            :class:`~hptvsim.dynamics.VehicleType` (from a vehicle file,
+            :func:`hptvsim.cosim.vehicles.load_vehicle_file`); stored as the type's name.
         parameters: Overrides of the type's parameters (e.g. ``{"v_max": 2.5}``), applied at
             every reset.
+        vehicle: The resolved :class:`~hptvsim.dynamics.VehicleType`.
 
     Raises:
         ParameterError: Unknown type or parameter name, or an invalid value (the message says
@@ -101,18 +105,31 @@ class VehicleSpec:
     """
 
     name: str
-    type: str
+    type: str | VehicleType
     parameters: Mapping[str, float] = field(default_factory=dict)
+    vehicle: VehicleType = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         if not self.name or not self.name.replace("_", "").replace("-", "").isalnum():
             raise ParameterError(f"vehicle name {self.name!r} must be letters, digits, '_' or '-'")
-        if self.type not in VEHICLE_TYPES:
+        if isinstance(self.type, VehicleType):
+            vehicle = self.type
+        elif self.type in BUILTIN_VEHICLES:
+            vehicle = BUILTIN_VEHICLES[self.type]
+        else:
             raise ParameterError(
-                f"vehicle {self.name!r}: unknown type {self.type!r} (valid: {', '.join(VEHICLE_TYPES)})"
+                f"vehicle {self.name!r}: unknown type {self.type!r} (valid: {', '.join(BUILTIN_VEHICLES)}, "
+                "or a VehicleType from a vehicle file)"
+            )
+        object.__setattr__(self, "vehicle", vehicle)
+        object.__setattr__(self, "type", vehicle.name)
+        if isinstance(vehicle, ExternalVehicleType) and self.parameters:
+            raise ParameterError(
+                f"vehicle {self.name!r} is an external FMU ({vehicle.fmu.name}); its parameters are its "
+                "own: set them in its vehicle file's [fmu.start]"
             )
         try:
-            VehicleParameters.from_mapping(self.parameters, base=vehicle_parameters(self.type))
+            VehicleParameters.from_mapping(self.parameters, base=vehicle.parameters)
         except ParameterError as exc:
             raise ParameterError(f"vehicle {self.name!r}: {exc}") from None
         object.__setattr__(
@@ -122,7 +139,7 @@ class VehicleSpec:
     @property
     def parameter_values(self) -> VehicleParameters:
         """The vehicle's parameters: its type's, with the overrides applied."""
-        return VehicleParameters.from_mapping(self.parameters, base=vehicle_parameters(self.type))
+        return VehicleParameters.from_mapping(self.parameters, base=self.vehicle.parameters)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -190,14 +207,27 @@ def _component_name(env: int, vehicle: str) -> str:
     return f"e{env}_{vehicle}"
 
 
+def _component_fmu(vehicle: VehicleType) -> str:
+    """The graph's ``fmu`` of a vehicle type: a shipped one by name, else a file's path."""
+    if vehicle.builtin:
+        return f"vehicle:{vehicle.name}"
+    if isinstance(vehicle, ExternalVehicleType):
+        return str(vehicle.fmu)
+    from hptvsim.fmu import fmu_for
+
+    return str(fmu_for(vehicle))
+
+
 def vehicle_graph(spec: SystemSpec, num_envs: int = 1) -> Graph:
     """The co-simulation graph of the default composition.
 
-    One component per vehicle and sub-environment (``e<b>_<name>``, FMU ``vehicle:<type>``,
-    parameters: the vehicle's overrides and ``h_max``); every FMU input is an external input
-    named ``e<b>/<name>/<input>`` and every output an external output ``e<b>/<name>/<output>``,
-    ordered so that they reshape to ``(B, N, 7)`` and ``(B, N, 9)``. The vehicles exchange
-    nothing through the graph (they interact through the world and the RL environment).
+    One component per vehicle and sub-environment (``e<b>_<name>``; FMU ``vehicle:<type>`` for a
+    built-in type, the generated FMU of a user's type, or an external FMU; parameters: the
+    vehicle's overrides and ``h_max``, or an external FMU's start values); every input the FMU
+    takes is an external input named ``e<b>/<name>/<input>`` and every output an external output
+    ``e<b>/<name>/<output>``, in the order of ``(B, N, 7)`` and ``(B, N, 9)`` (an external FMU's
+    unmapped signals are left out). The vehicles exchange nothing through the graph (they
+    interact through the world and the RL environment).
     """
     components = []
     inputs = []
@@ -205,14 +235,22 @@ def vehicle_graph(spec: SystemSpec, num_envs: int = 1) -> Graph:
     for b in range(num_envs):
         for v in spec.vehicles:
             comp = _component_name(b, v.name)
-            params = {**v.parameters, "h_max": spec.h_max}
-            components.append(Component(name=comp, fmu=f"vehicle:{v.type}", parameters=params))
+            vt = v.vehicle
+            if isinstance(vt, ExternalVehicleType):
+                params: dict[str, float | int | bool | str] = dict(vt.start)
+                in_map, out_map = dict(vt.inputs), dict(vt.outputs)
+            else:
+                params = {**v.parameters, "h_max": spec.h_max}
+                in_map, out_map = {n: n for n in INPUT_NAMES}, {n: n for n in OUTPUT_NAMES}
+            components.append(Component(name=comp, fmu=_component_fmu(vt), parameters=params))
             for name in INPUT_NAMES:
-                port = Port(component=comp, variable=name)
-                inputs.append(ExternalInput(name=f"e{b}/{v.name}/{name}", targets=(port,), start=0.0))
+                if name in in_map:
+                    port = Port(component=comp, variable=in_map[name])
+                    inputs.append(ExternalInput(name=f"e{b}/{v.name}/{name}", targets=(port,), start=0.0))
             for name in OUTPUT_NAMES:
-                port = Port(component=comp, variable=name)
-                outputs.append(ExternalOutput(name=f"e{b}/{v.name}/{name}", source=port))
+                if name in out_map:
+                    port = Port(component=comp, variable=out_map[name])
+                    outputs.append(ExternalOutput(name=f"e{b}/{v.name}/{name}", source=port))
     return Graph(
         name=f"vehicles-{num_envs}x{spec.num_vehicles}",
         components=tuple(components),
@@ -260,7 +298,7 @@ class VehicleSystem(abc.ABC):
     @property
     def vehicle_types(self) -> tuple[str, ...]:
         """The vehicles' types, in array order."""
-        return tuple(v.type for v in self.spec.vehicles)
+        return tuple(v.vehicle.name for v in self.spec.vehicles)
 
     @property
     def inputs(self) -> F64Array:
@@ -469,7 +507,10 @@ class FmuVehicleSystem(VehicleSystem):
 
     Built from :func:`vehicle_graph` and run by an :class:`~hptvsim.cosim.orchestrator.Orchestrator`
     (Jacobi; the vehicles are not coupled through the graph, so the algorithm does not change
-    the numbers). The arrays are views of the orchestrator's external inputs and outputs.
+    the numbers). The arrays are views of the orchestrator's external inputs and outputs; with an
+    external vehicle FMU (:class:`~hptvsim.cosim.vehicles.ExternalVehicleType`) they are copies,
+    exchanged around every step, its unmapped outputs are NaN and its ``psi`` is wrapped to
+    [-pi, pi).
 
     Args:
         spec: The vehicles and step settings.
@@ -481,8 +522,49 @@ class FmuVehicleSystem(VehicleSystem):
         self.graph = vehicle_graph(spec, num_envs)
         self._orch = Orchestrator(self.graph)
         n = spec.num_vehicles
-        self._inputs = self._orch.inputs.reshape(num_envs, n, len(INPUT_NAMES))
-        self._outputs = self._orch.outputs.reshape(num_envs, n, len(OUTPUT_NAMES))
+        shape_in, shape_out = (num_envs, n, len(INPUT_NAMES)), (num_envs, n, len(OUTPUT_NAMES))
+        self._external = frozenset(
+            k for k, v in enumerate(spec.vehicles) if isinstance(v.vehicle, ExternalVehicleType)
+        )
+        self._copying = bool(self._external)
+        if not self._copying:
+            self._inputs = self._orch.inputs.reshape(shape_in)
+            self._outputs = self._orch.outputs.reshape(shape_out)
+            return
+        self._inputs = np.zeros(shape_in)
+        self._outputs = np.full(shape_out, np.nan)
+        order = {v.name: k for k, v in enumerate(spec.vehicles)}
+
+        def flat(name: str, signals: tuple[str, ...], shape: tuple[int, int, int]) -> int:
+            env, vehicle, signal = name.split("/")
+            return int(np.ravel_multi_index((int(env[1:]), order[vehicle], signals.index(signal)), shape))
+
+        self._in_idx = np.array(
+            [flat(x.name, INPUT_NAMES, shape_in) for x in self.graph.inputs], dtype=np.intp
+        )
+        self._out_idx = np.array(
+            [flat(x.name, OUTPUT_NAMES, shape_out) for x in self.graph.outputs], dtype=np.intp
+        )
+        psi = OUTPUT_NAMES.index("psi")
+        self._wrap_idx = np.array(
+            [
+                np.ravel_multi_index((e, k, psi), shape_out)
+                for e in range(num_envs)
+                for k, v in enumerate(spec.vehicles)
+                if isinstance(v.vehicle, ExternalVehicleType)
+            ],
+            dtype=np.intp,
+        )
+
+    def _pull(self) -> None:
+        """Copy the orchestrator's outputs into :attr:`outputs` (with external vehicles)."""
+        if self._copying:
+            out = self._outputs.reshape(-1)
+            out[self._out_idx] = self._orch.outputs
+            psi = out[self._wrap_idx]
+            outside = (psi < -math.pi) | (psi >= math.pi)  # wrapping an in-range angle could move it an ulp
+            if outside.any():
+                out[self._wrap_idx[outside]] = np.mod(psi[outside] + math.pi, 2.0 * math.pi) - math.pi
 
     @property
     def orchestrator(self) -> Orchestrator:
@@ -491,6 +573,31 @@ class FmuVehicleSystem(VehicleSystem):
 
     def _components(self, env: int) -> list[str]:
         return [_component_name(env, v.name) for v in self.spec.vehicles]
+
+    def _external_start(
+        self, n: int, init: F64Array, params: Mapping[str, F64Array], i: int
+    ) -> dict[str, float]:
+        """What an external vehicle FMU gets at a reset: its mapped initial state (nothing else)."""
+        vt = self.spec.vehicles[n].vehicle
+        assert isinstance(vt, ExternalVehicleType)
+        mapped = dict(vt.initial)
+        values: dict[str, float] = {}
+        for ours, x in zip(INIT_NAMES, init, strict=True):
+            if ours in mapped:
+                values[mapped[ours]] = float(x)
+            elif x != 0.0:
+                raise ParameterError(
+                    f"vehicle {self.spec.vehicles[n].name!r}: its FMU maps no {ours} ([fmu.initial]), so it "
+                    f"cannot start at {ours} = {x:g}"
+                )
+        mine = vt.parameters.as_dict()
+        changed = sorted(name for name, arr in params.items() if arr[i, n] != mine[name])
+        if changed:
+            raise ParameterError(
+                f"vehicle {self.spec.vehicles[n].name!r} is an external FMU; its parameters are its own "
+                f"(asked to change {', '.join(changed)}); set them in its vehicle file's [fmu.start]"
+            )
+        return values
 
     def reset(
         self,
@@ -508,15 +615,22 @@ class FmuVehicleSystem(VehicleSystem):
         params = self._parameter_arrays(parameters, k)
         values: dict[str, dict[str, float]] = {}
         names: list[str] = []
+        external = self._external
         for i, b in enumerate(idx):
             for n, comp in enumerate(self._components(int(b))):
                 init = np.concatenate([pose[i, n], vel[i, n]])
+                if n in external:
+                    values[comp] = self._external_start(n, init, params, i)
+                    names.append(comp)
+                    continue
                 v = {name: float(x) for name, x in zip(INIT_NAMES, init, strict=True)}
                 v.update({name: float(arr[i, n]) for name, arr in params.items()})
                 values[comp] = v
                 names.append(comp)
         self.inputs[idx] = 0.0
         self._orch.reset(None if env_ids is None else names, parameters=values)
+        if self._copying:
+            self._pull()
         self.time[idx] = 0.0
         return self.outputs
 
@@ -524,7 +638,11 @@ class FmuVehicleSystem(VehicleSystem):
         """See :meth:`VehicleSystem.step`."""
         self._check_can_step()
         self._check_inputs()
+        if self._copying:
+            self._orch.inputs[:] = self._inputs.reshape(-1)[self._in_idx]
         self._orch.step()
+        if self._copying:
+            self._pull()
         self.time += self.spec.step_size
         return self.outputs
 
@@ -536,10 +654,14 @@ class FmuVehicleSystem(VehicleSystem):
         params = self._parameter_arrays(parameters, len(idx))
         for i, b in enumerate(idx):
             for n, comp in enumerate(self._components(int(b))):
+                vt = self.spec.vehicles[n].vehicle
+                if isinstance(vt, ExternalVehicleType):
+                    self._external_start(n, np.zeros(6), params, i)  # raises on a change
+                    continue
                 self._orch.set_parameters(comp, {name: float(arr[i, n]) for name, arr in params.items()})
 
     def parameters(self, name: str) -> F64Array:
-        """See :meth:`VehicleSystem.parameters`."""
+        """See :meth:`VehicleSystem.parameters` (an external FMU's: its type's limits, else NaN)."""
         if name not in MODEL_PARAMETER_NAMES:
             raise ParameterError(
                 f"unknown vehicle parameter {name!r}; valid names: {', '.join(MODEL_PARAMETER_NAMES)}"
@@ -547,6 +669,11 @@ class FmuVehicleSystem(VehicleSystem):
         out = np.empty((self.num_envs, self.num_vehicles))
         for b in range(self.num_envs):
             for n, comp in enumerate(self._components(b)):
+                vt = self.spec.vehicles[n].vehicle
+                if isinstance(vt, ExternalVehicleType):
+                    limits = ("v_min", "v_max", "omega_max")
+                    out[b, n] = getattr(vt.parameters, name) if name in limits else math.nan
+                    continue
                 out[b, n] = self._orch.instance(comp).get_values([name])[name]
         return out
 
@@ -559,6 +686,7 @@ class FmuVehicleSystem(VehicleSystem):
         if not isinstance(snapshot, FmuSystemSnapshot):
             raise TypeError(f"expected a FmuSystemSnapshot, got {type(snapshot).__name__}")
         self._orch.restore(snapshot.orchestrator)
+        self._pull()
         self.time[:] = snapshot.time
         return self.outputs
 

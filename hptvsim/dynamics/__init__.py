@@ -54,17 +54,21 @@ from hptvsim.dynamics.sixdof import (
     sixdof_model,
 )
 from hptvsim.dynamics.vehicles import (
+    BUILTIN_VEHICLES,
     FMU_NAMES,
     SETTLING_TIME_95,
     SPHERICAL_UUV,
     VEHICLE_RADIUS,
     VEHICLE_TYPES,
     WORK_CLASS_UUV,
+    VehicleType,
     actuator_limits,
+    builtin_vehicle,
     vehicle_parameters,
 )
 
 __all__ = [
+    "BUILTIN_VEHICLES",
     "COS_THETA_MIN",
     "FMU_NAMES",
     "INPUT_NAMES",
@@ -103,7 +107,9 @@ __all__ = [
     "SixDofParameters",
     "VehicleModel",
     "VehicleParameters",
+    "VehicleType",
     "actuator_limits",
+    "builtin_vehicle",
     "sixdof_closed_loop",
     "sixdof_controller_from_planar",
     "sixdof_dynamics",

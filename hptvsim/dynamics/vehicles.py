@@ -44,12 +44,17 @@ that result are stated in :data:`SETTLING_TIME_95` and checked by the tests.
 from __future__ import annotations
 
 import math
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass
 from types import MappingProxyType
-from typing import Final
+from typing import Any, Final
 
-from hptvsim.dynamics.parameters import VehicleParameters
+from hptvsim.dynamics.parameters import PARAMETER_SPECS, ParameterError, VehicleParameters
 
 __all__ = [
+    "BUILTIN_VEHICLES",
+    "CONTROLLER_DEFAULTS",
     "FMU_NAMES",
     "SETTLING_TIME_95",
     "SPEED_MARGIN",
@@ -57,7 +62,9 @@ __all__ = [
     "VEHICLE_RADIUS",
     "VEHICLE_TYPES",
     "WORK_CLASS_UUV",
+    "VehicleType",
     "actuator_limits",
+    "builtin_vehicle",
     "vehicle_parameters",
 ]
 
@@ -94,7 +101,7 @@ def actuator_limits(p: VehicleParameters) -> tuple[float, float, float]:
     return tau_X, tau_X, tau_N
 
 
-def _gains(omega_n_u: float, omega_n_r: float, omega_n_v: float, T_aw: float) -> dict[str, float]:
+def controller_gains(omega_n_u: float, omega_n_r: float, omega_n_v: float, T_aw: float) -> dict[str, float]:
     """Critically damped PI gains per unit inertia (K_p = 2 omega_n, K_i = omega_n^2).
 
     ``T_aw`` [s] was chosen from step responses to the Table II limits: the largest value with
@@ -139,7 +146,7 @@ _rexrov = VehicleParameters(
     v_min=0.0,  # m/s, forward only (Eq. 15)
     v_max=3.0,  # m/s, Table II
     omega_max=1.5,  # rad/s, Table II
-    **_gains(omega_n_u=1.5, omega_n_r=3.0, omega_n_v=1.5, T_aw=0.5),
+    **controller_gains(omega_n_u=1.5, omega_n_r=3.0, omega_n_v=1.5, T_aw=0.5),
 )
 
 _R = 0.2  # m, sphere radius
@@ -161,7 +168,7 @@ _sphere = VehicleParameters(
     v_min=0.0,  # m/s
     v_max=2.0,  # m/s, Table II
     omega_max=3.0,  # rad/s, Table II
-    **_gains(omega_n_u=3.0, omega_n_r=6.0, omega_n_v=3.0, T_aw=0.2),
+    **controller_gains(omega_n_u=3.0, omega_n_r=6.0, omega_n_v=3.0, T_aw=0.2),
 )
 
 WORK_CLASS_UUV: Final[VehicleParameters] = _sized(_rexrov)
@@ -170,20 +177,199 @@ WORK_CLASS_UUV: Final[VehicleParameters] = _sized(_rexrov)
 SPHERICAL_UUV: Final[VehicleParameters] = _sized(_sphere)
 """The spherical UUV (radius 0.2 m, neutrally buoyant, Table II limits)."""
 
-VEHICLE_TYPES: Final = MappingProxyType({"work_class": WORK_CLASS_UUV, "spherical": SPHERICAL_UUV})
-"""Vehicle types by the name scenarios use."""
+_NAME = re.compile(r"[a-z][a-z0-9_]{0,63}")
+_IDENTIFIER = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,63}")
+MAX_RADIUS: Final = 50.0  # m, the largest bounding radius a vehicle type may declare
 
-FMU_NAMES: Final = MappingProxyType({"work_class": "WorkClassUUV", "spherical": "SphericalUUV"})
-"""FMU model identifier of each vehicle type."""
+CONTROLLER_DEFAULTS: Final = MappingProxyType(
+    {"omega_n_u": 1.5, "omega_n_r": 3.0, "omega_n_v": 1.5, "T_aw": 0.5}
+)
+"""Controller design values [rad/s, rad/s, rad/s, s] a vehicle file gets when it names no gains
+(the work-class vehicle's): see :func:`controller_gains`."""
 
-VEHICLE_RADIUS: Final = MappingProxyType(
+
+@dataclass(frozen=True, kw_only=True)
+class VehicleType:
+    """A vehicle type: what scenarios name, what its FMU is generated from, how big it is.
+
+    The two built-in types are :data:`BUILTIN_VEHICLES`; a user's own type comes from a vehicle
+    file (:meth:`from_mapping` checks it; :func:`hptvsim.cosim.vehicles.load_vehicle_file`
+    reads it) and is generated into an FMU of its own by the same generator.
+
+    Attributes:
+        name: What scenarios call it (lower case letters, digits, ``_``; at most 64).
+        identifier: FMU model identifier (a C identifier; the binary's and the FMU's name).
+        description: One line for the FMU's model description.
+        parameters: The 3-DOF model's parameters (Eqs. 4-8, 15-16), in SI units.
+        radius: Radius [m] of the circle bounding the hull in the horizontal plane: what other
+            vehicles' sonar beams hit and what collision checks use.
+
+    Raises:
+        ParameterError: A name, identifier or radius is invalid (the message says what is valid).
+    """
+
+    name: str
+    identifier: str
+    description: str
+    parameters: VehicleParameters
+    radius: float  # m
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not _NAME.fullmatch(self.name):
+            raise ParameterError(
+                f"vehicle type name {self.name!r} is invalid; valid: a lower-case letter, then up to "
+                "63 lower-case letters, digits or '_'"
+            )
+        if not isinstance(self.identifier, str) or not _IDENTIFIER.fullmatch(self.identifier):
+            raise ParameterError(
+                f"vehicle type {self.name!r}: identifier {self.identifier!r} is invalid; valid: a "
+                "letter, then up to 63 letters, digits or '_' (it names the FMU and its binary)"
+            )
+        if not isinstance(self.description, str) or len(self.description) > 500 or "\n" in self.description:
+            raise ParameterError(
+                f"vehicle type {self.name!r}: the description must be one line of at most 500 characters"
+            )
+        r = self.radius
+        if isinstance(r, bool) or not isinstance(r, int | float) or not (0.0 < r <= MAX_RADIUS):
+            raise ParameterError(
+                f"vehicle type {self.name!r}: radius = {r!r} is invalid (valid: in (0, {MAX_RADIUS:g}] m)"
+            )
+        object.__setattr__(self, "radius", float(r))
+
+    @property
+    def builtin(self) -> bool:
+        """Whether this is one of :data:`BUILTIN_VEHICLES` (with its shipped FMU)."""
+        return BUILTIN_VEHICLES.get(self.name) == self
+
+    @classmethod
+    def from_mapping(cls, data: Mapping[str, Any], *, source: str = "<vehicle>") -> VehicleType:
+        """Build a vehicle type from a vehicle file's tables (parsed TOML).
+
+        Keys: ``name``, ``radius`` [m] (required), ``identifier`` (default: ``name`` in
+        CamelCase), ``description``, ``[parameters]`` and ``[controller]``. Parameters take
+        their SI unit (:data:`~hptvsim.dynamics.PARAMETER_SPECS`): either a number, or
+        ``{value = ..., unit = "..."}`` whose unit must be that one. ``m``, ``I_z``, ``v_max``
+        and ``omega_max`` are required; others default to zero (no added mass, damping or
+        offsets). Controller gains not given come from ``[controller]``'s natural frequencies
+        ``omega_n_u, omega_n_r, omega_n_v`` [rad/s] and ``T_aw`` [s] (critical damping, as the
+        built-ins; defaults :data:`CONTROLLER_DEFAULTS`); actuator limits not given are sized
+        by the built-ins' rule, :func:`actuator_limits`.
+
+        Raises:
+            ParameterError: The first problem, naming ``source``, the key and what is valid.
+        """
+        where = f"{source}: "
+        if not isinstance(data, Mapping):
+            raise ParameterError(f"{where}a vehicle file must be a table")
+        keys = ("name", "identifier", "description", "radius", "parameters", "controller")
+        unknown = sorted(str(k) for k in data if k not in keys)
+        if unknown:
+            raise ParameterError(f"{where}unknown key(s) {unknown}; valid keys: {', '.join(keys)}")
+        for required in ("name", "radius", "parameters"):
+            if required not in data:
+                raise ParameterError(f"{where}'{required}' is missing")
+        name = data["name"]
+        if not isinstance(name, str):
+            raise ParameterError(f"{where}'name' must be a string")
+        if name in BUILTIN_VEHICLES:
+            raise ParameterError(
+                f"{where}name {name!r} is a built-in vehicle type; give your type a name of its own "
+                f"(built-ins: {', '.join(BUILTIN_VEHICLES)})"
+            )
+        identifier = data.get("identifier", "".join(w.capitalize() for w in name.split("_")))
+        values = _parameter_values(data["parameters"], where)
+        missing = [k for k in ("m", "I_z", "v_max", "omega_max") if k not in values]
+        if missing:
+            raise ParameterError(f"{where}[parameters] needs {', '.join(missing)} (SI units)")
+        design = dict(CONTROLLER_DEFAULTS)
+        ctrl = data.get("controller", {})
+        if not isinstance(ctrl, Mapping):
+            raise ParameterError(f"{where}[controller] must be a table")
+        for key, value in ctrl.items():
+            if key not in design:
+                raise ParameterError(
+                    f"{where}unknown key controller.{key}; valid keys: {', '.join(CONTROLLER_DEFAULTS)}"
+                )
+            if isinstance(value, bool) or not isinstance(value, int | float) or not 0.0 < value < 1e3:
+                raise ParameterError(
+                    f"{where}controller.{key} = {value!r} is invalid (valid: a number in (0, 1000))"
+                )
+            design[key] = float(value)
+        gains = {k: v for k, v in controller_gains(**design).items() if k not in values}
+        try:
+            params = VehicleParameters.from_mapping({**gains, **values})
+            limits = dict(zip(("tau_X_max", "tau_Y_max", "tau_N_max"), actuator_limits(params), strict=True))
+            params = params.replace(**{k: v for k, v in limits.items() if k not in values})
+            return cls(
+                name=name,
+                identifier=identifier,
+                description=str(data.get("description", f"User vehicle type {name!r}, 3-DOF Fossen model")),
+                parameters=params,
+                radius=data["radius"],
+            )
+        except ParameterError as exc:
+            raise ParameterError(f"{where}{exc}") from None
+
+
+def _parameter_values(table: Any, where: str) -> dict[str, float]:
+    """A vehicle file's ``[parameters]``: numbers, or ``{value, unit}`` with the SI unit checked."""
+    if not isinstance(table, Mapping):
+        raise ParameterError(f"{where}[parameters] must be a table of name = value")
+    specs = {s.name: s for s in PARAMETER_SPECS}
+    out: dict[str, float] = {}
+    for key, raw in table.items():
+        spec = specs.get(key)
+        if spec is None:
+            raise ParameterError(f"{where}unknown parameter {key!r}; valid names: {', '.join(specs)}")
+        value = raw
+        if isinstance(raw, Mapping):
+            if set(raw) != {"value", "unit"}:
+                raise ParameterError(
+                    f'{where}parameters.{key}: give a number or {{value = ..., unit = "{spec.unit}"}}'
+                )
+            if raw["unit"] != spec.unit:
+                raise ParameterError(
+                    f"{where}parameters.{key}: unit {raw['unit']!r} is not {key}'s unit; valid: "
+                    f"{spec.unit!r} (convert the value to SI)"
+                )
+            value = raw["value"]
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ParameterError(f"{where}parameters.{key} = {value!r} is not a number [{spec.unit}]")
+        out[key] = float(value)
+    return out
+
+
+BUILTIN_VEHICLES: Final = MappingProxyType(
     {
-        # m, radius of the circle that bounds the hull in the horizontal plane: what sonar
-        # beams of other vehicles hit and what collision checks use.
-        "work_class": 1.5,  # RexROV hull 2.6 m x 1.5 m (rexrov.gazebo.xacro): half-diagonal 1.5 m
-        "spherical": 0.2,  # the sphere's radius
+        "work_class": VehicleType(
+            name="work_class",
+            identifier="WorkClassUUV",
+            description="Work-class UUV (RexROV / SF 30k hydrodynamics), 3-DOF Fossen model with "
+            "surge-speed and yaw-rate controller; HPTVSim paper Eqs. 4-8 and 15-16",
+            parameters=WORK_CLASS_UUV,
+            # RexROV hull 2.6 m x 1.5 m (rexrov.gazebo.xacro): half-diagonal 1.5 m
+            radius=1.5,  # m
+        ),
+        "spherical": VehicleType(
+            name="spherical",
+            identifier="SphericalUUV",
+            description="Spherical UUV (radius 0.2 m), 3-DOF Fossen model with surge-speed and "
+            "yaw-rate controller; HPTVSim paper Eqs. 4-8 and 15-16",
+            parameters=SPHERICAL_UUV,
+            radius=0.2,  # m, the sphere's radius
+        ),
     }
 )
+"""The paper's two vehicle types, by the name scenarios use."""
+
+VEHICLE_TYPES: Final = MappingProxyType({k: v.parameters for k, v in BUILTIN_VEHICLES.items()})
+"""Parameters of the built-in vehicle types by name."""
+
+FMU_NAMES: Final = MappingProxyType({k: v.identifier for k, v in BUILTIN_VEHICLES.items()})
+"""FMU model identifier of each built-in vehicle type."""
+
+VEHICLE_RADIUS: Final = MappingProxyType({k: v.radius for k, v in BUILTIN_VEHICLES.items()})
+"""Bounding radius [m] of each built-in vehicle type (:attr:`VehicleType.radius`)."""
 
 SETTLING_TIME_95: Final = MappingProxyType(
     {
@@ -195,6 +381,21 @@ SETTLING_TIME_95: Final = MappingProxyType(
         ("spherical", "yaw"): 1.5,
     }
 )
+
+
+def builtin_vehicle(vehicle_type: str) -> VehicleType:
+    """Return a built-in vehicle type by name.
+
+    Raises:
+        KeyError: The name is not a built-in type (the message lists them).
+    """
+    try:
+        return BUILTIN_VEHICLES[vehicle_type]
+    except KeyError:
+        raise KeyError(
+            f"unknown vehicle type {vehicle_type!r}; valid types: {', '.join(BUILTIN_VEHICLES)} "
+            "(or a vehicle file of your own)"
+        ) from None
 
 
 def vehicle_parameters(vehicle_type: str) -> VehicleParameters:

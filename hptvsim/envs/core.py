@@ -96,7 +96,6 @@ class Robots:
         self, scenario: Scenario, grid: OccupancyGrid, *, num_envs: int, rng: np.random.Generator
     ) -> None:
         from hptvsim.sensors import AcousticLink, Sonar
-        from hptvsim.sensors.sonar import vehicle_radii
 
         agents = scenario.agents
         self.names = tuple(a.name for a in agents)
@@ -116,7 +115,7 @@ class Robots:
                 configs.append(a.sonar)
                 members.append([i])
         n = len(agents)
-        radii = vehicle_radii([a.vehicle_type for a in agents])
+        radii = self.radii
         self.sonars = [
             Sonar(
                 cfg,
@@ -347,7 +346,7 @@ class GameCore:
         )
         spec = SystemSpec(
             vehicles=tuple(
-                VehicleSpec(name=a.name, type=a.vehicle_type, parameters=_overrides(a)) for a in agents
+                VehicleSpec(name=a.name, type=a.vehicle, parameters=_overrides(a)) for a in agents
             ),
             step_size=self.dt,
             h_max=sc.simulation.h_max,
@@ -556,8 +555,6 @@ class GameCore:
 
 def _overrides(agent: Any) -> dict[str, float]:
     """The parameters in which an agent differs from its vehicle type's defaults."""
-    from hptvsim.dynamics import vehicle_parameters
-
-    base = vehicle_parameters(agent.vehicle_type).as_dict()
+    base = agent.vehicle.parameters.as_dict()
     mine = agent.parameters.as_dict()
     return {k: v for k, v in mine.items() if v != base[k]}

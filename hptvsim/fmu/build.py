@@ -39,11 +39,11 @@ from xml.sax.saxutils import escape
 
 from hptvsim import __version__
 from hptvsim.dynamics import (
-    FMU_NAMES,
+    BUILTIN_VEHICLES,
     MODEL_PARAMETER_NAMES,
     PARAMETER_SPECS,
-    VEHICLE_TYPES,
     VehicleParameters,
+    VehicleType,
     vehicle_model,
 )
 from hptvsim.dynamics._casadi import ca
@@ -62,6 +62,7 @@ __all__ = [
     "default_platforms",
     "fmi_platform",
     "generate_sources",
+    "resolve_vehicle",
 ]
 
 DEFAULT_H_MAX: Final = 0.01  # s, largest internal RK4 step (<= 3.3e-7 from CVODES over 60 s)
@@ -89,13 +90,6 @@ _UNITS: Final[dict[str, dict[str, int]]] = {
     "1/s": {"s": -1},
     "1/s2": {"s": -2},
     "s": {"s": 1},
-}
-
-_DESCRIPTIONS: Final = {
-    "work_class": "Work-class UUV (RexROV / SF 30k hydrodynamics), 3-DOF Fossen model with surge-speed "
-    "and yaw-rate controller; HPTVSim paper Eqs. 4-8 and 15-16",
-    "spherical": "Spherical UUV (radius 0.2 m), 3-DOF Fossen model with surge-speed and yaw-rate "
-    "controller; HPTVSim paper Eqs. 4-8 and 15-16",
 }
 
 
@@ -251,7 +245,7 @@ def _scalar(
     return f"{head}\n      {element}\n    </ScalarVariable>"
 
 
-def _model_description(vehicle_type: str, identifier: str, params: VehicleParameters, guid: str) -> str:
+def _model_description(description: str, identifier: str, params: VehicleParameters, guid: str) -> str:
     variables: list[str] = []
     vr = 0
     input_index: dict[str, int] = {}
@@ -356,7 +350,7 @@ def _model_description(vehicle_type: str, identifier: str, params: VehicleParame
             '  fmiVersion="2.0"',
             f'  modelName="{identifier}"',
             f'  guid="{guid}"',
-            f'  description="{escape(_DESCRIPTIONS[vehicle_type])}"',
+            f'  description="{escape(description)}"',
             '  author="hptvsim developers"',
             f'  version="{__version__}"',
             '  license="Apache-2.0"',
@@ -407,25 +401,41 @@ def _template(name: str) -> str:
     return resources.files("hptvsim.fmu").joinpath("templates", name).read_text()
 
 
-def generate_sources(vehicle_type: str, params: VehicleParameters | None = None) -> dict[str, str]:
+def resolve_vehicle(vehicle: str | VehicleType) -> VehicleType:
+    """A built-in vehicle type by name, or the given type.
+
+    Raises:
+        FmuBuildError: An unknown name (the message lists the built-in ones).
+    """
+    if isinstance(vehicle, VehicleType):
+        return vehicle
+    found = BUILTIN_VEHICLES.get(vehicle)
+    if found is None:
+        raise FmuBuildError(
+            f"unknown vehicle type {vehicle!r}; valid: {', '.join(BUILTIN_VEHICLES)} (or a vehicle file)"
+        )
+    return found
+
+
+def generate_sources(vehicle: str | VehicleType, params: VehicleParameters | None = None) -> dict[str, str]:
     """Generate every text file of a vehicle type's FMU.
 
     Args:
-        vehicle_type: ``"work_class"`` or ``"spherical"``.
+        vehicle: A built-in type's name (``"work_class"``, ``"spherical"``) or a
+            :class:`~hptvsim.dynamics.VehicleType` (from a vehicle file).
         params: Start values of the parameters (default: the vehicle type's).
 
     Returns:
         Archive path (``modelDescription.xml``, ``sources/...``) to content.
     """
-    if vehicle_type not in VEHICLE_TYPES:
-        raise FmuBuildError(f"unknown vehicle type {vehicle_type!r}; valid: {', '.join(VEHICLE_TYPES)}")
-    identifier = FMU_NAMES[vehicle_type]
-    params = params if params is not None else VEHICLE_TYPES[vehicle_type]
+    vt = resolve_vehicle(vehicle)
+    identifier = vt.identifier
+    params = params if params is not None else vt.parameters
     placeholder = "{00000000-0000-0000-0000-000000000000}"
     files = {f"sources/{k}": v for k, v in _model_c().items()}
     files["sources/fmi2_cs.c"] = _template("fmi2_cs.c")
     files["sources/hptv_config.h"] = _config_h(identifier, params, placeholder)
-    files["modelDescription.xml"] = _model_description(vehicle_type, identifier, params, placeholder)
+    files["modelDescription.xml"] = _model_description(vt.description, identifier, params, placeholder)
     digest = hashlib.sha256()
     for name in sorted(files):
         digest.update(name.encode())
@@ -536,7 +546,7 @@ def _write_zip(root: Path, target: Path) -> None:
 
 
 def build_fmu(
-    vehicle_type: str,
+    vehicle: str | VehicleType,
     out_dir: Path,
     *,
     params: VehicleParameters | None = None,
@@ -545,7 +555,7 @@ def build_fmu(
     """Generate, compile and pack the FMU of one vehicle type into ``out_dir``.
 
     Args:
-        vehicle_type: One of :data:`~hptvsim.dynamics.VEHICLE_TYPES`.
+        vehicle: A built-in type's name or a :class:`~hptvsim.dynamics.VehicleType`.
         out_dir: Where the ``.fmu`` goes.
         params: The vehicle's parameters (default: the type's).
         platforms: FMI platforms to build binaries for (default: :func:`default_platforms`).
@@ -556,10 +566,9 @@ def build_fmu(
     Raises:
         FmuBuildError: An unknown type or platform, or a compiler that is missing or fails.
     """
-    identifier = FMU_NAMES.get(vehicle_type)
-    if identifier is None:
-        raise FmuBuildError(f"unknown vehicle type {vehicle_type!r}; valid: {', '.join(VEHICLE_TYPES)}")
-    files = generate_sources(vehicle_type, params)
+    vt = resolve_vehicle(vehicle)
+    identifier = vt.identifier
+    files = generate_sources(vt, params)
     out_dir.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp, identifier)
@@ -576,12 +585,12 @@ def build_fmu(
 
 def build_all(out_dir: Path) -> list[Path]:
     """Build the FMUs of all vehicle types into ``out_dir``."""
-    return [build_fmu(t, out_dir) for t in VEHICLE_TYPES]
+    return [build_fmu(t, out_dir) for t in BUILTIN_VEHICLES]
 
 
-def check_fmu(vehicle_type: str, fmu: Path) -> FmuDrift:
+def check_fmu(vehicle: str | VehicleType, fmu: Path) -> FmuDrift:
     """Compare an FMU's text files with what the model generates now."""
-    expected = generate_sources(vehicle_type)
+    expected = generate_sources(vehicle)
     with zipfile.ZipFile(fmu) as zf:
         present = {
             n: zf.read(n).decode()

@@ -97,41 +97,64 @@ def _number(value: Any) -> float | None:
     return float(value)
 
 
+def _shipped_file(raw: Any, field: str, folder: str, example: str) -> Path:
+    """A shipped file named relative to the scenarios folder, inside ``folder``; else a 422.
+
+    Absolute paths, ``~``, ``..``, backslashes and anything that resolves outside the shipped
+    folder are refused before the file system is asked about them.
+    """
+    from hptvsim.world.scenario import scenario_dir
+
+    if not isinstance(raw, str) or not raw:
+        raise ApiError(422, f"{field}: give a shipped file, e.g. {example}", field)
+    p = Path(raw)
+    root = scenario_dir().resolve()
+    if p.is_absolute() or raw.startswith("~") or ".." in p.parts or "\\" in raw:
+        raise ApiError(
+            422,
+            f"{field}: {raw!r} is not allowed; the service reads only the shipped files, named relative "
+            f"to the scenarios folder (e.g. {example})",
+            field,
+        )
+    shipped_root = (root / folder).resolve()
+    try:
+        resolved = (root / p).resolve()
+        shipped_file = resolved.is_relative_to(shipped_root) and resolved.is_file()
+    except OSError:  # a name too long for the file system, say
+        shipped_file = False
+    if not shipped_file:
+        shipped = sorted(
+            str(f.relative_to(root))
+            for f in shipped_root.glob("*")
+            if f.is_file() and f.suffix not in (".py", ".md")
+        )
+        raise ApiError(422, f"{field}: {raw!r} is not a shipped file; valid: {', '.join(shipped)}", field)
+    return resolved
+
+
 def screen_inline(data: Mapping[str, Any], settings: Settings) -> None:
     """Checks on a client's raw scenario tables before the schema builds anything from them."""
-    from hptvsim.world.scenario import TERRAIN_KINDS, scenario_dir
+    from hptvsim.world.scenario import TERRAIN_KINDS
 
     terrain = data.get("terrain", {})
     kind = terrain.get("kind", "flat") if isinstance(terrain, Mapping) else None
     # file terrain: only the shipped data files, named relative to the scenarios folder
     if kind == "file" and isinstance(terrain, Mapping):
-        raw = terrain.get("path")
-        field = "scenario.terrain.path"
-        if not isinstance(raw, str) or not raw:
-            raise ApiError(422, f"{field}: give a shipped data file, e.g. data/salish_sea.tif", field)
-        p = Path(raw)
-        root = scenario_dir().resolve()
-        if p.is_absolute() or raw.startswith("~") or ".." in p.parts or "\\" in raw:
-            raise ApiError(
-                422,
-                f"{field}: {raw!r} is not allowed; the service reads only the shipped data files, "
-                "named relative to the scenarios folder (e.g. data/salish_sea.tif)",
-                field,
-            )
-        try:
-            resolved = (root / p).resolve()
-            shipped_file = resolved.is_relative_to(root) and resolved.is_file()
-        except OSError:  # a name too long for the file system, say
-            shipped_file = False
-        if not shipped_file:
-            shipped = sorted(
-                str(f.relative_to(root))
-                for f in (root / "data").glob("*")
-                if f.is_file() and f.suffix != ".py"
-            )
-            raise ApiError(
-                422, f"{field}: {raw!r} is not a shipped data file; valid: {', '.join(shipped)}", field
-            )
+        _shipped_file(terrain.get("path"), "scenario.terrain.path", "data", "data/salish_sea.tif")
+    # vehicle files: only the shipped ones (Fossen parameters; never an FMU: that is native code)
+    raw_groups = data.get("vehicles")
+    for i, g in enumerate(raw_groups if isinstance(raw_groups, list) else []):
+        if isinstance(g, Mapping) and "vehicle_file" in g:
+            field = f"scenario.vehicles[{i}].vehicle_file"
+            path = _shipped_file(g["vehicle_file"], field, "vehicles", "vehicles/bluerov2_heavy.toml")
+            from hptvsim.cosim.vehicles import ExternalVehicleType, VehicleFileError, load_vehicle_file
+
+            try:
+                external = isinstance(load_vehicle_file(path), ExternalVehicleType)
+            except VehicleFileError:
+                external = False  # the scenario's own check reports it
+            if external:  # pragma: no cover - no shipped vehicle file brings an FMU
+                raise ApiError(422, f"{field}: this service runs no external vehicle FMUs", field)
     # grid size: site / resolution
     site = data.get("site", {})
     size = site.get("size", (400.0, 300.0)) if isinstance(site, Mapping) else None

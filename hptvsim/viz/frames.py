@@ -231,7 +231,7 @@ class AgentInfo(SchemaObject):
     Attributes:
         name: Agent name (``pursuer_0``, ``evader_0``, ...).
         role: ``pursuer`` or ``evader``.
-        vehicle_type: ``work_class`` or ``spherical``.
+        vehicle_type: ``work_class``, ``spherical``, or the name of a vehicle file's type.
         policy: The policy that drives it (a zoo spec, or ``external`` when actions come from outside).
         color: Display colour ``#rrggbb`` (the same in every view).
         radius: Collision radius [m].

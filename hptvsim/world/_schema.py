@@ -311,7 +311,8 @@ def check_bounds(obj: Any) -> None:
         FieldValueError: The first field out of bounds (or not finite, too long, too many items).
     """
     for f in dataclasses.fields(obj):
-        check_field(f, getattr(obj, f.name))
+        if f.init:  # derived fields (set after the check) have no limits of their own
+            check_field(f, getattr(obj, f.name))
 
 
 # --- reading ------------------------------------------------------------------------------------

@@ -55,6 +55,7 @@ import os
 import tomllib
 import typing
 from collections.abc import Mapping
+from contextvars import ContextVar
 from dataclasses import dataclass, field
 from functools import cached_property, lru_cache
 from pathlib import Path
@@ -64,7 +65,8 @@ import numpy as np
 import numpy.typing as npt
 
 from hptvsim._paths import shipped_dir
-from hptvsim.dynamics import VEHICLE_RADIUS, VEHICLE_TYPES, ParameterError, VehicleParameters
+from hptvsim.cosim.vehicles import ExternalVehicleType, VehicleFileError, load_vehicle_file
+from hptvsim.dynamics import BUILTIN_VEHICLES, VEHICLE_TYPES, ParameterError, VehicleParameters, VehicleType
 from hptvsim.sensors.config import AcousticLinkConfig, SonarConfig
 from hptvsim.world._schema import (
     JSON_SCHEMA_DIALECT,
@@ -477,6 +479,9 @@ TERRAIN_KINDS: dict[str, type[FlatSeabed] | type[RollingMountains] | type[Terrai
 
 # --- vehicles -------------------------------------------------------------------------------------------
 
+_VEHICLE_BASE: ContextVar[Path | None] = ContextVar("_VEHICLE_BASE", default=None)
+"""The folder vehicle files are resolved from while a scenario is read (its ``base_dir``)."""
+
 
 @dataclass(frozen=True, kw_only=True)
 class VehicleGroup:
@@ -486,7 +491,17 @@ class VehicleGroup:
     """
 
     role: Literal["pursuer", "evader"] = spec(doc="'pursuer' or 'evader'")
-    type: str = spec(doc="vehicle type: " + ", ".join(VEHICLE_TYPES), max_length=64)
+    type: str | None = spec(
+        None,
+        doc="vehicle type: " + ", ".join(VEHICLE_TYPES) + " (or the name in vehicle_file)",
+        max_length=64,
+    )
+    vehicle_file: str | None = spec(
+        None,
+        doc="a vehicle file of your own type (TOML: Fossen parameters, or an FMU and its mapping), "
+        "relative to the scenario file; see hptvsim.cosim.vehicles",
+        max_length=256,
+    )
     count: int = spec(1, doc="number of vehicles", ge=1, le=MAX_GROUP_SIZE)
     spawn: RectangleRegion | CircleRegion = spec(doc="start region: {kind = 'rectangle' | 'circle', ...}")
     heading: float | None = spec(
@@ -507,12 +522,43 @@ class VehicleGroup:
     )
     goal: Goal | None = spec(None, doc="this group's goto target point (default: task.goal)")
     sonar: SonarConfig | None = spec(None, doc="this group's sonar (default: [sensors.sonar])")
+    vehicle: VehicleType = field(init=False, repr=False, compare=False)
+    """The resolved vehicle type (built-in, or read from ``vehicle_file``)."""
 
     def __post_init__(self) -> None:
         check_bounds(self)
-        if self.type not in VEHICLE_TYPES:
+        if self.vehicle_file is not None:
+            base = _VEHICLE_BASE.get() or scenario_dir()
+            path = Path(self.vehicle_file).expanduser()
+            try:
+                vt = load_vehicle_file(path if path.is_absolute() else base / path)
+            except VehicleFileError as exc:
+                raise FieldValueError(
+                    "vehicle_file", f"{exc} (relative paths are resolved from {base})"
+                ) from None
+            if self.type is not None and self.type != vt.name:
+                raise FieldValueError(
+                    "type", f"{self.type!r} differs from the vehicle file's name {vt.name!r}; leave type out"
+                )
+            object.__setattr__(self, "type", vt.name)
+        elif self.type is None:
             raise FieldValueError(
-                "type", f"{self.type!r} is not a vehicle type; valid: {', '.join(VEHICLE_TYPES)}"
+                "type", f"missing; give a vehicle type ({', '.join(VEHICLE_TYPES)}) or a vehicle_file"
+            )
+        elif self.type not in BUILTIN_VEHICLES:
+            raise FieldValueError(
+                "type",
+                f"{self.type!r} is not a vehicle type; valid: {', '.join(VEHICLE_TYPES)} "
+                "(or give a vehicle_file of your own)",
+            )
+        else:
+            vt = BUILTIN_VEHICLES[self.type]
+        object.__setattr__(self, "vehicle", vt)
+        if self.parameters and isinstance(vt, ExternalVehicleType):
+            raise FieldValueError(
+                "parameters",
+                f"{vt.name!r} is an external FMU; its parameters are its own: set them in its vehicle "
+                "file's [fmu.start] (and the game's limits in [limits])",
             )
         try:
             self.vehicle_parameters()
@@ -521,12 +567,12 @@ class VehicleGroup:
 
     def vehicle_parameters(self) -> VehicleParameters:
         """The type's parameters with this group's overrides."""
-        return VehicleParameters.from_mapping(self.parameters, base=VEHICLE_TYPES[self.type])
+        return VehicleParameters.from_mapping(self.parameters, base=self.vehicle.parameters)
 
     @property
     def radius(self) -> float:
         """Radius [m] of the circle bounding one vehicle of this group."""
-        return float(VEHICLE_RADIUS[self.type])
+        return self.vehicle.radius
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -536,12 +582,13 @@ class AgentSpec:
     Attributes:
         name: ``<role>_<k>``.
         role: ``"pursuer"`` or ``"evader"``.
-        vehicle_type: A key of :data:`hptvsim.dynamics.VEHICLE_TYPES`.
+        vehicle_type: The vehicle type's name (a built-in's or a vehicle file's).
         group: Index of its :class:`VehicleGroup` in ``Scenario.vehicles``.
         parameters: Vehicle parameters (type defaults with the group's overrides).
         radius: Bounding radius [m].
         sonar: Its sonar settings.
         goal: Its goto target, if any.
+        vehicle: Its :class:`~hptvsim.dynamics.VehicleType`.
     """
 
     name: str
@@ -552,6 +599,7 @@ class AgentSpec:
     radius: float
     sonar: SonarConfig
     goal: Goal | None
+    vehicle: VehicleType
 
 
 # --- the world ------------------------------------------------------------------------------------------
@@ -696,9 +744,13 @@ class Scenario:
             raise ctx.child("vehicles").error("expected a non-empty array of tables ([[vehicles]])")
         _check_items("vehicles", raw_groups, ctx)
         base_sonar = sensors_raw.get("sonar", {}) if isinstance(sensors_raw, Mapping) else {}
-        groups = tuple(
-            _group(g, base_sonar, ctx.child("vehicles").child(i)) for i, g in enumerate(raw_groups)
-        )
+        token = _VEHICLE_BASE.set(Path(base_dir) if base_dir is not None else scenario_dir())
+        try:
+            groups = tuple(
+                _group(g, base_sonar, ctx.child("vehicles").child(i)) for i, g in enumerate(raw_groups)
+            )
+        finally:
+            _VEHICLE_BASE.reset(token)
         task = from_table(Task, data.get("task", {}), ctx.child("task"))
         simulation = from_table(Simulation, data.get("simulation", {}), ctx.child("simulation"))
         base = Path(base_dir) if base_dir is not None else scenario_dir()
@@ -767,7 +819,8 @@ class Scenario:
                         AgentSpec(
                             name=f"{role}_{k}",
                             role=role,
-                            vehicle_type=g.type,
+                            vehicle_type=g.vehicle.name,
+                            vehicle=g.vehicle,
                             group=gi,
                             parameters=g.vehicle_parameters(),
                             radius=g.radius,

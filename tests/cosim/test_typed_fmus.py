@@ -22,8 +22,7 @@ which would leave the global pointing at freed memory) and prints when no test l
 from __future__ import annotations
 
 import zipfile
-from collections.abc import Callable, Iterator
-from ctypes import byref
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -34,61 +33,19 @@ from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import (
     FMU2Slave,
-    fmi2CallbackAllocateMemoryTYPE,
-    fmi2CallbackFreeMemoryTYPE,
-    fmi2CallbackFunctions,
-    fmi2CallbackLoggerTYPE,
     fmi2Discard,
     fmi2DoStepStatus,
     fmi2Error,
     fmi2LastSuccessfulTime,
     fmi2Terminated,
 )
-from fmpy.logging import addLoggerProxy
 from fmpy.validation import validate_fmu
+from fmu_log import LogEntry, fmi2_callbacks, log
 from typed_fmus import GUIDS, TYPED_FMUS, VALUE_REFERENCES, typed_fmus
 
-__all__ = ["typed_fmus"]  # the fixture, imported for pytest
+__all__ = ["log", "typed_fmus"]  # the fixtures, imported for pytest
 
-LogEntry = tuple[int, str, str]  # status, category, message
 DISCARD, ERROR = 2, 3
-
-# --- logging through FMPy's process-global proxy ---------------------------------------------
-
-_LISTENERS: list[list[LogEntry]] = []
-
-
-def _dispatch(_env: Any, _name: bytes, status: int, category: bytes, message: bytes) -> None:
-    entry = (status, category.decode(), message.decode())
-    if _LISTENERS:
-        _LISTENERS[-1].append(entry)
-    else:  # as FMPy's default logger does
-        print(f"[{status}] {entry[2]}")
-
-
-_LOGGER = fmi2CallbackLoggerTYPE(_dispatch)
-_ALLOC = fmi2CallbackAllocateMemoryTYPE(fmpy.calloc)
-_FREE = fmi2CallbackFreeMemoryTYPE(fmpy.free)
-
-
-def _callbacks() -> fmi2CallbackFunctions:
-    """Callbacks that log to this module (and route FMPy's default callbacks here as well)."""
-    cb = fmi2CallbackFunctions()
-    cb.logger = _LOGGER
-    cb.allocateMemory = _ALLOC
-    cb.freeMemory = _FREE
-    addLoggerProxy(byref(cb))
-    return cb
-
-
-@pytest.fixture
-def log() -> Iterator[list[LogEntry]]:
-    """The messages the FMUs log during the test (``simulate_fmu``'s as well)."""
-    entries: list[LogEntry] = []
-    _callbacks()
-    _LISTENERS.append(entries)
-    yield entries
-    _LISTENERS.remove(entries)
 
 
 @pytest.fixture(scope="module")
@@ -103,7 +60,7 @@ def slave(unzipdir: str, name: str, instance_name: str = "inst") -> FMU2Slave:
     fmu = FMU2Slave(
         guid=GUIDS[name], unzipDirectory=unzipdir, modelIdentifier=name, instanceName=instance_name
     )
-    fmu.instantiate(callbacks=_callbacks())
+    fmu.instantiate(callbacks=fmi2_callbacks())
     return fmu
 
 
@@ -526,14 +483,14 @@ def test_once_second_instance_fails_while_the_first_lives(
         guid=GUIDS["Once"], unzipDirectory=unzipped["Once"], modelIdentifier="Once", instanceName="second"
     )
     with pytest.raises(Exception, match="Failed to instantiate model"):
-        second.instantiate(callbacks=_callbacks())
+        second.instantiate(callbacks=fmi2_callbacks())
     assert log[-1][0] == ERROR and "can be instantiated only once per process" in log[-1][2]
     assert log[-1][2].endswith("1 instance(s) still live; free it first")
     # a copy of the binary extracted elsewhere is another shared library with its own counter
     copy = slave(extract(str(typed_fmus["Once"]), str(tmp_path / "copy")), "Once", "copy")
     copy.freeInstance()
     first.freeInstance()  # releases the slot
-    second.instantiate(callbacks=_callbacks())
+    second.instantiate(callbacks=fmi2_callbacks())
     second.setupExperiment(startTime=0.0)
     second.enterInitializationMode()
     second.exitInitializationMode()

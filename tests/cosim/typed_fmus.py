@@ -63,7 +63,7 @@ VALUE_REFERENCES: dict[str, dict[str, int]] = {
 
 
 @dataclass(frozen=True)
-class _Spec:
+class FmuSpec:
     """What differs between the FMUs' model descriptions."""
 
     source: str
@@ -110,8 +110,8 @@ _ONE_OUTPUT_STRUCTURE = """
     <Outputs><Unknown index="1" dependencies=""/></Outputs>
     <InitialUnknowns><Unknown index="1" dependencies=""/></InitialUnknowns>"""
 
-_SPECS: dict[str, _Spec] = {
-    "Types": _Spec(
+_SPECS: dict[str, FmuSpec] = {
+    "Types": FmuSpec(
         source="types.c",
         guid="{5b0f2f7e-2c1a-4d1e-9a37-6f1c0b7d9e21}",
         description="Every FMI 2.0 variable type; outputs updated by fmi2DoStep",
@@ -185,7 +185,7 @@ _SPECS: dict[str, _Spec] = {
       <Unknown index="16" dependencies=""/>
     </InitialUnknowns>""",
     ),
-    "Terminator": _Spec(
+    "Terminator": FmuSpec(
         source="terminator.c",
         guid="{a4d3c9b2-7e61-4f08-b5a9-3c2e1d0f8b74}",
         description="Requests the end of the simulation at stop_at (fmi2Discard, fmi2Terminated)",
@@ -199,7 +199,7 @@ _SPECS: dict[str, _Spec] = {
       <Real unit="s" start="1.0"/></ScalarVariable>""",
         structure=_ONE_OUTPUT_STRUCTURE,
     ),
-    "Rejector": _Spec(
+    "Rejector": FmuSpec(
         source="rejector.c",
         guid="{3e7a5c10-9b24-4d6f-8e13-c0a2b4f69d57}",
         description="Discards (without advancing) steps longer than max_step; variable step size",
@@ -209,7 +209,7 @@ _SPECS: dict[str, _Spec] = {
         variables=_REJECTOR_VARIABLES,
         structure=_REJECTOR_STRUCTURE,
     ),
-    "RejectorFixed": _Spec(
+    "RejectorFixed": FmuSpec(
         source="rejector.c",
         guid="{c81f6b2d-0a4e-4b79-92d5-7e3f1a8c6b40}",
         description="Discards (without advancing) steps longer than max_step; fixed step size",
@@ -220,7 +220,7 @@ _SPECS: dict[str, _Spec] = {
         structure=_REJECTOR_STRUCTURE,
         cs_attributes='canHandleVariableCommunicationStepSize="false"',
     ),
-    "InitUser": _Spec(
+    "InitUser": FmuSpec(
         source="inituser.c",
         guid="{9d62e4a1-5f3b-4c8e-a7d0-2b91c6e35f18}",
         description="y = a * u + b, direct feedthrough computed on every read (initialization too)",
@@ -239,7 +239,7 @@ _SPECS: dict[str, _Spec] = {
     <Outputs><Unknown index="4" dependencies="1"/></Outputs>
     <InitialUnknowns><Unknown index="4" dependencies="1 2 3"/></InitialUnknowns>""",
     ),
-    "Once": _Spec(
+    "Once": FmuSpec(
         source="once.c",
         guid="{6f18b3d5-c2a7-4e90-8b4f-d15e7a0c2963}",
         description="Can be instantiated only once per process at a time; y = time",
@@ -258,16 +258,17 @@ GUIDS: dict[str, str] = {name: spec.guid for name, spec in _SPECS.items()}
 """Each FMU's GUID."""
 
 
-def model_description_xml(name: str) -> str:
+def model_description_xml(name: str, spec: FmuSpec | None = None) -> str:
     """The ``modelDescription.xml`` of the test FMU ``name``.
 
     Args:
-        name: One of :data:`TYPED_FMUS`.
+        name: One of :data:`TYPED_FMUS`, or any name when ``spec`` is given.
+        spec: The FMU's description (default: the one of ``name``).
 
     Returns:
         The XML text.
     """
-    spec = _SPECS[name]
+    spec = spec if spec is not None else _SPECS[name]
     units = f"\n  <UnitDefinitions>{spec.units}\n  </UnitDefinitions>" if spec.units else ""
     return f"""<?xml version="1.0" encoding="UTF-8"?>
 <fmiModelDescription fmiVersion="2.0" modelName="{name}" guid="{spec.guid}"
@@ -292,15 +293,16 @@ def model_description_xml(name: str) -> str:
 """
 
 
-def build_typed_fmu(name: str, out_dir: Path) -> Path:
+def build_typed_fmu(name: str, out_dir: Path, spec: FmuSpec | None = None) -> Path:
     """Compile the test FMU ``name`` from ``typed/`` and pack ``<name>.fmu`` into ``out_dir``.
 
     The archive holds ``modelDescription.xml``, ``binaries/<fmpy.platform>/<name>.so`` and the
     C sources under ``sources/`` (listed in ``<SourceFiles>``).
 
     Args:
-        name: One of :data:`TYPED_FMUS`.
+        name: One of :data:`TYPED_FMUS`, or any name when ``spec`` is given.
         out_dir: Directory for the FMU and its unpacked build tree (``out_dir/<name>``).
+        spec: The FMU's description and source (default: the one of ``name``).
 
     Returns:
         The path of the FMU.
@@ -309,7 +311,7 @@ def build_typed_fmu(name: str, out_dir: Path) -> Path:
         KeyError: ``name`` is not one of :data:`TYPED_FMUS`.
         subprocess.CalledProcessError: gcc failed.
     """
-    spec = _SPECS[name]
+    spec = spec if spec is not None else _SPECS[name]
     root = out_dir / name
     src = root / "sources"
     binary = root / "binaries" / fmpy.platform / f"{name}.so"
@@ -317,7 +319,7 @@ def build_typed_fmu(name: str, out_dir: Path) -> Path:
     binary.parent.mkdir(parents=True, exist_ok=True)
     for file in (spec.source, _HEADER):
         shutil.copy(_SOURCES / file, src / file)
-    (root / "modelDescription.xml").write_text(model_description_xml(name))
+    (root / "modelDescription.xml").write_text(model_description_xml(name, spec))
     include = Path(fmpy.__file__).parent / "c-code"
     cmd = ["gcc", "-shared", "-fPIC", "-O2", "-std=c99", "-ffp-contract=off", f"-I{include}"]
     subprocess.run(

@@ -236,3 +236,16 @@ def test_inline_scenario_runs(api: httpx.Client) -> None:
     assert ep.status_code == 201, ep.text
     done = wait_final(api, ep.json()["id"])
     assert done["status"] == "finished" and done["scenario"] == "my_goto (inline)"
+
+
+def test_inline_scenario_names_a_shipped_vehicle_file(api: httpx.Client) -> None:
+    """A client may name a shipped vehicle file (parameters; the worker generates its FMU)."""
+    tables = api.get("/scenarios/goto_tiny").json()
+    group = {k: v for k, v in tables["vehicles"][0].items() if k != "type"}
+    tables["vehicles"] = [{**group, "vehicle_file": "vehicles/bluerov2_heavy.toml"}]
+    ep = api.post("/episodes", json={"scenario": tables, "max_steps": 20})
+    assert ep.status_code == 201, ep.text
+    done = wait_final(api, ep.json()["id"])
+    assert done["status"] == "finished", done
+    static = api.get(f"/episodes/{done['id']}/static").json()
+    assert {a["vehicle_type"] for a in static["agents"]} == {"bluerov2_heavy"}

@@ -75,6 +75,20 @@ def test_inline_scenarios_are_data_checked_by_the_schema(api: httpx.Client) -> N
     ):
         terrain = {"kind": "file", "path": path}
         _bad(api, {"scenario": {**tables, "terrain": terrain}}, "scenario.terrain.path")
+    # vehicle files: only shipped ones by name; never a path (or an FMU) of the client's choosing
+    group = {k: v for k, v in tables["vehicles"][0].items() if k != "type"}
+    for path in (
+        "/tmp/evil.toml",
+        "../scenarios/vehicles/bluerov2_heavy.toml",
+        "vehicles/../source.toml",
+        "~/vehicle.toml",
+        "vehicles/none.toml",
+        "data/salish_sea.tif",
+        "source.toml",
+    ):
+        body = {"scenario": {**tables, "vehicles": [{**group, "vehicle_file": path}]}}
+        data = _bad(api, body, "scenario.vehicles[0].vehicle_file")
+        assert "evil" not in data["detail"] or "not allowed" in data["detail"]
     # sizes that would exhaust the machine are refused before anything is built
     huge = {**tables, "site": {**tables["site"], "size": [100000.0, 100000.0]}}
     _bad(api, {"scenario": huge}, "scenario.terrain.resolution")

@@ -56,7 +56,7 @@
  * @typedef {Object} AgentInfo
  * @property {string} name Agent name (`pursuer_0`, `evader_0`, ...).
  * @property {("pursuer" | "evader")} role `pursuer` or `evader`.
- * @property {string} vehicle_type `work_class` or `spherical`.
+ * @property {string} vehicle_type `work_class`, `spherical`, or the name of a vehicle file's type.
  * @property {string} policy The policy that drives it (a zoo spec, or `external` when actions come from outside).
  * @property {string} color Display colour `#rrggbb` (the same in every view).
  * @property {number} radius Collision radius [m].
@@ -508,7 +508,7 @@ export const FRAME_SCHEMA = {
           ]
         },
         "vehicle_type": {
-          "description": "`work_class` or `spherical`.",
+          "description": "`work_class`, `spherical`, or the name of a vehicle file's type.",
           "type": "string"
         },
         "policy": {
