@@ -78,7 +78,7 @@ def fmu_build(
     vehicle_files: tuple[Path, ...],
     platforms: tuple[str, ...],
 ) -> None:
-    """Generate C from the CasADi model, compile it and pack one FMU per vehicle type."""
+    """Generate C from the CasADi models, compile it and pack the FMUs (3-DOF and 6-DOF per type)."""
     from hptvsim._paths import checkout_dir
     from hptvsim.cosim.vehicles import ExternalVehicleType, VehicleFileError, load_vehicle_file
     from hptvsim.dynamics import VEHICLE_TYPES, VehicleType
@@ -103,11 +103,13 @@ def fmu_build(
                 param_hint="--vehicle-file",
             )
         todo.append(loaded)
-    todo += list(vehicle_types or (() if vehicle_files else tuple(VEHICLE_TYPES)))
+    jobs: list[tuple[str | VehicleType, int]] = [(vt, 3) for vt in todo]
+    if not vehicle_files or vehicle_types:
+        jobs += [(vt, dof) for dof in (3, 6) for vt in (vehicle_types or tuple(VEHICLE_TYPES))]
     target = out_dir if out_dir is not None else fmu_dir()
-    for item in todo:
+    for item, dof in jobs:
         try:
-            path = build_fmu(item, target, platforms=platforms or None)
+            path = build_fmu(item, target, platforms=platforms or None, dof=dof)
         except FmuBuildError as exc:
             raise click.ClickException(str(exc)) from None
         click.echo(f"built {path}")
@@ -138,20 +140,22 @@ def fmu_check(fmu_folder: Path | None) -> None:
     """
     from fmpy.validation import validate_fmu
 
-    from hptvsim.dynamics import FMU_NAMES
+    from hptvsim.dynamics import FMU_NAMES, SIXDOF_FMU_NAMES
     from hptvsim.fmu import fmu_dir
     from hptvsim.fmu.build import check_binaries, check_fmu
 
     folder = fmu_folder if fmu_folder is not None else fmu_dir()
-    missing = [f"{ident}.fmu" for ident in FMU_NAMES.values() if not (folder / f"{ident}.fmu").is_file()]
+    every = [(vt, ident, 3) for vt, ident in FMU_NAMES.items()]
+    every += [(vt, ident, 6) for vt, ident in SIXDOF_FMU_NAMES.items()]
+    missing = [f"{ident}.fmu" for _, ident, _ in every if not (folder / f"{ident}.fmu").is_file()]
     if missing:
         raise click.ClickException(
             f"{folder} has no {', '.join(missing)}; build them with `hptvsim fmu build --out {folder}`"
         )
     bad = False
-    for vt, ident in FMU_NAMES.items():
+    for vt, ident, dof in every:
         path = folder / f"{ident}.fmu"
-        drift = check_fmu(vt, path)
+        drift = check_fmu(vt, path, dof=dof)
         problems = validate_fmu(str(path))
         click.echo(str(drift))
         for p in problems:

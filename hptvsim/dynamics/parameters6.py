@@ -68,6 +68,7 @@ from hptvsim.dynamics.vehicles import MU_SEA, RHO_SEA, SPHERICAL_UUV, WORK_CLASS
 
 __all__ = [
     "PLANAR_SHARED_NAMES",
+    "SIXDOF_FMU_NAMES",
     "SIXDOF_PARAMETER_NAMES",
     "SIXDOF_PARAMETER_SPECS",
     "SIXDOF_VEHICLE_TYPES",
@@ -265,3 +266,8 @@ SIXDOF_VEHICLE_TYPES: Final = MappingProxyType(
     {"work_class": WORK_CLASS_UUV_6DOF, "spherical": SPHERICAL_UUV_6DOF}
 )
 """6-DOF vehicle sets by the name scenarios use (the keys of ``VEHICLE_TYPES``)."""
+
+SIXDOF_FMU_NAMES: Final = MappingProxyType(
+    {"work_class": "WorkClassUUV6DOF", "spherical": "SphericalUUV6DOF"}
+)
+"""FMU model identifier of each vehicle type's 6-DOF FMU."""

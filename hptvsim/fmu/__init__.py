@@ -15,7 +15,7 @@ import tempfile
 from pathlib import Path
 
 from hptvsim._paths import shipped_dir
-from hptvsim.dynamics import FMU_NAMES, VEHICLE_TYPES, VehicleType
+from hptvsim.dynamics import FMU_NAMES, SIXDOF_FMU_NAMES, VEHICLE_TYPES, VehicleType
 
 __all__ = ["fmu_dir", "fmu_for", "fmu_path"]
 
@@ -25,16 +25,19 @@ def fmu_dir() -> Path:
     return shipped_dir("fmus", env="HPTVSIM_FMU_DIR")
 
 
-def fmu_path(vehicle_type: str) -> Path:
-    """Return the path of the shipped FMU of a vehicle type.
+def fmu_path(vehicle_type: str, *, dof: int = 3) -> Path:
+    """Return the path of the shipped FMU of a vehicle type (``dof``: 3, planar, or 6).
 
     Raises:
-        KeyError: Unknown vehicle type (the message lists the valid ones).
+        KeyError: Unknown vehicle type (the message lists the valid ones) or ``dof``.
         FileNotFoundError: The FMU is missing (build it with ``hptvsim fmu build``).
     """
-    if vehicle_type not in FMU_NAMES:
+    names = {3: FMU_NAMES, 6: SIXDOF_FMU_NAMES}.get(dof)
+    if names is None:
+        raise KeyError(f"dof = {dof!r} is invalid; valid: 3, 6")
+    if vehicle_type not in names:
         raise KeyError(f"unknown vehicle type {vehicle_type!r}; valid types: {', '.join(VEHICLE_TYPES)}")
-    path = fmu_dir() / f"{FMU_NAMES[vehicle_type]}.fmu"
+    path = fmu_dir() / f"{names[vehicle_type]}.fmu"
     if not path.is_file():
         raise FileNotFoundError(f"{path} is missing; build it with `hptvsim fmu build`")
     return path

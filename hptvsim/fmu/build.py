@@ -30,24 +30,36 @@ import sys
 import tempfile
 import uuid
 import zipfile
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from functools import lru_cache
 from importlib import resources
 from pathlib import Path
-from typing import Final
+from typing import Any, Final
 from xml.sax.saxutils import escape
 
 from hptvsim import __version__
 from hptvsim.dynamics import (
     BUILTIN_VEHICLES,
-    MODEL_PARAMETER_NAMES,
     PARAMETER_SPECS,
     VehicleParameters,
     VehicleType,
     vehicle_model,
 )
 from hptvsim.dynamics._casadi import ca
-from hptvsim.dynamics.model import INPUTS, OUTPUTS, STATE_NAMES
+from hptvsim.dynamics.controller6 import INPUTS as SIXDOF_INPUTS
+from hptvsim.dynamics.controller6 import OUTPUTS as SIXDOF_OUTPUTS
+from hptvsim.dynamics.controller6 import (
+    SIXDOF_CLOSED_LOOP_STATE_NAMES,
+    SIXDOF_CONTROLLER_PARAMETER_SPECS,
+    SIXDOF_CONTROLLER_TYPES,
+    sixdof_closed_loop,
+)
+from hptvsim.dynamics.controller6 import STATES as SIXDOF_STATES
+from hptvsim.dynamics.model import INPUTS, OUTPUTS, STATE_NAMES, Signal
+from hptvsim.dynamics.parameters import ParameterSpec
+from hptvsim.dynamics.parameters6 import SIXDOF_FMU_NAMES, SIXDOF_PARAMETER_SPECS, SIXDOF_VEHICLE_TYPES
+from hptvsim.dynamics.sixdof import sixdof_model
 
 __all__ = [
     "CROSS_COMPILERS",
@@ -62,12 +74,101 @@ __all__ = [
     "default_platforms",
     "fmi_platform",
     "generate_sources",
+    "generate_sources_6dof",
     "resolve_vehicle",
 ]
 
 DEFAULT_H_MAX: Final = 0.01  # s, largest internal RK4 step (<= 3.3e-7 from CVODES over 60 s)
 DEFAULT_STEP: Final = 0.25  # s, the paper's control step (Table II)
 INIT_STATES: Final = ("x_0", "y_0", "psi_0", "u_0", "v_0", "r_0")
+
+
+@dataclass(frozen=True, kw_only=True)
+class _Kind:
+    """What one model (planar 3-DOF, 6-DOF) brings to the generator; the C template is shared.
+
+    Attributes:
+        label: A word for messages and descriptions.
+        functions: Builds ``(hptv_rk4_step(x, w, p, h), hptv_output(x, w, p), hptv_mass_matrix(p))``.
+        states: State names (the first ``len(init)`` of them start from the ``<name>_0`` parameters).
+        inputs: Input signals.
+        outputs: Output signals.
+        specs: Parameter specs in the order of ``p``.
+        init: Signals of the states set by start parameters (``x_0`` ...), in state order.
+        integer_last: The last parameter is an Integer (the planar ``control_mode``).
+        mass_hint: Which parameters to check when ``M`` is not positive definite.
+        feedthrough: Inputs the applied-thrust outputs (``tau_*``) depend on directly.
+    """
+
+    label: str
+    functions: Callable[[], tuple[Any, Any, Any]]
+    states: tuple[str, ...]
+    inputs: tuple[Signal, ...]
+    outputs: tuple[Signal, ...]
+    specs: tuple[ParameterSpec, ...]
+    init: tuple[Signal, ...]
+    integer_last: bool
+    mass_hint: str
+    feedthrough: tuple[str, ...]
+
+    @property
+    def init_names(self) -> tuple[str, ...]:
+        """The start parameters of the initial state: ``x_0, y_0, ...``."""
+        return tuple(f"{sig.name}_0" for sig in self.init)
+
+    def mass_dim(self) -> int:
+        """Rows of the mass matrix."""
+        return int(self.functions()[2].size1_out(0))
+
+
+def _planar_functions() -> tuple[Any, Any, Any]:
+    m = vehicle_model()
+    return m.step, m.output, m.mass_matrix
+
+
+@lru_cache(maxsize=1)
+def _sixdof_functions() -> tuple[Any, Any, Any]:
+    """The 6-DOF closed loop with ``p = [model parameters, controller parameters]`` as one vector."""
+    cl = sixdof_closed_loop()
+    x, w, h = ca.SX.sym("x", cl.nx), ca.SX.sym("w", cl.nw), ca.SX.sym("h")
+    pc = ca.SX.sym("p", cl.np + cl.nc)
+    p, c = pc[: cl.np], pc[cl.np :]
+    opts = {"cse": True}
+    step = ca.Function(
+        "hptv_rk4_step", [x, w, pc, h], [cl.step(x, w, p, c, h)], ["x", "w", "p", "h"], ["x_next"], opts
+    )
+    output = ca.Function("hptv_output", [x, w, pc], [cl.output(x, w, p, c)], ["x", "w", "p"], ["y"], opts)
+    M = sixdof_model().mass_matrix(p)[0]
+    mass = ca.Function("hptv_mass_matrix", [pc], [M], ["p"], ["M"], opts)
+    return step, output, mass
+
+
+_PLANAR_KIND: Final = _Kind(
+    label="3-DOF",
+    functions=_planar_functions,
+    states=STATE_NAMES,
+    inputs=INPUTS,
+    outputs=OUTPUTS,
+    specs=PARAMETER_SPECS,
+    init=OUTPUTS[:6],
+    integer_last=True,
+    mass_hint="m, I_z, x_g, y_g and the added-mass derivatives X_udot, Y_vdot, N_rdot, X_vdot, X_rdot, "
+    "Y_rdot",
+    feedthrough=("v_cmd", "omega_cmd", "tau_X_cmd", "tau_Y_cmd", "tau_N_cmd"),
+)
+
+_SIXDOF_KIND: Final = _Kind(
+    label="6-DOF",
+    functions=_sixdof_functions,
+    states=SIXDOF_CLOSED_LOOP_STATE_NAMES,
+    inputs=SIXDOF_INPUTS,
+    outputs=SIXDOF_OUTPUTS,
+    specs=SIXDOF_PARAMETER_SPECS + SIXDOF_CONTROLLER_PARAMETER_SPECS,
+    init=SIXDOF_STATES[:12],
+    integer_last=False,
+    mass_hint="m, the inertia tensor, r_g and the added-mass derivatives",
+    feedthrough=("v_cmd", "omega_cmd", "w_z_cmd"),
+)
 _DEFAULT_STOP: Final = 60.0  # s, default experiment length in modelDescription.xml
 
 # Unit name -> SI base-unit exponents (kg, m, s, rad), for <UnitDefinitions>.
@@ -146,15 +247,15 @@ def _xml_real(value: float) -> str:
     return repr(float(value))
 
 
-def _model_c() -> dict[str, str]:
+def _model_c(kind: _Kind) -> dict[str, str]:
     """Generate ``hptv_model.c`` and ``hptv_model.h`` from the symbolic model."""
-    model = vehicle_model()
+    funcs = kind.functions()
     with tempfile.TemporaryDirectory() as tmp:
         cwd = os.getcwd()
         os.chdir(tmp)
         try:
             cg = ca.CodeGenerator("hptv_model.c", {"with_header": True, "verbose": False})
-            for f in (model.step, model.output, model.mass_matrix):
+            for f in funcs:
                 cg.add(f)
             cg.generate()
             return {
@@ -165,21 +266,21 @@ def _model_c() -> dict[str, str]:
             os.chdir(cwd)
 
 
-def _config_h(identifier: str, params: VehicleParameters, guid: str) -> str:
-    model = vehicle_model()
-    funcs = (model.step, model.output, model.mass_matrix)
+def _config_h(kind: _Kind, identifier: str, p_start: Sequence[float], guid: str) -> str:
+    funcs = kind.functions()
     sz_arg = max(f.sz_arg() for f in funcs)
     sz_res = max(f.sz_res() for f in funcs)
     sz_iw = max(f.sz_iw() for f in funcs)
     sz_w = max(f.sz_w() for f in funcs)
-    if MODEL_PARAMETER_NAMES[-1] != "control_mode":
-        raise FmuBuildError("control_mode must be the last model parameter (the FMU's one Integer)")
+    names_p = [spec.name for spec in kind.specs]
+    if kind.integer_last and not kind.specs[-1].integer:
+        raise FmuBuildError(f"the last {kind.label} parameter must be the FMU's one Integer")
 
     def names(items: Iterable[str]) -> str:
         return ", ".join(f'"{n}"' for n in items)
 
     bounds = []
-    for spec in PARAMETER_SPECS:
+    for spec in kind.specs:
         bounds.append(
             "    {"
             + ", ".join(
@@ -195,30 +296,34 @@ def _config_h(identifier: str, params: VehicleParameters, guid: str) -> str:
             )
             + "}"
         )
-    p_start = ", ".join(_c_double(v) for v in params.to_vector())
+    p_text = ", ".join(_c_double(v) for v in p_start)
+    nm = kind.mass_dim()
     lines = [
         "/* Generated by hptvsim from the symbolic model; do not edit. Rebuild: hptvsim fmu build */",
         "#ifndef HPTV_CONFIG_H",
         "#define HPTV_CONFIG_H",
         f'#define HPTV_MODEL_IDENTIFIER "{identifier}"',
         f'#define HPTV_GUID "{guid}"',
-        f"#define HPTV_NX {len(STATE_NAMES)}",
-        f"#define HPTV_NW {len(INPUTS)}",
-        f"#define HPTV_NP {len(MODEL_PARAMETER_NAMES)}",
-        f"#define HPTV_NY {len(OUTPUTS)}",
-        f"#define HPTV_NINIT {len(INIT_STATES)}",
+        f"#define HPTV_NX {len(kind.states)}",
+        f"#define HPTV_NW {len(kind.inputs)}",
+        f"#define HPTV_NP {len(kind.specs)}",
+        f"#define HPTV_NY {len(kind.outputs)}",
+        f"#define HPTV_NINIT {len(kind.init)}",
+        f"#define HPTV_N_INT {int(kind.integer_last)}",
+        f"#define HPTV_NM {nm}",
+        f'#define HPTV_MASS_HINT "{kind.mass_hint}"',
         f"#define HPTV_SZ_ARG {sz_arg}",
         f"#define HPTV_SZ_RES {sz_res}",
         f"#define HPTV_SZ_IW {sz_iw}",
         f"#define HPTV_SZ_W {sz_w}",
-        f"#define HPTV_P_V_MIN {MODEL_PARAMETER_NAMES.index('v_min')}",
-        f"#define HPTV_P_V_MAX {MODEL_PARAMETER_NAMES.index('v_max')}",
+        f"#define HPTV_P_V_MIN {names_p.index('v_min')}",
+        f"#define HPTV_P_V_MAX {names_p.index('v_max')}",
         f"#define HPTV_H_MAX_START {_c_double(DEFAULT_H_MAX)}",
-        f"static const char *const hptv_input_names[HPTV_NW] = {{{names(s.name for s in INPUTS)}}};",
-        f"static const char *const hptv_output_names[HPTV_NY] = {{{names(s.name for s in OUTPUTS)}}};",
-        f"static const char *const hptv_init_names[HPTV_NINIT] = {{{names(INIT_STATES)}}};",
-        f"static const double hptv_p_start[HPTV_NP] = {{{p_start}}};",
-        "static const double hptv_init_start[HPTV_NINIT] = {" + ", ".join(["0.0"] * len(INIT_STATES)) + "};",
+        f"static const char *const hptv_input_names[HPTV_NW] = {{{names(s.name for s in kind.inputs)}}};",
+        f"static const char *const hptv_output_names[HPTV_NY] = {{{names(s.name for s in kind.outputs)}}};",
+        f"static const char *const hptv_init_names[HPTV_NINIT] = {{{names(kind.init_names)}}};",
+        f"static const double hptv_p_start[HPTV_NP] = {{{p_text}}};",
+        "static const double hptv_init_start[HPTV_NINIT] = {" + ", ".join(["0.0"] * len(kind.init)) + "};",
         "static const hptv_bound hptv_p_bounds[HPTV_NP] = {",
         ",\n".join(bounds),
         "};",
@@ -245,12 +350,14 @@ def _scalar(
     return f"{head}\n      {element}\n    </ScalarVariable>"
 
 
-def _model_description(description: str, identifier: str, params: VehicleParameters, guid: str) -> str:
+def _model_description(
+    kind: _Kind, description: str, identifier: str, values: Mapping[str, float], guid: str
+) -> str:
     variables: list[str] = []
     vr = 0
     input_index: dict[str, int] = {}
     output_index: list[int] = []
-    for sig in INPUTS:
+    for sig in kind.inputs:
         variables.append(
             _scalar(
                 sig.name, vr, "input", "continuous", sig.description, f'<Real unit="{sig.unit}" start="0.0"/>'
@@ -258,7 +365,7 @@ def _model_description(description: str, identifier: str, params: VehicleParamet
         )
         input_index[sig.name] = len(variables)
         vr += 1
-    for sig in OUTPUTS:
+    for sig in kind.outputs:
         variables.append(
             _scalar(
                 sig.name,
@@ -272,8 +379,8 @@ def _model_description(description: str, identifier: str, params: VehicleParamet
         )
         output_index.append(len(variables))
         vr += 1
-    values = params.as_dict()
-    for spec in PARAMETER_SPECS[:-1]:
+    reals = kind.specs[:-1] if kind.integer_last else kind.specs
+    for spec in reals:
         bounds = ""
         if spec.lower is not None:
             bounds += f' min="{_xml_real(spec.lower)}"'
@@ -291,7 +398,7 @@ def _model_description(description: str, identifier: str, params: VehicleParamet
             )
         )
         vr += 1
-    for name, sig in zip(INIT_STATES, OUTPUTS[:6], strict=True):
+    for name, sig in zip(kind.init_names, kind.init, strict=True):
         variables.append(
             _scalar(
                 name,
@@ -316,24 +423,24 @@ def _model_description(description: str, identifier: str, params: VehicleParamet
         )
     )
     vr += 1
-    mode = PARAMETER_SPECS[-1]
-    variables.append(
-        _scalar(
-            mode.name,
-            vr,
-            "parameter",
-            "tunable",
-            mode.description,
-            f'<Integer min="0" max="1" start="{int(values[mode.name])}"/>',
-            initial="exact",
+    if kind.integer_last:
+        mode = kind.specs[-1]
+        variables.append(
+            _scalar(
+                mode.name,
+                vr,
+                "parameter",
+                "tunable",
+                mode.description,
+                f'<Integer min="{int(mode.lower or 0)}" max="{int(mode.upper or 0)}" '
+                f'start="{int(values[mode.name])}"/>',
+                initial="exact",
+            )
         )
-    )
 
-    tau_deps = " ".join(
-        str(input_index[n]) for n in ("v_cmd", "omega_cmd", "tau_X_cmd", "tau_Y_cmd", "tau_N_cmd")
-    )
+    tau_deps = " ".join(str(input_index[n]) for n in kind.feedthrough)
     outputs_xml = []
-    for sig, idx in zip(OUTPUTS, output_index, strict=True):
+    for sig, idx in zip(kind.outputs, output_index, strict=True):
         deps = tau_deps if sig.name.startswith("tau_") else ""  # pose and velocity: states only
         outputs_xml.append(f'      <Unknown index="{idx}" dependencies="{deps}"/>')
     initial_xml = [f'      <Unknown index="{idx}"/>' for idx in output_index]
@@ -417,8 +524,24 @@ def resolve_vehicle(vehicle: str | VehicleType) -> VehicleType:
     return found
 
 
+def _sources(kind: _Kind, identifier: str, description: str, p_start: Sequence[float]) -> dict[str, str]:
+    """Every text file of one FMU, its GUID a hash of the rest."""
+    values = {spec.name: float(v) for spec, v in zip(kind.specs, p_start, strict=True)}
+    placeholder = "{00000000-0000-0000-0000-000000000000}"
+    files = {f"sources/{k}": v for k, v in _model_c(kind).items()}
+    files["sources/fmi2_cs.c"] = _template("fmi2_cs.c")
+    files["sources/hptv_config.h"] = _config_h(kind, identifier, p_start, placeholder)
+    files["modelDescription.xml"] = _model_description(kind, description, identifier, values, placeholder)
+    digest = hashlib.sha256()
+    for name in sorted(files):
+        digest.update(name.encode())
+        digest.update(files[name].encode())
+    guid = "{" + str(uuid.UUID(bytes=digest.digest()[:16], version=4)) + "}"
+    return {name: text.replace(placeholder, guid) for name, text in files.items()}
+
+
 def generate_sources(vehicle: str | VehicleType, params: VehicleParameters | None = None) -> dict[str, str]:
-    """Generate every text file of a vehicle type's FMU.
+    """Generate every text file of a vehicle type's (planar, 3-DOF) FMU.
 
     Args:
         vehicle: A built-in type's name (``"work_class"``, ``"spherical"``) or a
@@ -429,19 +552,34 @@ def generate_sources(vehicle: str | VehicleType, params: VehicleParameters | Non
         Archive path (``modelDescription.xml``, ``sources/...``) to content.
     """
     vt = resolve_vehicle(vehicle)
-    identifier = vt.identifier
     params = params if params is not None else vt.parameters
-    placeholder = "{00000000-0000-0000-0000-000000000000}"
-    files = {f"sources/{k}": v for k, v in _model_c().items()}
-    files["sources/fmi2_cs.c"] = _template("fmi2_cs.c")
-    files["sources/hptv_config.h"] = _config_h(identifier, params, placeholder)
-    files["modelDescription.xml"] = _model_description(vt.description, identifier, params, placeholder)
-    digest = hashlib.sha256()
-    for name in sorted(files):
-        digest.update(name.encode())
-        digest.update(files[name].encode())
-    guid = "{" + str(uuid.UUID(bytes=digest.digest()[:16], version=4)) + "}"
-    return {name: text.replace(placeholder, guid) for name, text in files.items()}
+    return _sources(_PLANAR_KIND, vt.identifier, vt.description, params.to_vector())
+
+
+def generate_sources_6dof(vehicle_type: str) -> dict[str, str]:
+    """Generate every text file of a built-in vehicle type's 6-DOF FMU (:data:`SIXDOF_FMU_NAMES`).
+
+    The FMU runs the 6-DOF closed loop (:func:`hptvsim.dynamics.sixdof_closed_loop`): inputs
+    ``v_cmd, omega_cmd, w_z_cmd`` and the 3-D current; parameters the model's and then the
+    controller's, each with its unit and bounds; start parameters ``x_0 ... r_0``.
+
+    Raises:
+        FmuBuildError: Not a built-in vehicle type.
+    """
+    if vehicle_type not in SIXDOF_FMU_NAMES:
+        raise FmuBuildError(
+            f"unknown vehicle type {vehicle_type!r} for a 6-DOF FMU; valid: {', '.join(SIXDOF_FMU_NAMES)}"
+        )
+    planar = BUILTIN_VEHICLES[vehicle_type].description.split(",")[0]
+    description = (
+        f"{planar}, 6-DOF Fossen (2021) model with weight, buoyancy and restoring moments, and a "
+        "surge-speed, yaw-rate and vertical-speed controller (roll and pitch left to the restoring moments)"
+    )
+    p_start = [
+        *SIXDOF_VEHICLE_TYPES[vehicle_type].to_vector(),
+        *SIXDOF_CONTROLLER_TYPES[vehicle_type].to_vector(),
+    ]
+    return _sources(_SIXDOF_KIND, SIXDOF_FMU_NAMES[vehicle_type], description, p_start)
 
 
 def _shared_library_suffix(platform: str | None = None) -> str:
@@ -551,6 +689,7 @@ def build_fmu(
     *,
     params: VehicleParameters | None = None,
     platforms: Iterable[str] | None = None,
+    dof: int = 3,
 ) -> Path:
     """Generate, compile and pack the FMU of one vehicle type into ``out_dir``.
 
@@ -559,6 +698,7 @@ def build_fmu(
         out_dir: Where the ``.fmu`` goes.
         params: The vehicle's parameters (default: the type's).
         platforms: FMI platforms to build binaries for (default: :func:`default_platforms`).
+        dof: 3 (the planar model) or 6 (a built-in type's 6-DOF FMU, :func:`generate_sources_6dof`).
 
     Returns:
         The path of the written ``.fmu``.
@@ -566,9 +706,17 @@ def build_fmu(
     Raises:
         FmuBuildError: An unknown type or platform, or a compiler that is missing or fails.
     """
-    vt = resolve_vehicle(vehicle)
-    identifier = vt.identifier
-    files = generate_sources(vt, params)
+    if dof == 6:
+        if not isinstance(vehicle, str) or params is not None:
+            raise FmuBuildError("a 6-DOF FMU is built for a built-in vehicle type, by name")
+        identifier = SIXDOF_FMU_NAMES.get(vehicle, "")
+        files = generate_sources_6dof(vehicle)
+    elif dof == 3:
+        vt = resolve_vehicle(vehicle)
+        identifier = vt.identifier
+        files = generate_sources(vt, params)
+    else:
+        raise FmuBuildError(f"dof = {dof!r} is invalid; valid: 3, 6")
     out_dir.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp, identifier)
@@ -584,13 +732,18 @@ def build_fmu(
 
 
 def build_all(out_dir: Path) -> list[Path]:
-    """Build the FMUs of all vehicle types into ``out_dir``."""
-    return [build_fmu(t, out_dir) for t in BUILTIN_VEHICLES]
+    """Build the FMUs (planar and 6-DOF) of all built-in vehicle types into ``out_dir``."""
+    return [build_fmu(t, out_dir, dof=d) for d in (3, 6) for t in BUILTIN_VEHICLES]
 
 
-def check_fmu(vehicle: str | VehicleType, fmu: Path) -> FmuDrift:
-    """Compare an FMU's text files with what the model generates now."""
-    expected = generate_sources(vehicle)
+def check_fmu(vehicle: str | VehicleType, fmu: Path, *, dof: int = 3) -> FmuDrift:
+    """Compare an FMU's text files with what the model generates now (``dof``: 3 or 6)."""
+    if dof == 6:
+        if not isinstance(vehicle, str):
+            raise FmuBuildError("a 6-DOF FMU belongs to a built-in vehicle type, named")
+        expected = generate_sources_6dof(vehicle)
+    else:
+        expected = generate_sources(vehicle)
     with zipfile.ZipFile(fmu) as zf:
         present = {
             n: zf.read(n).decode()
