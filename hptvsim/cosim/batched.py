@@ -49,16 +49,16 @@ import numpy.typing as npt
 
 from hptvsim.cosim.fmi2 import F64Array, FmuModel, load_model
 from hptvsim.cosim.orchestrator import SimulationFailedError
-from hptvsim.cosim.system import INIT_NAMES, SystemSpec, VehicleSystem
+from hptvsim.cosim.system import PLANAR_LAYOUT, Layout, SystemSpec, VehicleSystem
 from hptvsim.cosim.vehicles import ExternalVehicleType
-from hptvsim.dynamics import INPUT_NAMES, MODEL_PARAMETER_NAMES, OUTPUT_NAMES, ParameterError, VehicleType
+from hptvsim.dynamics import ParameterError, VehicleType
 
 __all__ = ["BatchedSnapshot", "BatchedVehicleSystem", "NonFiniteStateError", "VehicleLibrary"]
 
-NX: Final = 8
-NW: Final = len(INPUT_NAMES)
-NP: Final = len(MODEL_PARAMETER_NAMES)
-NY: Final = len(OUTPUT_NAMES)
+NX: Final = PLANAR_LAYOUT.nx
+NW: Final = len(PLANAR_LAYOUT.input_names)
+NP: Final = len(PLANAR_LAYOUT.parameter_names)
+NY: Final = len(PLANAR_LAYOUT.output_names)
 SPLIT_MIN_WORK: Final = 2048
 """Vehicle-substeps per step below which a step stays on one thread (the hand-off costs tens of
 microseconds, about 200 vehicle-substeps of work)."""
@@ -86,10 +86,11 @@ class VehicleLibrary:
 
     _cache: ClassVar[dict[str, VehicleLibrary]] = {}
 
-    def __init__(self, model: FmuModel) -> None:
+    def __init__(self, model: FmuModel, layout: Layout = PLANAR_LAYOUT) -> None:
         import fmpy
 
         self.model = model
+        self.layout = layout
         binary = (
             model.unzip_dir / "binaries" / fmpy.platform / f"{model.identifier}{fmpy.sharedLibraryExtension}"
         )
@@ -113,13 +114,14 @@ class VehicleLibrary:
         sizes = [ctypes.c_int() for _ in range(4)]
         dims(*[ctypes.byref(s) for s in sizes])
         got = tuple(s.value for s in sizes)
-        if got != (NX, NW, NP, NY):
+        want = (layout.nx, len(layout.input_names), len(layout.parameter_names), len(layout.output_names))
+        if got != want:
             raise RuntimeError(
-                f"{model.path} has dimensions (nx, nw, np, ny) = {got}, the model has {(NX, NW, NP, NY)}; "
-                "rebuild it with `hptvsim fmu build`"
+                f"{model.path} has dimensions (nx, nw, np, ny) = {got}, the {layout.dof}-DOF model has "
+                f"{want}; rebuild it with `hptvsim fmu build`"
             )
         start = []
-        for name in MODEL_PARAMETER_NAMES:
+        for name in layout.parameter_names:
             value = model.variable(name, causality=("parameter",)).start
             if value is None:
                 raise RuntimeError(f"{model.path}: parameter {name!r} has no start value")
@@ -134,26 +136,30 @@ class VehicleLibrary:
         return cls.for_path(fmu_path(vehicle_type))
 
     @classmethod
-    def for_vehicle(cls, vehicle: VehicleType) -> VehicleLibrary:
-        """The library of any vehicle type's FMU (:func:`hptvsim.fmu.fmu_for`: shipped or generated)."""
-        from hptvsim.fmu import fmu_for
+    def for_vehicle(cls, vehicle: VehicleType, layout: Layout = PLANAR_LAYOUT) -> VehicleLibrary:
+        """The library of a vehicle type's FMU: :func:`hptvsim.fmu.fmu_for`, or the 6-DOF one.
 
-        return cls.for_path(fmu_for(vehicle))
+        For ``layout.dof = 6`` it is the shipped 6-DOF FMU of a built-in type.
+        """
+        from hptvsim.fmu import fmu_for, fmu_path
+
+        path = fmu_path(vehicle.name, dof=6) if layout.dof == 6 else fmu_for(vehicle)
+        return cls.for_path(path, layout)
 
     @classmethod
-    def for_path(cls, path: Path) -> VehicleLibrary:
+    def for_path(cls, path: Path, layout: Layout = PLANAR_LAYOUT) -> VehicleLibrary:
         """The library of a vehicle FMU file, loaded once per process."""
         model = load_model(path)
         key = str(model.unzip_dir)
         lib = cls._cache.get(key)
         if lib is None:
-            lib = cls(model)
+            lib = cls(model, layout)
             cls._cache[key] = lib
         return lib
 
     def check_rows(self, p: F64Array) -> tuple[int, str] | None:
         """Check parameter rows ``p (rows, NP)``; returns ``(row, why)`` of the first bad one."""
-        rows = np.ascontiguousarray(p, dtype=np.float64).reshape(-1, NP)
+        rows = np.ascontiguousarray(p, dtype=np.float64).reshape(-1, len(self.layout.parameter_names))
         why = ctypes.create_string_buffer(600)
         bad = self.check(len(rows), rows.ctypes.data, why, len(why))
         if bad == 0:
@@ -220,6 +226,10 @@ class BatchedVehicleSystem(VehicleSystem):
         n_all = spec.num_vehicles
         B = self.num_envs
         self.threads = max(1, int(threads if threads is not None else min(2, os.cpu_count() or 1)))
+        layout = spec.layout
+        self._nx, self._nw = layout.nx, len(layout.input_names)
+        self._np, self._ny = len(layout.parameter_names), len(layout.output_names)
+        NX, NW, NY = self._nx, self._nw, self._ny
         self._inputs = np.zeros((B, n_all, NW))
         self._outputs = np.zeros((B, n_all, NY))
         self._failed = np.zeros(B, dtype=bool)
@@ -234,7 +244,7 @@ class BatchedVehicleSystem(VehicleSystem):
         self._groups: list[_Group] = []
         for vt in types:
             t = vt.name
-            lib = VehicleLibrary.for_vehicle(vt)
+            lib = VehicleLibrary.for_vehicle(vt, layout)
             vehicles = np.array([k for k, v in enumerate(spec.vehicles) if v.vehicle == vt], dtype=np.intp)
             n = len(vehicles)
             contiguous = bool(np.all(np.diff(vehicles) == 1))
@@ -244,7 +254,7 @@ class BatchedVehicleSystem(VehicleSystem):
             base_p = np.tile(lib.start_parameters, (n, 1))
             for i, k in enumerate(vehicles):
                 for name, value in spec.vehicles[k].parameters.items():
-                    base_p[i, MODEL_PARAMETER_NAMES.index(name)] = value
+                    base_p[i, layout.parameter_names.index(name)] = value
             bad = lib.check_rows(base_p)
             if bad is not None:
                 raise ParameterError(f"vehicle {spec.vehicles[vehicles[bad[0]]].name!r}: {bad[1]}")
@@ -274,10 +284,10 @@ class BatchedVehicleSystem(VehicleSystem):
             g.lib.advance,
             g.lib.output,
             rows,
-            g.x.ctypes.data + row0 * NX * 8,
-            g.w.ctypes.data + row0 * NW * 8,
-            g.p.ctypes.data + row0 * NP * 8,
-            g.y.ctypes.data + row0 * NY * 8,
+            g.x.ctypes.data + row0 * self._nx * 8,
+            g.w.ctypes.data + row0 * self._nw * 8,
+            g.p.ctypes.data + row0 * self._np * 8,
+            g.y.ctypes.data + row0 * self._ny * 8,
             gi,
             row0,
         )
@@ -400,8 +410,9 @@ class BatchedVehicleSystem(VehicleSystem):
         out = []
         for g in self._groups:
             p = np.tile(g.base_p, (len(idx), 1, 1)) if from_base else g.p[idx].copy()
+            names = self.spec.layout.parameter_names
             for name, arr in params.items():
-                p[:, :, MODEL_PARAMETER_NAMES.index(name)] = arr[:, g.vehicles]
+                p[:, :, names.index(name)] = arr[:, g.vehicles]
             bad = g.lib.check_rows(p)
             if bad is not None:
                 b, i = divmod(bad[0], g.n)
@@ -423,11 +434,12 @@ class BatchedVehicleSystem(VehicleSystem):
         order = np.argsort(ids, kind="stable")
         idx = ids[order]
         k = len(idx)
-        init = np.zeros((k, self.num_vehicles, len(INIT_NAMES)))  # x_0, y_0, psi_0, u_0, v_0, r_0
+        size = self.spec.layout.pose_size  # 3: x_0, y_0, psi_0 then u_0, v_0, r_0; 6: 6 and 6
+        init = np.zeros((k, self.num_vehicles, 2 * size))
         if poses is not None:
-            init[:, :, 0:3] = self._per_vehicle("poses", poses, k, 3)[order]
+            init[:, :, 0:size] = self._per_vehicle("poses", poses, k, size)[order]
         if velocities is not None:
-            init[:, :, 3:6] = self._per_vehicle("velocities", velocities, k, 3)[order]
+            init[:, :, size : 2 * size] = self._per_vehicle("velocities", velocities, k, size)[order]
         params = {n: a[order] for n, a in self._parameter_arrays(parameters, k).items()}
         new_p = self._candidate_p(idx, params, from_base=True) if params else None
         runs = [(0, self.num_envs)] if env_ids is None else self._runs(idx)
@@ -440,16 +452,16 @@ class BatchedVehicleSystem(VehicleSystem):
             for gi, g in enumerate(self._groups):
                 g.p[envs] = g.base_p if new_p is None else new_p[gi][rel]
                 g.x[envs] = 0.0
-                g.x[envs, :, 0:6] = init[rel, g.sel]
+                g.x[envs, :, 0 : 2 * size] = init[rel, g.sel]
                 if not g.alias:
                     g.w[envs] = 0.0
                 r0 = start * g.n
                 g.lib.output(
                     count * g.n,
-                    g.x.ctypes.data + r0 * NX * 8,
-                    g.w.ctypes.data + r0 * NW * 8,
-                    g.p.ctypes.data + r0 * NP * 8,
-                    g.y.ctypes.data + r0 * NY * 8,
+                    g.x.ctypes.data + r0 * self._nx * 8,
+                    g.w.ctypes.data + r0 * self._nw * 8,
+                    g.p.ctypes.data + r0 * self._np * 8,
+                    g.y.ctypes.data + r0 * self._ny * 8,
                 )
                 if not g.alias:
                     self.outputs[envs, g.sel] = g.y[envs]
@@ -469,11 +481,10 @@ class BatchedVehicleSystem(VehicleSystem):
 
     def parameters(self, name: str) -> F64Array:
         """See :meth:`VehicleSystem.parameters`."""
-        if name not in MODEL_PARAMETER_NAMES:
-            raise ParameterError(
-                f"unknown vehicle parameter {name!r}; valid names: {', '.join(MODEL_PARAMETER_NAMES)}"
-            )
-        j = MODEL_PARAMETER_NAMES.index(name)
+        names = self.spec.layout.parameter_names
+        if name not in names:
+            raise ParameterError(f"unknown vehicle parameter {name!r}; valid names: {', '.join(names)}")
+        j = names.index(name)
         out = np.empty((self.num_envs, self.num_vehicles))
         for g in self._groups:
             out[:, g.vehicles] = g.p[:, :, j]
@@ -481,8 +492,11 @@ class BatchedVehicleSystem(VehicleSystem):
 
     @property
     def states(self) -> F64Array:
-        """Full states ``(B, N, 8)``: x, y, psi (not wrapped), u, v, r, and the controller integrators."""
-        out = np.empty((self.num_envs, self.num_vehicles, NX))
+        """Full states ``(B, N, 8)``: x, y, psi (not wrapped), u, v, r, and the controller integrators.
+
+        6-DOF: ``(B, N, 15)``: eta, nu and three integrators.
+        """
+        out = np.empty((self.num_envs, self.num_vehicles, self._nx))
         for g in self._groups:
             out[:, g.vehicles] = g.x
         return out

@@ -55,10 +55,21 @@ from hptvsim.cosim.orchestrator import Orchestrator, SimulationFailedError, Simu
 from hptvsim.cosim.vehicles import ExternalVehicleType
 from hptvsim.dynamics import (
     BUILTIN_VEHICLES,
+    FMU_NAMES,
     INPUT_NAMES,
-    MODEL_PARAMETER_NAMES,
     OUTPUT_NAMES,
+    PARAMETER_SPECS,
+    SIXDOF_CLOSED_LOOP_INPUT_NAMES,
+    SIXDOF_CLOSED_LOOP_OUTPUT_NAMES,
+    SIXDOF_CLOSED_LOOP_STATE_NAMES,
+    SIXDOF_CONTROLLER_PARAMETER_SPECS,
+    SIXDOF_CONTROLLER_TYPES,
+    SIXDOF_FMU_NAMES,
+    SIXDOF_PARAMETER_SPECS,
+    SIXDOF_VEHICLE_TYPES,
+    STATE_NAMES,
     ParameterError,
+    ParameterSpec,
     VehicleParameters,
     VehicleType,
 )
@@ -87,6 +98,93 @@ DEFAULT_H_MAX: Final = 0.01  # s, the FMUs' default largest internal step
 
 
 @dataclass(frozen=True, kw_only=True)
+class Layout:
+    """The arrays of one vehicle model: the planar 3-DOF model or the 6-DOF model.
+
+    Attributes:
+        dof: 3 or 6.
+        nx: State size of the generated C (pose, velocities, controller integrators).
+        input_names: Inputs, in array order (``w``).
+        output_names: Outputs, in array order (``y``).
+        init_names: Start parameters of the initial pose and velocities, in state order.
+        parameter_specs: Parameters of ``p``, in order.
+        commands: The action's inputs (``v_cmd, omega_cmd`` [, ``w_z_cmd``]).
+        currents: The current's inputs (north, east [, down]) [m/s] in {n}.
+        observation_size: Leading outputs that are pose and velocities.
+        fmu_names: FMU model identifier of each built-in vehicle type.
+    """
+
+    dof: int
+    nx: int
+    input_names: tuple[str, ...]
+    output_names: tuple[str, ...]
+    init_names: tuple[str, ...]
+    parameter_specs: tuple[ParameterSpec, ...]
+    commands: tuple[str, ...]
+    currents: tuple[str, ...]
+    observation_size: int
+    fmu_names: Mapping[str, str]
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        """Names of ``p``, in order."""
+        return tuple(s.name for s in self.parameter_specs)
+
+    @property
+    def pose_size(self) -> int:
+        """Values of a pose (``x, y, psi`` or ``x, y, z, phi, theta, psi``) and of a velocity."""
+        return len(self.init_names) // 2
+
+    def span(self, names: tuple[str, ...]) -> slice:
+        """The contiguous inputs ``names`` as a slice of the input axis."""
+        start = self.input_names.index(names[0])
+        if self.input_names[start : start + len(names)] != names:  # pragma: no cover - a layout bug
+            raise AssertionError(f"{names} are not contiguous inputs")
+        return slice(start, start + len(names))
+
+    def base_parameters(self, vehicle: VehicleType) -> dict[str, float]:
+        """A vehicle type's parameter values by name (its 6-DOF sets for ``dof = 6``)."""
+        if self.dof == 3:
+            return vehicle.parameters.as_dict()
+        return {
+            **SIXDOF_VEHICLE_TYPES[vehicle.name].as_dict(),
+            **SIXDOF_CONTROLLER_TYPES[vehicle.name].as_dict(),
+        }
+
+
+PLANAR_LAYOUT: Final = Layout(
+    dof=3,
+    nx=len(STATE_NAMES),
+    input_names=INPUT_NAMES,
+    output_names=OUTPUT_NAMES,
+    init_names=INIT_NAMES,
+    parameter_specs=PARAMETER_SPECS,
+    commands=("v_cmd", "omega_cmd"),
+    currents=("current_x", "current_y"),
+    observation_size=6,
+    fmu_names=FMU_NAMES,
+)
+"""The planar model (paper Eqs. 4-8, 15-16): ``(B, N, 7)`` inputs, ``(B, N, 9)`` outputs."""
+
+SIXDOF_LAYOUT: Final = Layout(
+    dof=6,
+    nx=len(SIXDOF_CLOSED_LOOP_STATE_NAMES),
+    input_names=SIXDOF_CLOSED_LOOP_INPUT_NAMES,
+    output_names=SIXDOF_CLOSED_LOOP_OUTPUT_NAMES,
+    init_names=tuple(f"{n}_0" for n in SIXDOF_CLOSED_LOOP_STATE_NAMES[:12]),
+    parameter_specs=SIXDOF_PARAMETER_SPECS + SIXDOF_CONTROLLER_PARAMETER_SPECS,
+    commands=("v_cmd", "omega_cmd", "w_z_cmd"),
+    currents=("current_x", "current_y", "current_z"),
+    observation_size=12,
+    fmu_names=SIXDOF_FMU_NAMES,
+)
+"""The 6-DOF closed loop (:func:`hptvsim.dynamics.sixdof_closed_loop`): ``(B, N, 6)`` inputs,
+``(B, N, 17)`` outputs."""
+
+LAYOUTS: Final = MappingProxyType({3: PLANAR_LAYOUT, 6: SIXDOF_LAYOUT})
+
+
+@dataclass(frozen=True, kw_only=True)
 class VehicleSpec:
     """One vehicle of the system.
 
@@ -97,6 +195,7 @@ class VehicleSpec:
             :func:`hptvsim.cosim.vehicles.load_vehicle_file`); stored as the type's name.
         parameters: Overrides of the type's parameters (e.g. ``{"v_max": 2.5}``), applied at
             every reset.
+        dof: 3 (the planar model) or 6 (the 6-DOF model; built-in types only).
         vehicle: The resolved :class:`~hptvsim.dynamics.VehicleType`.
 
     Raises:
@@ -107,6 +206,7 @@ class VehicleSpec:
     name: str
     type: str | VehicleType
     parameters: Mapping[str, float] = field(default_factory=dict)
+    dof: int = 3
     vehicle: VehicleType = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -128,17 +228,39 @@ class VehicleSpec:
                 f"vehicle {self.name!r} is an external FMU ({vehicle.fmu.name}); its parameters are its "
                 "own: set them in its vehicle file's [fmu.start]"
             )
-        try:
-            VehicleParameters.from_mapping(self.parameters, base=vehicle.parameters)
-        except ParameterError as exc:
-            raise ParameterError(f"vehicle {self.name!r}: {exc}") from None
+        if self.dof not in LAYOUTS:
+            raise ParameterError(f"vehicle {self.name!r}: dof = {self.dof!r} is invalid (valid: 3, 6)")
+        if self.dof == 6:
+            if not vehicle.builtin:
+                raise ParameterError(
+                    f"vehicle {self.name!r}: 6-DOF vehicles are the built-in types "
+                    f"({', '.join(SIXDOF_FMU_NAMES)})"
+                )
+            specs = {sp.name: sp for sp in SIXDOF_LAYOUT.parameter_specs}
+            for name, value in self.parameters.items():
+                spec = specs.get(name)
+                if spec is None:
+                    raise ParameterError(
+                        f"vehicle {self.name!r}: unknown 6-DOF parameter {name!r}; valid names: "
+                        f"{', '.join(specs)}"
+                    )
+                why = spec.check(float(value))
+                if why:
+                    raise ParameterError(f"vehicle {self.name!r}: {why}")
+        else:
+            try:
+                VehicleParameters.from_mapping(self.parameters, base=vehicle.parameters)
+            except ParameterError as exc:
+                raise ParameterError(f"vehicle {self.name!r}: {exc}") from None
         object.__setattr__(
             self, "parameters", MappingProxyType({k: float(v) for k, v in self.parameters.items()})
         )
 
     @property
     def parameter_values(self) -> VehicleParameters:
-        """The vehicle's parameters: its type's, with the overrides applied."""
+        """The vehicle's planar parameters: its type's, with the overrides applied."""
+        if self.dof != 3:
+            raise ValueError(f"vehicle {self.name!r} is a 6-DOF vehicle; see layout.base_parameters")
         return VehicleParameters.from_mapping(self.parameters, base=self.vehicle.parameters)
 
 
@@ -169,6 +291,16 @@ class SystemSpec:
             value = getattr(self, attr)
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"{attr} = {value} is invalid (valid: a finite number > 0 [s])")
+        dofs = sorted({v.dof for v in self.vehicles})
+        if len(dofs) > 1:
+            raise ValueError(
+                f"a system's vehicles share one model; got dof {dofs} (make them all 3 or all 6)"
+            )
+
+    @property
+    def layout(self) -> Layout:
+        """The arrays' layout of the vehicles' model."""
+        return LAYOUTS[self.vehicles[0].dof]
 
     @property
     def num_vehicles(self) -> int:
@@ -192,10 +324,14 @@ class SystemSpec:
             raise ValueError(f"unknown key(s) {unknown} in a system spec (valid: vehicles, step_size, h_max)")
         vehicles = []
         for k, v in enumerate(data.get("vehicles", [])):
-            bad = sorted(set(v) - {"name", "type", "parameters"})
+            bad = sorted(set(v) - {"name", "type", "parameters", "dof"})
             if bad:
-                raise ValueError(f"vehicles[{k}]: unknown key(s) {bad} (valid: name, type, parameters)")
-            vehicles.append(VehicleSpec(name=v["name"], type=v["type"], parameters=v.get("parameters", {})))
+                raise ValueError(f"vehicles[{k}]: unknown key(s) {bad} (valid: name, type, parameters, dof)")
+            vehicles.append(
+                VehicleSpec(
+                    name=v["name"], type=v["type"], parameters=v.get("parameters", {}), dof=v.get("dof", 3)
+                )
+            )
         return cls(
             vehicles=tuple(vehicles),
             step_size=float(data.get("step_size", 0.25)),
@@ -207,8 +343,12 @@ def _component_name(env: int, vehicle: str) -> str:
     return f"e{env}_{vehicle}"
 
 
-def _component_fmu(vehicle: VehicleType) -> str:
+def _component_fmu(vehicle: VehicleType, dof: int = 3) -> str:
     """The graph's ``fmu`` of a vehicle type: a shipped one by name, else a file's path."""
+    if dof == 6:
+        from hptvsim.fmu import fmu_path
+
+        return str(fmu_path(vehicle.name, dof=6))
     if vehicle.builtin:
         return f"vehicle:{vehicle.name}"
     if isinstance(vehicle, ExternalVehicleType):
@@ -232,6 +372,7 @@ def vehicle_graph(spec: SystemSpec, num_envs: int = 1) -> Graph:
     components = []
     inputs = []
     outputs = []
+    layout = spec.layout
     for b in range(num_envs):
         for v in spec.vehicles:
             comp = _component_name(b, v.name)
@@ -241,13 +382,14 @@ def vehicle_graph(spec: SystemSpec, num_envs: int = 1) -> Graph:
                 in_map, out_map = dict(vt.inputs), dict(vt.outputs)
             else:
                 params = {**v.parameters, "h_max": spec.h_max}
-                in_map, out_map = {n: n for n in INPUT_NAMES}, {n: n for n in OUTPUT_NAMES}
-            components.append(Component(name=comp, fmu=_component_fmu(vt), parameters=params))
-            for name in INPUT_NAMES:
+                in_map = {n: n for n in layout.input_names}
+                out_map = {n: n for n in layout.output_names}
+            components.append(Component(name=comp, fmu=_component_fmu(vt, v.dof), parameters=params))
+            for name in layout.input_names:
                 if name in in_map:
                     port = Port(component=comp, variable=in_map[name])
                     inputs.append(ExternalInput(name=f"e{b}/{v.name}/{name}", targets=(port,), start=0.0))
-            for name in OUTPUT_NAMES:
+            for name in layout.output_names:
                 if name in out_map:
                     port = Port(component=comp, variable=out_map[name])
                     outputs.append(ExternalOutput(name=f"e{b}/{v.name}/{name}", source=port))
@@ -280,6 +422,8 @@ class VehicleSystem(abc.ABC):
         self.spec = spec
         self.num_envs = int(num_envs)
         self._paused = False
+        self._commands = spec.layout.span(spec.layout.commands)
+        self._currents = spec.layout.span(spec.layout.currents)
         self.time = np.zeros(self.num_envs)
         """Simulated time [s] of each sub-environment since its last reset."""
 
@@ -301,29 +445,40 @@ class VehicleSystem(abc.ABC):
         return tuple(v.vehicle.name for v in self.spec.vehicles)
 
     @property
+    def layout(self) -> Layout:
+        """The arrays' layout (:data:`PLANAR_LAYOUT` or :data:`SIXDOF_LAYOUT`)."""
+        return self.spec.layout
+
+    @property
     def inputs(self) -> F64Array:
-        """``(B, N, 7)`` inputs (:data:`INPUT_NAMES`); write into it before :meth:`step`."""
+        """``(B, N, 7)`` inputs (:data:`INPUT_NAMES`; 6-DOF: ``(B, N, 6)``); write before :meth:`step`."""
         return self._inputs
 
     @property
     def outputs(self) -> F64Array:
-        """``(B, N, 9)`` outputs (:data:`OUTPUT_NAMES`), refreshed by :meth:`step` and :meth:`reset`."""
+        """``(B, N, 9)`` outputs (:data:`OUTPUT_NAMES`; 6-DOF: 17), refreshed by step and reset."""
         return self._outputs
 
     @property
     def commands(self) -> F64Array:
-        """``(B, N, 2)`` view of :attr:`inputs`: ``v_cmd`` [m/s], ``omega_cmd`` [rad/s] (Eq. 16)."""
-        return self.inputs[:, :, 0:2]
+        """``(B, N, 2)`` view of :attr:`inputs`: ``v_cmd`` [m/s], ``omega_cmd`` [rad/s] (Eq. 16).
+
+        6-DOF: ``(B, N, 3)``, with ``w_z_cmd`` [m/s] (vertical speed, down positive).
+        """
+        return self.inputs[:, :, self._commands]
 
     @property
     def currents(self) -> F64Array:
-        """``(B, N, 2)`` view of :attr:`inputs`: ocean current north and east [m/s] in {n}."""
-        return self.inputs[:, :, 5:7]
+        """``(B, N, 2)`` view of :attr:`inputs`: current north and east [m/s] in {n} (6-DOF: and down)."""
+        return self.inputs[:, :, self._currents]
 
     @property
     def observations(self) -> F64Array:
-        """``(B, N, 6)`` view of :attr:`outputs`: x, y [m], psi [rad], u, v [m/s], r [rad/s]."""
-        return self.outputs[:, :, 0:6]
+        """``(B, N, 6)`` view of :attr:`outputs`: x, y [m], psi [rad], u, v [m/s], r [rad/s].
+
+        6-DOF: ``(B, N, 12)``: x, y, z [m], phi, theta, psi [rad], u, v, w [m/s], p, q, r [rad/s].
+        """
+        return self.outputs[:, :, 0 : self.spec.layout.observation_size]
 
     @property
     def paused(self) -> bool:
@@ -384,14 +539,10 @@ class VehicleSystem(abc.ABC):
         if not parameters:
             return {}
         out: dict[str, F64Array] = {}
-        from hptvsim.dynamics import PARAMETER_SPECS
-
-        specs = {s.name: s for s in PARAMETER_SPECS}
+        specs = {s.name: s for s in self.spec.layout.parameter_specs}
         for name, value in parameters.items():
             if name not in specs:
-                raise ParameterError(
-                    f"unknown vehicle parameter {name!r}; valid names: {', '.join(MODEL_PARAMETER_NAMES)}"
-                )
+                raise ParameterError(f"unknown vehicle parameter {name!r}; valid names: {', '.join(specs)}")
             arr = np.asarray(value, dtype=np.float64)
             try:
                 full = np.broadcast_to(arr, (k, self.num_vehicles)).copy()
@@ -419,7 +570,7 @@ class VehicleSystem(abc.ABC):
         if not np.isfinite(self.inputs).all():
             b, n, i = (int(j[0]) for j in np.nonzero(~np.isfinite(self.inputs)))
             raise ValueError(
-                f"env {b}, vehicle {self.vehicle_names[n]!r}: input '{INPUT_NAMES[i]}' = "
+                f"env {b}, vehicle {self.vehicle_names[n]!r}: input '{self.spec.layout.input_names[i]}' = "
                 f"{self.inputs[b, n, i]} is not finite"
             )
 
@@ -445,8 +596,10 @@ class VehicleSystem(abc.ABC):
 
         Args:
             env_ids: Sub-environments to reset: indices or a boolean mask (default: all).
-            poses: Initial ``x_0, y_0`` [m], ``psi_0`` [rad]; broadcastable to ``(k, N, 3)``.
-            velocities: Initial ``u_0, v_0`` [m/s], ``r_0`` [rad/s]; broadcastable to ``(k, N, 3)``.
+            poses: Initial ``x_0, y_0`` [m], ``psi_0`` [rad]; broadcastable to ``(k, N, 3)``
+                (6-DOF: ``x_0, y_0, z_0`` [m], ``phi_0, theta_0, psi_0`` [rad], ``(k, N, 6)``).
+            velocities: Initial ``u_0, v_0`` [m/s], ``r_0`` [rad/s]; broadcastable to ``(k, N, 3)``
+                (6-DOF: ``u_0, v_0, w_0`` [m/s], ``p_0, q_0, r_0`` [rad/s], ``(k, N, 6)``).
             parameters: Per-episode parameter values by name, each broadcastable to ``(k, N)``.
 
         Returns:
@@ -522,7 +675,9 @@ class FmuVehicleSystem(VehicleSystem):
         self.graph = vehicle_graph(spec, num_envs)
         self._orch = Orchestrator(self.graph)
         n = spec.num_vehicles
-        shape_in, shape_out = (num_envs, n, len(INPUT_NAMES)), (num_envs, n, len(OUTPUT_NAMES))
+        layout = spec.layout
+        names_in, names_out = layout.input_names, layout.output_names
+        shape_in, shape_out = (num_envs, n, len(names_in)), (num_envs, n, len(names_out))
         self._external = frozenset(
             k for k, v in enumerate(spec.vehicles) if isinstance(v.vehicle, ExternalVehicleType)
         )
@@ -539,13 +694,11 @@ class FmuVehicleSystem(VehicleSystem):
             env, vehicle, signal = name.split("/")
             return int(np.ravel_multi_index((int(env[1:]), order[vehicle], signals.index(signal)), shape))
 
-        self._in_idx = np.array(
-            [flat(x.name, INPUT_NAMES, shape_in) for x in self.graph.inputs], dtype=np.intp
-        )
+        self._in_idx = np.array([flat(x.name, names_in, shape_in) for x in self.graph.inputs], dtype=np.intp)
         self._out_idx = np.array(
-            [flat(x.name, OUTPUT_NAMES, shape_out) for x in self.graph.outputs], dtype=np.intp
+            [flat(x.name, names_out, shape_out) for x in self.graph.outputs], dtype=np.intp
         )
-        psi = OUTPUT_NAMES.index("psi")
+        psi = names_out.index("psi")
         self._wrap_idx = np.array(
             [
                 np.ravel_multi_index((e, k, psi), shape_out)
@@ -610,12 +763,14 @@ class FmuVehicleSystem(VehicleSystem):
         """See :meth:`VehicleSystem.reset`."""
         idx = self._env_index(env_ids)
         k = len(idx)
-        pose = self._per_vehicle("poses", poses, k, 3)
-        vel = self._per_vehicle("velocities", velocities, k, 3)
+        size = self.spec.layout.pose_size
+        pose = self._per_vehicle("poses", poses, k, size)
+        vel = self._per_vehicle("velocities", velocities, k, size)
         params = self._parameter_arrays(parameters, k)
         values: dict[str, dict[str, float]] = {}
         names: list[str] = []
         external = self._external
+        init_names = self.spec.layout.init_names
         for i, b in enumerate(idx):
             for n, comp in enumerate(self._components(int(b))):
                 init = np.concatenate([pose[i, n], vel[i, n]])
@@ -623,7 +778,7 @@ class FmuVehicleSystem(VehicleSystem):
                     values[comp] = self._external_start(n, init, params, i)
                     names.append(comp)
                     continue
-                v = {name: float(x) for name, x in zip(INIT_NAMES, init, strict=True)}
+                v = {name: float(x) for name, x in zip(init_names, init, strict=True)}
                 v.update({name: float(arr[i, n]) for name, arr in params.items()})
                 values[comp] = v
                 names.append(comp)
@@ -662,10 +817,9 @@ class FmuVehicleSystem(VehicleSystem):
 
     def parameters(self, name: str) -> F64Array:
         """See :meth:`VehicleSystem.parameters` (an external FMU's: its type's limits, else NaN)."""
-        if name not in MODEL_PARAMETER_NAMES:
-            raise ParameterError(
-                f"unknown vehicle parameter {name!r}; valid names: {', '.join(MODEL_PARAMETER_NAMES)}"
-            )
+        names = self.spec.layout.parameter_names
+        if name not in names:
+            raise ParameterError(f"unknown vehicle parameter {name!r}; valid names: {', '.join(names)}")
         out = np.empty((self.num_envs, self.num_vehicles))
         for b in range(self.num_envs):
             for n, comp in enumerate(self._components(b)):
