@@ -6,7 +6,9 @@
   :class:`GeometricSonar` (batched ray casts, compiled kernel) and :class:`SignalSonar`
   (echoes, the matched filter of Eq. 1, the spatial periodogram of Eq. 2);
 * :class:`GaussMarkov`: the error model of Eq. 3;
-* :class:`AcousticLink`: the IoUT link that reports the target's position (section IV-A).
+* :class:`AcousticLink`: the IoUT link that reports the target's position (section IV-A);
+* :class:`Sonar3d`, :class:`GeometricSonar3d`, :class:`Sonar3dConfig`: the 3-D multibeam sonar
+  (azimuth x elevation beams ray-marched against the seabed, Eq. 3 per beam) of the 3-D game.
 
 The classes other than the settings are imported on first use, so that importing the settings
 (as the scenario loader and the command line do) stays cheap.
@@ -24,6 +26,7 @@ if TYPE_CHECKING:
     from hptvsim.sensors.errors import GaussMarkov
     from hptvsim.sensors.signal import SignalSonar
     from hptvsim.sensors.sonar import GeometricSonar, Sonar, SonarScan, vehicle_radii
+    from hptvsim.sensors.sonar3d import GeometricSonar3d, Sonar3d, Sonar3dConfig, Sonar3dScan
 
 __all__ = [
     "AcousticLink",
@@ -31,8 +34,12 @@ __all__ = [
     "GaussMarkov",
     "GaussMarkovConfig",
     "GeometricSonar",
+    "GeometricSonar3d",
     "SignalSonar",
     "Sonar",
+    "Sonar3d",
+    "Sonar3dConfig",
+    "Sonar3dScan",
     "SonarConfig",
     "SonarScan",
     "vehicle_radii",
@@ -46,6 +53,10 @@ _LAZY = {
     "Sonar": "hptvsim.sensors.sonar",
     "SonarScan": "hptvsim.sensors.sonar",
     "vehicle_radii": "hptvsim.sensors.sonar",
+    "GeometricSonar3d": "hptvsim.sensors.sonar3d",
+    "Sonar3d": "hptvsim.sensors.sonar3d",
+    "Sonar3dConfig": "hptvsim.sensors.sonar3d",
+    "Sonar3dScan": "hptvsim.sensors.sonar3d",
 }
 
 
