@@ -258,7 +258,69 @@ class SonarScan:
     hit_points: F64
 
 
-class GeometricSonar:
+class _Caster:
+    """What the planar and the 3-D geometric sonars share: checking poses, radii and activity.
+
+    Subclasses set ``_last_radii`` (the last radii given and their checked copy).
+    """
+
+    _last_radii: tuple[object, F64 | None]
+    _MAX_VEHICLES: int | None = None
+
+    def _check_poses(
+        self,
+        poses: npt.ArrayLike,
+        radii: npt.ArrayLike | None,
+        active: npt.ArrayLike | None,
+        what: str,
+        detect: bool,
+    ) -> tuple[F64, F64 | None, Bool | None]:
+        """Poses ``(B, N, len(what))`` as contiguous floats, the radii (cached) and the mask.
+
+        Args:
+            poses: The poses.
+            radii: Every agent's radius [m] (used when ``detect``).
+            active: Which agents cast.
+            what: The pose's names, e.g. ``"[x, y, psi]"``.
+            detect: Whether the sonar sees other vehicles.
+        """
+        width = what.count(",") + 1
+        p = (
+            poses
+            if type(poses) is np.ndarray and poses.dtype == np.float64
+            else np.asarray(poses, np.float64)
+        )
+        if not p.flags.c_contiguous:
+            p = np.ascontiguousarray(p)
+        if p.ndim != 3 or p.shape[2] != width:
+            raise ValueError(f"poses must have shape (B, N, {width}) = {what}; got {p.shape}")
+        n = p.shape[1]
+        if not np.isfinite(p.sum()):  # one reduction; the slow search only on failure
+            bad = np.argwhere(~np.isfinite(p).all(axis=2))[0]
+            raise ValueError(f"poses hold a non-finite value (environment {bad[0]}, agent {bad[1]})")
+        r: F64 | None = None
+        if radii is not None and detect:
+            last, checked = self._last_radii
+            if checked is not None and checked.shape == (n,) and _same_values(radii, last, checked):
+                r = checked
+            else:
+                r = np.array(radii, dtype=np.float64)  # a private copy: the caller may mutate theirs
+                if r.shape != (n,) or not (np.isfinite(r).all() and (r >= 0.0).all()):
+                    raise ValueError(f"radii must be {n} finite radii >= 0 [m], one per agent; got {r!r}")
+                if self._MAX_VEHICLES is not None and n > self._MAX_VEHICLES:
+                    raise ValueError(
+                        f"this sonar detects at most {self._MAX_VEHICLES} vehicles per environment, got {n}"
+                    )
+                self._last_radii = (radii, r)
+        a: Bool | None = None
+        if active is not None:
+            a = np.ascontiguousarray(active, dtype=np.bool_)
+            if a.shape != p.shape[:2]:
+                raise ValueError(f"active must have shape (B, N) = {p.shape[:2]}; got {a.shape}")
+        return p, r, a
+
+
+class GeometricSonar(_Caster):
     """Batched multi-beam sonar ray casts (the geometric fidelity).
 
     Args:
@@ -322,34 +384,8 @@ class GeometricSonar:
         active: npt.ArrayLike | None,
         sensing: npt.ArrayLike | None,
     ) -> tuple[F64, F64 | None, Bool | None, I64 | None]:
-        p = (
-            poses
-            if type(poses) is np.ndarray and poses.dtype == np.float64
-            else np.asarray(poses, np.float64)
-        )
-        if not p.flags.c_contiguous:
-            p = np.ascontiguousarray(p)
-        if p.ndim != 3 or p.shape[2] != 3:
-            raise ValueError(f"poses must have shape (B, N, 3) = [x, y, psi]; got {p.shape}")
+        p, r, a = self._check_poses(poses, radii, active, "[x, y, psi]", self.config.detect_vehicles)
         n = p.shape[1]
-        if not np.isfinite(p.sum()):  # one reduction; the slow search only on failure
-            bad = np.argwhere(~np.isfinite(p).all(axis=2))[0]
-            raise ValueError(f"poses hold a non-finite value (environment {bad[0]}, agent {bad[1]})")
-        r: F64 | None = None
-        if radii is not None and self.config.detect_vehicles:
-            last, checked = self._last_radii
-            if checked is not None and checked.shape == (n,) and _same_values(radii, last, checked):
-                r = checked
-            else:
-                r = np.array(radii, dtype=np.float64)  # a private copy: the caller may mutate theirs
-                if r.shape != (n,) or not (np.isfinite(r).all() and (r >= 0.0).all()):
-                    raise ValueError(f"radii must be {n} finite radii >= 0 [m], one per agent; got {r!r}")
-                self._last_radii = (radii, r)
-        a: Bool | None = None
-        if active is not None:
-            a = np.ascontiguousarray(active, dtype=np.bool_)
-            if a.shape != p.shape[:2]:
-                raise ValueError(f"active must have shape (B, N) = {p.shape[:2]}; got {a.shape}")
         idx: I64 | None = None
         if sensing is not None:
             last_s, checked_s = self._last_sensing

@@ -73,10 +73,10 @@ from hptvsim.sensors.sonar import (
     _PARALLEL_MIN_RAYS,
     HIT_NOTHING,
     HIT_TERRAIN,
+    _Caster,
     _default_threads,
     _libm_cos,
     _libm_sin,
-    _same_values,
     _thread_pool,
     beam_angles,
 )
@@ -373,7 +373,7 @@ class Sonar3dScan:
     hit_points: F64
 
 
-class GeometricSonar3d:
+class GeometricSonar3d(_Caster):
     """Batched 3-D multibeam sonar ray casts against a height map and other vehicles.
 
     Args:
@@ -385,6 +385,8 @@ class GeometricSonar3d:
     Attributes:
         directions: ``(K, 3)`` body-frame unit vectors of the beams (:func:`beam_directions`).
     """
+
+    _MAX_VEHICLES = _MAX_VEHICLES
 
     def __init__(
         self,
@@ -441,39 +443,9 @@ class GeometricSonar3d:
     def _check(
         self, poses: npt.ArrayLike, radii: npt.ArrayLike | None, active: npt.ArrayLike | None
     ) -> tuple[F64, F64 | None, Bool | None]:
-        p = (
-            poses
-            if type(poses) is np.ndarray and poses.dtype == np.float64
-            else np.asarray(poses, np.float64)
+        return self._check_poses(
+            poses, radii, active, "[x, y, z, phi, theta, psi]", self.config.detect_vehicles
         )
-        if not p.flags.c_contiguous:
-            p = np.ascontiguousarray(p)
-        if p.ndim != 3 or p.shape[2] != 6:
-            raise ValueError(f"poses must have shape (B, N, 6) = [x, y, z, phi, theta, psi]; got {p.shape}")
-        n = p.shape[1]
-        if not np.isfinite(p.sum()):  # one reduction; the slow search only on failure
-            bad = np.argwhere(~np.isfinite(p).all(axis=2))[0]
-            raise ValueError(f"poses hold a non-finite value (environment {bad[0]}, agent {bad[1]})")
-        r: F64 | None = None
-        if radii is not None and self.config.detect_vehicles:
-            last, checked = self._last_radii
-            if checked is not None and checked.shape == (n,) and _same_values(radii, last, checked):
-                r = checked
-            else:
-                r = np.array(radii, dtype=np.float64)  # a private copy: the caller may mutate theirs
-                if r.shape != (n,) or not (np.isfinite(r).all() and (r >= 0.0).all()):
-                    raise ValueError(f"radii must be {n} finite radii >= 0 [m], one per agent; got {r!r}")
-                if n > _MAX_VEHICLES:
-                    raise ValueError(
-                        f"the 3-D sonar detects at most {_MAX_VEHICLES} vehicles per environment, got {n}"
-                    )
-                self._last_radii = (radii, r)
-        a: Bool | None = None
-        if active is not None:
-            a = np.ascontiguousarray(active, dtype=np.bool_)
-            if a.shape != p.shape[:2]:
-                raise ValueError(f"active must have shape (B, N) = {p.shape[:2]}; got {a.shape}")
-        return p, r, a
 
     def ranges(
         self,
