@@ -17,7 +17,7 @@ from __future__ import annotations
 import csv
 import json
 from collections import defaultdict
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -120,6 +120,23 @@ def _labels(run_dirs: Sequence[Path], labels: Sequence[str] | None) -> list[str]
     return list(labels) if labels is not None else [run_label(r) for r in run_dirs]
 
 
+def stage_segments(runs: Sequence[Mapping[tuple[int, str], Any]]) -> list[str]:
+    """The stages of several runs by name, in curriculum order, each name once.
+
+    A stage of the same name is one segment for every run, wherever it stands in that run's
+    curriculum: a run trained in the target scenario alone is drawn over the STT runs' target
+    stage. The order is each name's latest place in any curriculum (the longest one decides).
+
+    Args:
+        runs: Per run, its episode returns keyed by ``(stage index, stage name)``.
+    """
+    last: dict[str, int] = {}
+    for r in runs:
+        for index, name in r:
+            last[name] = max(last.get(name, index), index)
+    return sorted(last, key=lambda name: (last[name], name))
+
+
 def reward_curves(
     run_dirs: Sequence[Path],
     out: Path,
@@ -152,24 +169,25 @@ def reward_curves(
     groups: dict[str, list[dict[tuple[int, str], dict[str, list[float]]]]] = defaultdict(list)
     for run, label in zip(run_dirs, _labels(run_dirs, labels), strict=True):
         groups[label].append(episode_returns(run))
-    all_stages = sorted({k for runs in groups.values() for r in runs for k in r})
+    all_stages = stage_segments([r for runs in groups.values() for r in runs])
     if stages is not None:
-        all_stages = [k for k in all_stages if k[1] in stages]
-    roles = sorted(
-        {role for runs in groups.values() for r in runs for k in all_stages for role in r.get(k, {})}
-    )
+        all_stages = [name for name in all_stages if name in stages]
+
+    def of(r: dict[tuple[int, str], dict[str, list[float]]], name: str) -> dict[str, list[float]]:
+        return next((v for (_, n), v in r.items() if n == name), {})
+
+    roles = sorted({role for runs in groups.values() for r in runs for k in all_stages for role in of(r, k)})
     names = {"pursuer": "UUVs (pursuers)", "evader": "spherical robot (evader)"}
     out.mkdir(parents=True, exist_ok=True)
     written = []
     for role in roles:
         fig, ax = plt.subplots(figsize=(8, 4.4))
         offset = 0
-        for s_idx, (stage_index, stage) in enumerate(all_stages):
+        labelled: set[str] = set()
+        for s_idx, stage in enumerate(all_stages):
             n_max = 0
             for g_idx, (label, runs) in enumerate(groups.items()):
-                series = [
-                    r[(stage_index, stage)][role] for r in runs if role in r.get((stage_index, stage), {})
-                ]
+                series = [of(r, stage)[role] for r in runs if role in of(r, stage)]
                 if not series:
                     continue
                 arr = _stack(series, smooth)
@@ -182,8 +200,11 @@ def reward_curves(
                     x,
                     mean,
                     color=color,
-                    label=f"{label} ({len(series)} seed{'s' * (len(series) > 1)})" if s_idx == 0 else None,
+                    label=None
+                    if label in labelled
+                    else f"{label} ({len(series)} seed{'s' * (len(series) > 1)})",
                 )
+                labelled.add(label)
                 if len(series) > 1:
                     ax.fill_between(x, mean - half, mean + half, color=color, alpha=0.2, linewidth=0)
             if s_idx > 0:
@@ -199,7 +220,8 @@ def reward_curves(
                 linespacing=0.9,
             )
             offset += n_max
-        ax.set_xlabel("training episode (all stages in order)")
+        only = f"training episode in stage {all_stages[0]}" if len(all_stages) == 1 else ""
+        ax.set_xlabel(only or "training episode (all stages in order)")
         ax.set_ylabel("average total reward per episode (dimensionless)")
         fig_no = {"pursuer": "Figs. 7, 9", "evader": "Figs. 8, 10"}.get(role, "")
         ax.set_title(f"{names.get(role, role)}: mean over seeds, 95 % band (paper {fig_no})", pad=22)
@@ -334,21 +356,27 @@ def final_reward_bars(
     )
     x = np.arange(len(groups))
     colors = [f"C{i}" for i in range(len(groups))]
+    seeds = {g: min((len(per[g][r]) for r in roles if per[g][r]), default=0) for g in groups}
+    ticks = [f"{g}\n(n = {seeds[g]})" for g in groups]
     for r_idx, role in enumerate(roles):
         for c_idx, what in enumerate(("mean", "variance")):
             ax = axes[r_idx, c_idx]
             vals = [np.asarray([v[c_idx] for v in per[g][role]]) for g in groups]
             heights = [v.mean() if v.size else np.nan for v in vals]
-            errs = [_t_half(v[:, None])[0] if v.size > 1 else 0.0 for v in vals]
+            # one seed has no interval: no error bar rather than a zero-width one
+            errs = [_t_half(v[:, None])[0] if v.size > 1 else np.nan for v in vals]
             ax.bar(x, heights, 0.6, yerr=errs, capsize=4, color=colors, edgecolor="black", linewidth=0.5)
-            ax.set_xticks(x, groups, rotation=15, fontsize=8)
+            ax.set_xticks(x, ticks, rotation=15, fontsize=8)
             ax.set_ylabel(f"{what} of total reward (dimensionless)", fontsize=8)
             ax.set_title(f"{short.get(role, role)}: {what}, {where}", fontsize=9)
             ax.grid(alpha=0.3, axis="y")
             ax.axhline(0, color="black", linewidth=0.6)
     fig.tight_layout(rect=(0, 0.04, 1, 0.95))
     fig.suptitle("Mean and variance of the final total reward (paper Fig. 11)", fontsize=10)
-    _caption(fig, (caption + "; " if caption else "") + "bars: mean over seeds, error bars: 95 % t interval")
+    bars = "bars: mean over seeds, error bars: 95 % t interval"
+    if any(n < 2 for n in seeds.values()):
+        bars += " (none where n = 1: one seed has no interval)"
+    _caption(fig, (caption + "; " if caption else "") + bars)
     out.mkdir(parents=True, exist_ok=True)
     path = out / "final_reward_mean_variance.png"
     fig.savefig(path, dpi=120)
