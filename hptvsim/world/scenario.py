@@ -522,6 +522,14 @@ class VehicleGroup:
     )
     goal: Goal | None = spec(None, doc="this group's goto target point (default: task.goal)")
     sonar: SonarConfig | None = spec(None, doc="this group's sonar (default: [sensors.sonar])")
+    depth: tuple[float, float] | None = spec(
+        None,
+        doc="start depth range (min, max) in the 3-D game (default: site.operating_depth); the "
+        "planar game keeps every vehicle at site.operating_depth",
+        unit="m",
+        ge=0.0,
+        le=MAX_DEPTH,
+    )
     vehicle: VehicleType = field(init=False, repr=False, compare=False)
     """The resolved vehicle type (built-in, or read from ``vehicle_file``)."""
 
@@ -554,6 +562,12 @@ class VehicleGroup:
         else:
             vt = BUILTIN_VEHICLES[self.type]
         object.__setattr__(self, "vehicle", vt)
+        if self.depth is not None and not self.depth[0] <= self.depth[1]:
+            raise FieldValueError(
+                "depth",
+                f"({self.depth[0]:g}, {self.depth[1]:g}) is empty: the first value must not exceed "
+                "the second",
+            )
         if self.parameters and isinstance(vt, ExternalVehicleType):
             raise FieldValueError(
                 "parameters",
@@ -633,6 +647,16 @@ class World:
         inside an obstacle or outside the site).
         """
         result: F64 = np.minimum(self.obstacles.distance(xy), self.site.boundary_distance(xy))
+        return result
+
+    def altitude(self, xyz: npt.ArrayLike) -> F64:
+        """Height [m] above the seabed of points ``xyz[..., 3]`` (north, east, depth down).
+
+        The seabed is the height map's bilinear surface (clamped outside the grid), the one the
+        3-D sonar sees; negative below it.
+        """
+        p = np.asarray(xyz, dtype=np.float64)
+        result: F64 = self.heightmap.depth_at(p[..., 0:2]) - p[..., 2]
         return result
 
     def is_free(self, xy: npt.ArrayLike, radius: float = 0.0) -> Bool:
