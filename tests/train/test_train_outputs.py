@@ -192,8 +192,12 @@ def test_stages_of_different_curricula_share_a_segment_by_name() -> None:
     """A run trained in the target scenario alone is drawn over the STT runs' target stage."""
     from hptvsim.train.figures import stage_segments
 
-    stt = {(0, "source"): {}, (1, "transition"): {}, (2, "target"): {}}
-    target_only = {(0, "target"): {}}
+    stt: dict[tuple[int, str], dict[str, list[float]]] = {
+        (0, "source"): {},
+        (1, "transition"): {},
+        (2, "target"): {},
+    }
+    target_only: dict[tuple[int, str], dict[str, list[float]]] = {(0, "target"): {}}
     assert stage_segments([stt, target_only]) == ["source", "transition", "target"]
     assert stage_segments([target_only, stt]) == ["source", "transition", "target"]
     assert stage_segments([target_only]) == ["target"]
