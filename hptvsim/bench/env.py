@@ -7,6 +7,10 @@ Rows, all with random actions drawn beforehand (drawing them is not timed):
   beams per vehicle, geometric), acoustic link on;
 * ours, the batched backend at B = 1, 64 and 1024 (:class:`~hptvsim.envs.UPEGBatchEnv`, arrays in
   and out, same-step resets), sonar and link on;
+* ours, the 3-D game (:mod:`hptvsim.envs.game3d`, 6-DOF vehicles, ``dive_flat`` scenario, 3-D
+  sonar of 12 x 5 beams per vehicle, acoustic link on): one environment through the PettingZoo
+  ParallelEnv API (batched backend) and the batched core at B = 64 (arrays in and out,
+  same-step resets);
 * PettingZoo MPE ``simple_tag_v3`` (package ``mpe2``): 3 adversaries, 1 good agent, 2 obstacles,
   continuous actions, one environment;
 * VMAS ``simple_tag`` on the CPU (3 adversaries, 1 good agent), 1 and 1024 environments.
@@ -175,6 +179,47 @@ def _ours_batched(scenario: str, num_envs: int, seconds: float) -> EnvBenchRow:
     return EnvBenchRow(f"hptvsim batched backend, B={num_envs}", num_envs, 4, rate * num_envs, note)
 
 
+def _ours_3d(num_envs: int, seconds: float) -> EnvBenchRow:
+    """The 3-D game: one ParallelEnv (``num_envs = 1``) or the batched core, random actions."""
+    from hptvsim.envs.game3d import Game3DCore, UPEG3DParallelEnv
+
+    rng = np.random.default_rng(0)
+    if num_envs == 1:
+        env = UPEG3DParallelEnv("dive_flat", seed=0)
+        env.reset(seed=0)
+        acts = [
+            {a: rng.uniform(-1.0, 1.0, 3).astype(np.float32) for a in env.possible_agents} for _ in range(64)
+        ]
+
+        def step(k: int) -> None:
+            if not env.agents:
+                env.reset()
+            a = acts[k % 64]
+            env.step({name: a[name] for name in env.agents})
+
+        rate = _rate(step, seconds=seconds)
+        env.close()
+        return EnvBenchRow("hptvsim 3-D game, PettingZoo API", 1, 4, rate, "6-DOF, 60-beam 3-D sonar")
+    core = Game3DCore("dive_flat", num_envs=num_envs, seed=0)
+    core.reset()
+    batch = [rng.uniform(-1.0, 1.0, (num_envs, core.num_agents, 3)) for _ in range(8)]
+
+    def step_batch(k: int) -> None:
+        result = core.step(batch[k % 8])
+        if result.done.any():
+            core.reset(np.flatnonzero(result.done))
+
+    rate = _rate(step_batch, seconds=seconds)
+    core.close()
+    return EnvBenchRow(
+        f"hptvsim 3-D game batched, B={num_envs}",
+        num_envs,
+        4,
+        rate * num_envs,
+        "arrays in/out, resets included",
+    )
+
+
 def _mpe(seconds: float) -> EnvBenchRow | str:
     try:
         from mpe2 import simple_tag_v3
@@ -233,6 +278,8 @@ def bench_env(*, quick: bool = False, scenario: str = "source") -> EnvBenchResul
     result.rows.append(_ours_fmu(scenario, seconds))
     for b in (1, 64, 1024):
         result.rows.append(_ours_batched(scenario, b, seconds))
+    for b in (1, 64):
+        result.rows.append(_ours_3d(b, seconds))
     for peer in (_mpe(seconds), _vmas(1, seconds), _vmas(1024, seconds)):
         if isinstance(peer, str):
             missing.append(peer)

@@ -8,7 +8,11 @@
 * :func:`make_sb3_vec_env`: the batch as a stable-baselines3 ``VecEnv``;
 * :class:`UPEGBatchEnv`: B environments x N agents as arrays, for multi-agent training;
 * :class:`GameCore`: the engine under all of them; :mod:`hptvsim.envs.policies`: scripted
-  policies.
+  policies;
+* the 3-D game (diving 6-DOF vehicles, issue 15): :mod:`hptvsim.envs.game3d`
+  (:class:`~hptvsim.envs.game3d.UPEG3DParallelEnv`, the Gymnasium ids
+  ``hptvsim/UPEG3D-Pursuer-v0``, ``hptvsim/UPEG3D-Evader-v0``, ``hptvsim/UPEG3D-Goto-v0``) and
+  :mod:`hptvsim.envs.policies3d`.
 """
 
 from __future__ import annotations
@@ -48,6 +52,16 @@ def _register() -> None:
                 id=env_id,
                 entry_point="hptvsim.envs.single:UPEGSingleAgentEnv",
                 vector_entry_point="hptvsim.envs.single:UPEGVectorEnv",
+                kwargs=dict(kwargs),
+                disable_env_checker=False,
+            )
+    from hptvsim.envs.game3d import ENV_IDS_3D
+
+    for env_id, kwargs in ENV_IDS_3D.items():
+        if env_id not in gymnasium.registry:
+            gymnasium.register(
+                id=env_id,
+                entry_point="hptvsim.envs.game3d:UPEG3DSingleAgentEnv",
                 kwargs=dict(kwargs),
                 disable_env_checker=False,
             )

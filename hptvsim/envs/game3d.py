@@ -1,0 +1,1083 @@
+"""The 3-D underwater pursuit-evasion game (issue 15): diving 6-DOF vehicles over the seabed.
+
+The planar game (:mod:`hptvsim.envs.core`) keeps every vehicle at the site's operating depth;
+here the vehicles are the 6-DOF closed loops of :mod:`hptvsim.dynamics.controller6` (built-in
+types only) and move in depth as well. The layers are the planar game's:
+
+* **simulation layer**: a :class:`~hptvsim.cosim.system.VehicleSystem` of 6-DOF vehicles on the
+  batched or the FMU backend (the same generated C; both give the same numbers);
+* **robot layer**: command limits (Eq. 15 plus the vertical speed), currents at each vehicle
+  (horizontal; the vertical component is 0), a 3-D sonar per vehicle
+  (:class:`~hptvsim.sensors.sonar3d.Sonar3d`, Eq. 3 errors per beam) and, for pursuers, the
+  acoustic link reporting the evader's horizontal position (as in the planar game; its depth
+  is known, e.g. from the evader's pressure sensor sent with the report);
+* **task layer**: :class:`Obs3DLayout` and the rules below, reusing the planar reward
+  (:func:`hptvsim.envs.task.reward_terms`) and bookkeeping (:func:`hptvsim.envs.task.bookkeeping`)
+  with 3-D distances.
+
+**Action** per agent: ``a = [a_v, a_omega, a_w]`` in ``[-1, 1]^3`` (float32), clipped to that box
+(Eq. 15's clipping) and mapped linearly to the commanded surge speed ``v`` in
+``[v_min, v_max]`` [m/s], yaw rate ``omega`` in ``[-omega_max, omega_max]`` [rad/s] (Eq. 16) and
+vertical speed ``w_z`` in ``[-w_z_max, w_z_max]`` [m/s] (NED, positive down):
+``v = v_min + (a_v + 1) (v_max - v_min) / 2``, ``omega = a_omega omega_max``, ``w_z = a_w w_z_max``.
+
+**Observation** per agent (float32, ``K + 16`` values, ``K = A x E`` sonar beams; default
+``12 x 5``): see :class:`Obs3DLayout`. It extends Eq. 14: the sonar ranges and their minimum,
+own state (depth, altitude, speeds, attitude, position) and the target's relative position in
+3-D. The target is, for a pursuer, the nearest evader (its horizontal position as last
+reported over the acoustic link; before the first report the pursuer "sees" it at its own
+position, as in the planar game); for an evader, the nearest pursuer (true position); in goto,
+the agent's goal point.
+
+**Reward** (Eqs. 17-20 with the scenario's ``[task.reward]``; the planar
+:func:`~hptvsim.envs.task.reward_terms` on 3-D quantities):
+
+* ``r_C`` (Eq. 17): -collision_penalty while any beam's (measured) range is within the safe
+  distance ``l_min``. In 3-D the beams look up and down as well, so **the seabed counts**: a
+  vehicle within ``l_min`` of the seabed along a beam (at the lowest default row, 67.5 degrees
+  down, an altitude below about 14 m) is penalised; the sea surface is no echo and does not;
+* ``r_E1`` (Eq. 18): +-progress_reward as the **3-D** distance to the target shrinks or grows
+  (for the evader, mirrored, as in the planar game);
+* ``r_E2`` (Eq. 19): +capture_reward (evader: -capture_reward) while the **3-D** distance is
+  within ``l_max`` (goto: within the goal radius of the 3-D goal).
+
+**Episode end**, after every step:
+
+* capture (pursuit): a pursuer within ``l_max`` of an evader in 3-D: every agent terminates;
+* collision (every agent terminates): a vehicle's altitude above the seabed below its radius
+  (``seabed``), its depth below its radius (``surface``: it breaks the surface), two vehicles
+  closer (3-D, centre to centre) than the sum of their radii;
+* leaving the site: a centre outside the site's horizontal extent: every agent terminates;
+* goto: an agent within its goal radius of its goal (3-D) terminates;
+* the step limit truncates every agent still active.
+
+An agent whose own collision or exit ends the episode also gets ``-crash_penalty``.
+
+**Start**: horizontal poses from :meth:`~hptvsim.world.scenario.Scenario.sample_spawn`; each
+vehicle's depth uniform in its group's ``depth = [min, max]`` (default: the site's operating
+depth), re-drawn where the altitude or the depth would be below its radius plus
+:data:`SPAWN_MARGIN`; at rest, level.
+
+**Goals** (goto): the scenario gives ``(x, y)``; the depth is the site's operating depth, or
+``goal_depth``.
+
+**Vehicles**: built-in types only (``work_class``, ``spherical``); a group's ``parameters`` may
+override ``v_min``, ``v_max`` and ``omega_max`` (passed to the 6-DOF vehicle); other planar
+parameters have no 6-DOF meaning here and are refused. Mind the attitude envelope
+(:mod:`hptvsim.dynamics.controller6`): the work-class UUV pitches over above about 1.3 m/s.
+
+Deterministic: the same seed gives the same episode bit for bit.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any, ClassVar, Final, Literal
+
+import gymnasium
+import numpy as np
+import numpy.typing as npt
+from pettingzoo import ParallelEnv
+
+from hptvsim.cosim.system import SIXDOF_LAYOUT, SystemSpec, VehicleSpec, VehicleSystem, make_system
+from hptvsim.envs.task import EndFlags, RewardTerms, bookkeeping, reward_terms, wrap
+from hptvsim.world.scenario import Scenario, Task, World, load_scenario
+
+__all__ = [
+    "ENV_IDS_3D",
+    "OVERRIDABLE",
+    "SPAWN_MARGIN",
+    "Game3DCore",
+    "Obs3DLayout",
+    "Step3D",
+    "UPEG3DParallelEnv",
+    "UPEG3DSingleAgentEnv",
+    "parallel_env_3d",
+]
+
+F64 = npt.NDArray[np.float64]
+F32 = npt.NDArray[np.float32]
+Bool = npt.NDArray[np.bool_]
+
+Backend = Literal["batched", "fmu"]
+
+SPAWN_MARGIN: Final = 1.0
+"""m: a vehicle starts at least its radius plus this above the seabed and below the surface."""
+
+OVERRIDABLE: Final = ("v_min", "v_max", "omega_max")
+"""Group parameters the 3-D game passes to the 6-DOF vehicles (they exist in both parameter sets)."""
+
+ENV_IDS_3D: dict[str, dict[str, Any]] = {
+    "hptvsim/UPEG3D-Pursuer-v0": {"scenario": "dive_flat", "agent": "pursuer_0", "task": "pursuit"},
+    "hptvsim/UPEG3D-Evader-v0": {"scenario": "dive_flat", "agent": "evader_0", "task": "pursuit"},
+    "hptvsim/UPEG3D-Goto-v0": {"scenario": "dive_goto", "task": "goto"},
+}
+"""Registered Gymnasium ids of the 3-D game and their default arguments."""
+
+
+# --- the observation -------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, kw_only=True)
+class Obs3DLayout:
+    """Where each quantity sits in an agent's 3-D observation vector (``K + 16`` float32 values).
+
+    ==========  =============================================================  ==================
+    index       quantity                                                       normalised by
+    ==========  =============================================================  ==================
+    0 .. K-1    sonar ranges [m], beam ``k = row * A + column`` (rows from     sonar max range
+                the top, columns port to starboard; :func:`beam_grid`)
+    K           minimum sonar range [m]                                        sonar max range
+    K + 1       own depth ``z`` [m]                                            depth scale
+    K + 2       own altitude above the seabed [m]                              depth scale
+    K + 3       surge speed ``u`` [m/s]                                        ``v_max``
+    K + 4       yaw rate ``r`` [rad/s]                                         ``omega_max``
+    K + 5       vertical speed ``z_dot`` [m/s] (positive down)                 ``w_z_max``
+    K + 6       roll ``phi`` [rad]                                             pi
+    K + 7       pitch ``theta`` [rad]                                          pi / 2
+    K + 8       yaw ``psi`` [rad], wrapped to [-pi, pi)                        pi
+    K + 9       horizontal distance to the target [m]                          site diagonal
+    K + 10      ``sin`` of the target's bearing relative to the heading        -
+    K + 11      ``cos`` of the same                                            -
+    K + 12      elevation angle to the target [rad] (positive: deeper)         pi / 2
+    K + 13      depth difference ``z_target - z`` [m]                          depth scale
+    K + 14      own north position ``x - x_0`` [m]                             site length
+    K + 15      own east position ``y - y_0`` [m]                              site width
+    ==========  =============================================================  ==================
+
+    Distances and ranges lie in ``[0, 1]`` (clipped), the rest in ``[-1, 1]`` (clipped). The
+    depth scale is the deepest seabed of the site.
+
+    Attributes:
+        beams: Sonar beams ``K``.
+        max_range: Sonar maximum range [m].
+        diagonal: Site diagonal [m].
+        depth_scale: Deepest seabed of the site [m].
+        azimuth: ``(K,)`` beam azimuths [rad] (clockwise from the bow).
+        elevation: ``(K,)`` beam elevations [rad] (positive down).
+    """
+
+    SIZE_EXTRA: ClassVar[int] = 16
+
+    beams: int
+    max_range: float
+    diagonal: float
+    depth_scale: float
+    azimuth: F64 = field(compare=False, repr=False)
+    elevation: F64 = field(compare=False, repr=False)
+
+    @property
+    def size(self) -> int:
+        """Length of the observation vector."""
+        return self.beams + self.SIZE_EXTRA
+
+    @property
+    def sonar(self) -> slice:
+        """Slice of the sonar ranges."""
+        return slice(0, self.beams)
+
+    def index(self, name: str) -> int:
+        """Index of a named quantity in the observation vector.
+
+        Names: ``min_range``, ``depth``, ``altitude``, ``u``, ``r``, ``z_dot``, ``phi``, ``theta``,
+        ``psi``, ``distance``, ``sin_bearing``, ``cos_bearing``, ``elevation``,
+        ``depth_difference``, ``north``, ``east``.
+        """
+        try:
+            return self.beams + _OBS_NAMES.index(name)
+        except ValueError:
+            raise ValueError(f"unknown observation {name!r}; valid: {', '.join(_OBS_NAMES)}") from None
+
+    def bounds(self) -> tuple[F32, F32]:
+        """Lower and upper bounds of the observation vector."""
+        low = np.full(self.size, -1.0, dtype=np.float32)
+        high = np.ones(self.size, dtype=np.float32)
+        low[self.sonar] = 0.0
+        low[self.index("min_range")] = low[self.index("distance")] = 0.0
+        return low, high
+
+    def decode(self, obs: npt.ArrayLike) -> dict[str, F64]:
+        """Turn normalised observations ``(..., size)`` back into SI quantities.
+
+        Returns:
+            The names of :meth:`index`, plus ``ranges`` [m] and ``bearing`` [rad]; the speeds stay
+            normalised (their limits are per agent).
+        """
+        o = np.asarray(obs, dtype=np.float64)
+        k = self.beams
+        out = {name: o[..., k + i] for i, name in enumerate(_OBS_NAMES)}
+        out["ranges"] = o[..., self.sonar] * self.max_range
+        out["min_range"] = out["min_range"] * self.max_range
+        for name in ("depth", "altitude", "depth_difference"):
+            out[name] = out[name] * self.depth_scale
+        out["distance"] = out["distance"] * self.diagonal
+        out["phi"] = out["phi"] * math.pi
+        out["theta"] = out["theta"] * 0.5 * math.pi
+        out["psi"] = out["psi"] * math.pi
+        out["elevation"] = out["elevation"] * 0.5 * math.pi
+        out["bearing"] = np.arctan2(out["sin_bearing"], out["cos_bearing"])
+        return out
+
+
+_OBS_NAMES: Final = (
+    "min_range",
+    "depth",
+    "altitude",
+    "u",
+    "r",
+    "z_dot",
+    "phi",
+    "theta",
+    "psi",
+    "distance",
+    "sin_bearing",
+    "cos_bearing",
+    "elevation",
+    "depth_difference",
+    "north",
+    "east",
+)
+
+
+# --- the core ----------------------------------------------------------------------------------------
+
+
+@dataclass
+class Step3D:
+    """What one step of every environment produced (the core's buffers; copy what you keep).
+
+    Attributes:
+        obs: ``(B, N, size)`` observations after the step.
+        reward: ``(B, N)`` rewards (Eq. 20); 0 for agents already done.
+        terminated: ``(B, N)``.
+        truncated: ``(B, N)``.
+        terms: The reward terms (Eqs. 17-19).
+        flags: Why episodes ended (``collision`` includes seabed and surface).
+        seabed: ``(B, N)`` the agent's altitude fell below its radius.
+        surface: ``(B, N)`` the agent's depth fell below its radius.
+        done: ``(B,)`` environments whose episode ended this step.
+    """
+
+    obs: F32
+    reward: F64
+    terminated: Bool
+    truncated: Bool
+    terms: RewardTerms
+    flags: EndFlags
+    seabed: Bool
+    surface: Bool
+    done: Bool
+
+
+def _check_agents(sc: Scenario) -> list[dict[str, float]]:
+    """Each agent's 6-DOF overrides; refuses vehicle files and planar-only overrides."""
+    out: list[dict[str, float]] = []
+    for a in sc.agents:
+        if not a.vehicle.builtin:
+            raise ValueError(
+                f"{sc.source}: {a.name} is a {a.vehicle_type!r} from a vehicle file; the 3-D game runs "
+                "the built-in 6-DOF types only (work_class, spherical): vehicle files are planar"
+            )
+        given = sc.vehicles[a.group].parameters
+        bad = sorted(set(given) - set(OVERRIDABLE))
+        if bad:
+            raise ValueError(
+                f"{sc.source}: vehicles[{a.group}].parameters overrides {bad}, which the 3-D game cannot "
+                f"pass to the 6-DOF vehicle; valid overrides: {', '.join(OVERRIDABLE)}"
+            )
+        out.append({k: float(v) for k, v in given.items()})
+    return out
+
+
+class Game3DCore:
+    """B environments of the 3-D game: reset, step, observations, rewards, end rules.
+
+    Args:
+        scenario: A :class:`~hptvsim.world.scenario.Scenario`, a shipped scenario's name or a path.
+        num_envs: B.
+        backend: ``"batched"`` or ``"fmu"`` (the same numbers).
+        task: Override the scenario's task kind (``"pursuit"`` or ``"goto"``).
+        max_steps: Override the scenario's step limit.
+        seed: Seed of spawn poses and sensor noise (default: the scenario's).
+        threads: Threads of the batched backend and the sonar (``None``: up to 2).
+        reward: Overrides of ``[task.reward]`` (as :class:`~hptvsim.envs.core.GameCore`).
+        azimuth_beams: Sonar beams per row ``A`` (default 12, over a full circle).
+        elevation_beams: Sonar rows ``E`` (default 5, over the default 135 degrees).
+        goal_depth: Depth [m] of every goal in goto (default: the site's operating depth).
+
+    Raises:
+        ValueError: An invalid argument, a vehicle file, a planar-only parameter override, a
+            pursuit scenario without both roles, a goal depth outside the water.
+    """
+
+    def __init__(
+        self,
+        scenario: Scenario | str,
+        *,
+        num_envs: int = 1,
+        backend: Backend = "batched",
+        task: Literal["pursuit", "goto"] | None = None,
+        max_steps: int | None = None,
+        seed: int | None = None,
+        threads: int | None = None,
+        reward: Mapping[str, float] | None = None,
+        azimuth_beams: int = 12,
+        elevation_beams: int = 5,
+        goal_depth: float | None = None,
+    ) -> None:
+        from hptvsim.sensors import AcousticLink
+        from hptvsim.sensors.sonar3d import Sonar3d, Sonar3dConfig, beam_grid
+
+        sc = load_scenario(scenario) if isinstance(scenario, str) else scenario
+        if not isinstance(sc, Scenario):
+            raise TypeError(
+                f"scenario must be a Scenario, a shipped scenario's name or a path; got {scenario!r}"
+            )
+        overrides: dict[str, Any] = {}
+        if task is not None and task != sc.task.kind:
+            if task not in ("pursuit", "goto"):
+                raise ValueError(f"task = {task!r} is invalid; valid: 'pursuit', 'goto'")
+            overrides["task"] = {"kind": task}
+        if max_steps is not None:
+            if isinstance(max_steps, bool) or not float(max_steps).is_integer() or max_steps < 1:
+                raise ValueError(f"max_steps = {max_steps!r} is invalid; valid: an integer >= 1")
+            overrides["simulation"] = {"max_steps": int(max_steps)}
+        if reward:
+            overrides.setdefault("task", {})["reward"] = {k: float(v) for k, v in reward.items()}
+        if overrides:
+            sc = sc.with_overrides(overrides)
+        if isinstance(num_envs, bool) or num_envs < 1:
+            raise ValueError(f"num_envs = {num_envs} is invalid; valid: an integer >= 1")
+        if backend not in ("batched", "fmu"):
+            raise ValueError(f"backend = {backend!r} is invalid; valid: 'batched', 'fmu'")
+        for name, value in (("azimuth_beams", azimuth_beams), ("elevation_beams", elevation_beams)):
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ValueError(f"{name} = {value!r} is invalid; valid: an integer >= 1")
+        group_overrides = _check_agents(sc)
+        agents = sc.agents
+        self.scenario = sc
+        self.num_envs = b = int(num_envs)
+        self.backend: Backend = backend
+        self.task: Task = sc.task
+        self.goto = sc.task.kind == "goto"
+        self.dt = sc.simulation.dt  # s
+        self.max_steps = sc.simulation.max_steps
+        self.seed = sc.simulation.seed if seed is None else int(seed)
+        self.rng = np.random.default_rng(self.seed)
+        self.world: World = sc.build_world()
+        self.agents = tuple(a.name for a in agents)
+        n = len(agents)
+        self.pursuer = np.array([a.role == "pursuer" for a in agents])
+        if not self.goto and (not self.pursuer.any() or self.pursuer.all()):
+            raise ValueError(f"{sc.source}: the pursuit task needs at least one pursuer and one evader")
+        self.radii = np.array([a.radius for a in agents], dtype=np.float64)  # m
+        # command limits [v_min, v_max, omega_max, w_z_max] per agent (6-DOF defaults + overrides)
+        lim = []
+        for a, extra in zip(agents, group_overrides, strict=True):
+            p = {**SIXDOF_LAYOUT.base_parameters(a.vehicle), **extra}
+            lim.append([p["v_min"], p["v_max"], p["omega_max"], p["w_z_max"]])
+        self.limits = np.array(lim, dtype=np.float64)
+        x0, y0 = sc.site.origin
+        lx, ly = sc.site.size
+        self.extent = (float(x0), float(x0 + lx), float(y0), float(y0 + ly))  # m
+        hm = self.world.heightmap
+        depth_scale = float(np.max(hm.depth))
+        # sonar: one 3-D sonar per distinct planar configuration (every group the same fan size)
+        configs: list[Any] = []
+        members: list[list[int]] = []
+        for i, a in enumerate(agents):
+            if a.sonar in configs:
+                members[configs.index(a.sonar)].append(i)
+            else:
+                configs.append(a.sonar)
+                members.append([i])
+        ranges = {c.max_range for c in configs}
+        if len(ranges) != 1:
+            raise ValueError(
+                f"agents with sonars of different max ranges {sorted(ranges)} cannot share one observation "
+                "layout; give every group the same"
+            )
+        cfg3 = [
+            Sonar3dConfig.from_sonar(c, azimuth_beams=azimuth_beams, elevation_beams=elevation_beams)
+            for c in configs
+        ]
+        self.sonars = [
+            Sonar3d(
+                c,
+                hm,
+                num_envs=b,
+                num_agents=n,
+                radii=self.radii if c.detect_vehicles else None,
+                rng=self.rng,
+                threads=threads,
+            )
+            for c in cfg3
+        ]
+        self.sonar_members = [np.array(m, dtype=np.intp) for m in members]
+        az, el = beam_grid(cfg3[0])
+        self.layout = Obs3DLayout(
+            beams=cfg3[0].beams,
+            max_range=cfg3[0].max_range,
+            diagonal=math.hypot(lx, ly),
+            depth_scale=depth_scale,
+            azimuth=az,
+            elevation=el,
+        )
+        self.pursuer_index = np.flatnonzero(self.pursuer)
+        self.evader_index = np.flatnonzero(~self.pursuer)
+        self.links = (
+            [
+                AcousticLink(
+                    sc.sensors.link,
+                    num_envs=b,
+                    num_pursuers=self.pursuer_index.size,
+                    dt=self.dt,
+                    rng=self.rng,
+                )
+                for _ in self.evader_index
+            ]
+            if not self.goto and self.pursuer_index.size and self.evader_index.size
+            else []
+        )
+        # goals (goto): (x, y) from the scenario, the depth from goal_depth or the operating depth
+        self.goals: F64 | None = None
+        if self.goto:
+            missing = [a.name for a in agents if a.goal is None]
+            if missing:
+                raise ValueError(
+                    f"{sc.source}: the goto task needs a goal for every agent; none for {missing}"
+                )
+            gz = float(sc.site.operating_depth if goal_depth is None else goal_depth)
+            xy = np.array([a.goal.position for a in agents if a.goal is not None], dtype=np.float64)
+            floor = hm.depth_at(xy)
+            if not (math.isfinite(gz) and gz > 0.0 and bool((gz < floor).all())):
+                raise ValueError(
+                    f"goal_depth = {goal_depth!r} is invalid; valid: a depth in "
+                    f"(0, {float(floor.min()):g}) m, between the surface and the seabed under every goal"
+                )
+            self.goals = np.broadcast_to(np.concatenate([xy, np.full((n, 1), gz)], axis=1), (b, n, 3)).copy()
+            self.goal_radius = np.array([a.goal.radius for a in agents if a.goal is not None])
+        else:
+            self.goal_radius = np.full(n, sc.task.target_distance)
+        self.depth_ranges = [
+            sc.vehicles[a.group].depth or (sc.site.operating_depth, sc.site.operating_depth) for a in agents
+        ]
+        spec = SystemSpec(
+            vehicles=tuple(
+                VehicleSpec(name=a.name, type=a.vehicle_type, dof=6, parameters=extra)
+                for a, extra in zip(agents, group_overrides, strict=True)
+            ),
+            step_size=self.dt,
+            h_max=sc.simulation.h_max,
+        )
+        self.system: VehicleSystem = make_system(spec, b, backend=backend, threads=threads)
+        # state
+        self.poses = np.zeros((b, n, 6))  # x, y, z [m], phi, theta, psi [rad]
+        self.velocity = np.zeros((b, n, 6))  # u, v, w [m/s], p, q, r [rad/s]
+        self.z_dot = np.zeros((b, n))  # m/s
+        self.altitude = np.zeros((b, n))  # m
+        self.ranges = np.zeros((b, n, self.layout.beams))  # m
+        self.distance = np.zeros((b, n))  # m, true 3-D distance to the target
+        self.prev_distance = np.zeros((b, n))  # m
+        self.steps = np.zeros(b, dtype=np.int64)
+        self.active = np.zeros((b, n), dtype=bool)
+        self.done = np.ones(b, dtype=bool)
+        self.episode_return = np.zeros((b, n))
+        self.obs = np.zeros((b, n, self.layout.size), dtype=np.float32)
+        self._time = np.zeros(b)  # s
+        current = self.world.current
+        self._steady_uniform_current = bool(current.is_steady and current.is_uniform)
+
+    # -- helpers ---------------------------------------------------------------------------------
+
+    @property
+    def num_agents(self) -> int:
+        """N."""
+        return len(self.agents)
+
+    def commands(self, actions: npt.ArrayLike) -> F64:
+        """Map normalised actions ``(..., N, 3)`` in ``[-1, 1]`` (clipped) to commands.
+
+        Returns:
+            ``(..., N, 3)`` ``[v, omega, w_z]`` [m/s, rad/s, m/s] (the module docstring's mapping).
+        """
+        a = np.clip(np.asarray(actions, dtype=np.float64), -1.0, 1.0)
+        lim = self.limits
+        out = np.empty_like(a)
+        out[..., 0] = lim[:, 0] + 0.5 * (a[..., 0] + 1.0) * (lim[:, 1] - lim[:, 0])
+        out[..., 1] = a[..., 1] * lim[:, 2]
+        out[..., 2] = a[..., 2] * lim[:, 3]
+        return out
+
+    def _read_system(self) -> None:
+        y = self.system.outputs
+        self.poses[...] = y[..., 0:6]
+        self.velocity[...] = y[..., 6:12]
+        self.z_dot[...] = y[..., 12]
+
+    def _sense(self, dt: float) -> None:
+        for sonar, idx in zip(self.sonars, self.sonar_members, strict=True):
+            measured = sonar.measure(self.poses, dt)
+            if idx.size == self.num_agents:
+                self.ranges[...] = measured
+            else:
+                self.ranges[:, idx, :] = measured[:, idx, :]
+
+    def _targets(self) -> tuple[F64, F64]:
+        """Each agent's true 3-D distance to its target ``(B, N)`` and the target it knows ``(B, N, 3)``."""
+        pos = self.poses[..., 0:3]
+        if self.goals is not None:
+            return np.linalg.norm(self.goals - pos, axis=-1), self.goals
+        diff = pos[:, :, None, :] - pos[:, None, :, :]
+        dist = np.linalg.norm(diff, axis=-1)  # (B, N, N)
+        p = self.pursuer
+        candidate = p[:, None] & ~p[None, :] | ~p[:, None] & p[None, :]
+        masked = np.where(candidate[None], dist, np.inf)
+        nearest = np.argmin(masked, axis=-1)  # (B, N)
+        true_d = np.take_along_axis(masked, nearest[..., None], axis=-1)[..., 0]
+        known = np.take_along_axis(pos, np.repeat(nearest[..., None], 3, axis=-1), axis=1)  # (B, N, 3)
+        if self.links:
+            pi = self.pursuer_index
+            if len(self.links) == 1:
+                reported = self.links[0].position  # (B, P, 2)
+            else:
+                cand = np.stack([link.position for link in self.links], axis=2)  # (B, P, E, 2)
+                which = np.searchsorted(self.evader_index, nearest[:, pi])  # (B, P) index among evaders
+                reported = np.take_along_axis(cand, which[..., None, None].repeat(2, -1), axis=2)[:, :, 0]
+            reported = np.where(np.isnan(reported), pos[:, pi, 0:2], reported)
+            known[:, pi, 0:2] = reported
+        return true_d, known
+
+    def _observe(self, known: F64) -> None:
+        lay = self.layout
+        o = self.obs
+        k = lay.beams
+        inv = 1.0 / lay.max_range
+        o[..., lay.sonar] = np.clip(self.ranges * inv, 0.0, 1.0)
+        pos, att = self.poses[..., 0:3], self.poses[..., 3:6]
+        ds = lay.depth_scale
+        lim = self.limits
+        delta = known - pos
+        horizontal = np.hypot(delta[..., 0], delta[..., 1])
+        psi = wrap(att[..., 2])
+        bearing = np.arctan2(delta[..., 1], delta[..., 0]) - psi  # NED: atan2(east, north)
+        x0, x1, y0, y1 = self.extent
+        values = [
+            self.ranges.min(axis=-1) * inv,
+            pos[..., 2] / ds,
+            self.altitude / ds,
+            self.velocity[..., 0] / lim[:, 1],
+            self.velocity[..., 5] / lim[:, 2],
+            self.z_dot / lim[:, 3],
+            att[..., 0] / math.pi,
+            att[..., 1] / (0.5 * math.pi),
+            psi / math.pi,
+            horizontal / lay.diagonal,
+            np.sin(bearing),
+            np.cos(bearing),
+            np.arctan2(delta[..., 2], horizontal) / (0.5 * math.pi),
+            delta[..., 2] / ds,
+            (pos[..., 0] - x0) / (x1 - x0),
+            (pos[..., 1] - y0) / (y1 - y0),
+        ]
+        for i, v in enumerate(values):
+            o[..., k + i] = v
+        low, high = lay.bounds()
+        np.clip(o, low, high, out=o)
+
+    def _flags(self) -> tuple[EndFlags, Bool, Bool]:
+        pos = self.poses[..., 0:3]
+        r = self.radii
+        n = self.num_agents
+        seabed = self.altitude < r[None, :]
+        surface = pos[..., 2] < r[None, :]
+        gap = (
+            np.linalg.norm(pos[:, :, None, :] - pos[:, None, :, :], axis=-1) - (r[:, None] + r[None, :])[None]
+        )
+        gap[:, np.arange(n), np.arange(n)] = np.inf
+        collision = seabed | surface | (gap < 0.0).any(axis=-1)
+        x0, x1, y0, y1 = self.extent
+        x, y = pos[..., 0], pos[..., 1]
+        out = (x < x0) | (x > x1) | (y < y0) | (y > y1)
+        if self.goto:
+            reached = self.distance <= self.goal_radius[None, :]
+            captured = np.zeros(self.num_envs, dtype=bool)
+        else:
+            reached = np.zeros((self.num_envs, n), dtype=bool)
+            captured = np.any((self.distance <= self.task.target_distance) & self.pursuer[None, :], axis=1)
+        flags = EndFlags(
+            captured=captured,
+            reached=reached,
+            collision=collision,
+            out_of_site=out,
+            truncated=self.steps >= self.max_steps,
+        )
+        return flags, seabed, surface
+
+    def _spawn(self) -> F64:
+        """One environment's start poses ``(N, 6)`` (module docstring)."""
+        sc = self.scenario
+        planar = sc.sample_spawn(self.rng)
+        poses = np.zeros((self.num_agents, 6))
+        poses[:, 0:2] = planar[:, 0:2]
+        poses[:, 5] = planar[:, 2]
+        for i, (lo, hi) in enumerate(self.depth_ranges):
+            floor = float(self.world.heightmap.depth_at(planar[i, 0:2]))
+            need = self.radii[i] + SPAWN_MARGIN
+            for _ in range(64):
+                z = float(self.rng.uniform(lo, hi))
+                if z >= need and floor - z >= need:
+                    break
+            else:
+                raise RuntimeError(
+                    f"{sc.source}: cannot start {self.agents[i]} at "
+                    f"({planar[i, 0]:.1f}, {planar[i, 1]:.1f}) m: its group's depth [{lo:g}, {hi:g}] m "
+                    f"leaves no depth at least {need:g} m below the "
+                    f"surface and above the seabed (at {floor:.1f} m); change the group's depth"
+                )
+            poses[i, 2] = z
+        return poses
+
+    def _evaluate(self) -> None:
+        self.altitude[...] = self.world.heightmap.depth_at(self.poses[..., 0:2]) - self.poses[..., 2]
+        self.distance[...], known = self._targets()
+        self._observe(known)
+
+    # -- the interface -----------------------------------------------------------------------------
+
+    def reset(self, env_ids: npt.ArrayLike | None = None, *, seed: int | None = None) -> F32:
+        """Start new episodes in the chosen environments (default: all); ``seed`` re-seeds first.
+
+        Returns:
+            ``(B, N, size)`` observations (rows of environments not reset are unchanged).
+        """
+        if seed is not None:
+            self.rng = np.random.default_rng(seed)
+            for sonar in self.sonars:
+                sonar.rng = self.rng
+                sonar.errors.rng = self.rng
+            for link in self.links:
+                link.rng = self.rng
+                link.errors.rng = self.rng
+        b = self.num_envs
+        envs = np.arange(b) if env_ids is None else np.arange(b)[np.asarray(env_ids)]
+        if envs.size:
+            self.system.reset(envs, poses=np.stack([self._spawn() for _ in envs]))
+        held_obs = self.obs.copy()
+        self._read_system()
+        self.steps[envs] = 0
+        self._time[envs] = 0.0
+        self.active[envs] = True
+        self.done[envs] = False
+        self.episode_return[envs] = 0.0
+        self.system.commands[envs] = 0.0
+        self.system.currents[envs] = 0.0
+        if self._steady_uniform_current:
+            self.system.currents[envs, :, 0:2] = self.world.current.sample(0.0, self.poses[envs, :, 0:2])
+        for sonar in self.sonars:
+            sonar.reset(envs)
+        for k, link in enumerate(self.links):
+            e = self.evader_index[k]
+            xy = self.poses[..., 0:2]
+            link.reset(xy[:, e, :], xy[:, self.pursuer_index, :], envs)
+        held_ranges = self.ranges.copy()
+        self._sense(0.0)
+        keep = np.ones(b, dtype=bool)
+        keep[envs] = False
+        self.ranges[keep] = held_ranges[keep]
+        self._evaluate()
+        self.obs[keep] = held_obs[keep]
+        self.prev_distance[envs] = self.distance[envs]
+        return self.obs
+
+    def step(self, actions: npt.ArrayLike) -> Step3D:
+        """Advance every environment by one control step.
+
+        Args:
+            actions: ``(B, N, 3)`` normalised ``[a_v, a_omega, a_w]`` in ``[-1, 1]`` (clipped);
+                agents no longer active stop (``[v_min, 0, 0]``); finished environments hold still.
+
+        Raises:
+            ValueError: Wrong shape or a non-finite value (naming the agent and environment).
+        """
+        b, n = self.num_envs, self.num_agents
+        a = np.asarray(actions, dtype=np.float64)
+        if a.shape != (b, n, 3):
+            raise ValueError(f"actions must have shape (B, N, 3) = ({b}, {n}, 3); got {a.shape}")
+        if not np.isfinite(a).all():
+            e, i = (int(j[0]) for j in np.nonzero(~np.isfinite(a).all(axis=-1)))
+            raise ValueError(
+                f"the action of {self.agents[i]} in environment {e} is not finite: {a[e, i].tolist()}"
+            )
+        cmd = self.commands(a)
+        stop = ~self.active
+        cmd[..., 0] = np.where(stop, self.limits[:, 0], cmd[..., 0])
+        cmd[..., 1:] = np.where(stop[..., None], 0.0, cmd[..., 1:])
+        self.system.commands[...] = cmd
+        if not self._steady_uniform_current:
+            self.system.currents[..., 0:2] = self.world.current.sample(
+                self._time[:, None], self.poses[..., 0:2]
+            )
+        running = ~self.done
+        held = np.flatnonzero(self.done)
+        before = self.poses[held].copy()
+        np.copyto(self.prev_distance, self.distance)
+        self.system.step()
+        self._time += self.dt * running
+        if held.size:  # finished environments hold their poses, at rest
+            self.system.reset(held, poses=before)
+        self._read_system()
+        self.steps += running
+        for k, link in enumerate(self.links):
+            e = self.evader_index[k]
+            xy = self.poses[..., 0:2]
+            link.step(xy[:, e, :], xy[:, self.pursuer_index, :], check=False)
+        self._sense(self.dt)
+        self._evaluate()
+        flags, seabed, surface = self._flags()
+        w = self.task.reward
+        terms = reward_terms(
+            self.task,
+            min_range=self.ranges.min(axis=-1),
+            distance=self.distance,
+            previous_distance=self.prev_distance,
+            pursuer=self.pursuer,
+            goto=self.goto,
+            goal_radius=self.goal_radius,
+        )
+        book = bookkeeping(
+            total=terms.total, flags=flags, active=self.active, done=self.done, crash_penalty=w.crash_penalty
+        )
+        self.active[...] = book.active
+        self.done[...] = book.done
+        self.episode_return += book.reward
+        return Step3D(
+            obs=self.obs,
+            reward=book.reward,
+            terminated=book.terminated,
+            truncated=book.truncated,
+            terms=terms,
+            flags=flags,
+            seabed=seabed,
+            surface=surface,
+            done=book.newly_done,
+        )
+
+    def close(self) -> None:
+        """Release the simulation's native resources."""
+        self.system.close()
+
+
+def _info(core: Game3DCore, result: Step3D | None, b: int, i: int) -> dict[str, Any]:
+    """One agent's info: its pose (``x, y, z, phi, theta, psi``) and, after a step, the flags."""
+    x, y, z, phi, theta, psi = core.poses[b, i].tolist()
+    info: dict[str, Any] = {
+        "x": x,
+        "y": y,
+        "z": z,
+        "phi": phi,
+        "theta": theta,
+        "psi": psi,
+        "altitude": float(core.altitude[b, i]),
+        "distance": float(core.distance[b, i]),
+        "min_range": float(core.ranges[b, i].min()),
+        "step": int(core.steps[b]),
+    }
+    if result is not None:
+        f = result.flags
+        info.update(
+            captured=bool(f.captured[b]),
+            collision=bool(f.collision[b, i]),
+            seabed=bool(result.seabed[b, i]),
+            surface=bool(result.surface[b, i]),
+            out_of_site=bool(f.out_of_site[b, i]),
+            reached=bool(f.reached[b, i]),
+            r_C=float(result.terms.r_C[b, i]),
+            r_E1=float(result.terms.r_E1[b, i]),
+            r_E2=float(result.terms.r_E2[b, i]),
+        )
+    return info
+
+
+def _action_box() -> gymnasium.spaces.Box:
+    return gymnasium.spaces.Box(
+        np.full(3, -1.0, dtype=np.float32), np.ones(3, dtype=np.float32), dtype=np.float32
+    )
+
+
+# --- PettingZoo -------------------------------------------------------------------------------------
+
+
+class UPEG3DParallelEnv(ParallelEnv[str, F32, F32]):  # type: ignore[misc]  # pettingzoo is untyped here
+    """The 3-D UPEG as a PettingZoo ParallelEnv (rules: the module docstring).
+
+    ## Action Space
+    ``Box(-1, 1, (3,), float32)``: normalised surge speed, yaw rate and vertical speed.
+
+    ## Observation Space
+    ``Box`` of ``K + 16`` float32 values (:class:`Obs3DLayout`).
+
+    ## Arguments
+    ``scenario`` (default ``"dive_flat"``), ``backend``, ``task``, ``max_steps``, ``seed``,
+    ``reward``, ``azimuth_beams``, ``elevation_beams``, ``goal_depth``: as :class:`Game3DCore`.
+
+    ``info`` of every agent holds its pose ``x, y, z`` [m], ``phi, theta, psi`` [rad], its
+    ``altitude``, ``distance`` and ``min_range`` [m], the ``step`` and, after a step, the end
+    flags (``captured``, ``collision``, ``seabed``, ``surface``, ``out_of_site``, ``reached``)
+    and the reward terms.
+    """
+
+    metadata: ClassVar[dict[str, Any]] = {
+        "name": "hptvsim_upeg3d_v0",
+        "render_modes": [],
+        "is_parallelizable": True,
+    }
+
+    def __init__(
+        self,
+        scenario: Scenario | str = "dive_flat",
+        *,
+        backend: Backend = "batched",
+        task: Literal["pursuit", "goto"] | None = None,
+        max_steps: int | None = None,
+        seed: int | None = None,
+        reward: Mapping[str, float] | None = None,
+        azimuth_beams: int = 12,
+        elevation_beams: int = 5,
+        goal_depth: float | None = None,
+        render_mode: str | None = None,
+    ) -> None:
+        if render_mode is not None:
+            raise ValueError(
+                f"render_mode = {render_mode!r} is invalid; valid: None (no renderer in 3-D yet)"
+            )
+        self.core = Game3DCore(
+            scenario,
+            num_envs=1,
+            backend=backend,
+            task=task,
+            max_steps=max_steps,
+            seed=seed,
+            threads=1,
+            reward=reward,
+            azimuth_beams=azimuth_beams,
+            elevation_beams=elevation_beams,
+            goal_depth=goal_depth,
+        )
+        self.render_mode = render_mode
+        self.possible_agents = list(self.core.agents)
+        self.agents: list[str] = []
+        self._index = {name: i for i, name in enumerate(self.possible_agents)}
+        low, high = self.core.layout.bounds()
+        self._obs_space = {a: gymnasium.spaces.Box(low, high, dtype=np.float32) for a in self.possible_agents}
+        self._act_space = {a: _action_box() for a in self.possible_agents}
+        self._actions = np.zeros((1, len(self.possible_agents), 3))
+        self.max_cycles = self.core.max_steps
+
+    @functools.cache  # noqa: B019 - one space object per agent, as PettingZoo asks
+    def observation_space(self, agent: str) -> gymnasium.spaces.Box:
+        """The agent's observation space (:class:`Obs3DLayout`)."""
+        return self._obs_space[self._agent(agent)]
+
+    @functools.cache  # noqa: B019 - one space object per agent, as PettingZoo asks
+    def action_space(self, agent: str) -> gymnasium.spaces.Box:
+        """The agent's action space ``[-1, 1]^3``."""
+        return self._act_space[self._agent(agent)]
+
+    def _agent(self, agent: str) -> str:
+        if agent not in self._index:
+            raise ValueError(f"unknown agent {agent!r}; agents: {', '.join(self.possible_agents)}")
+        return agent
+
+    def reset(
+        self, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, F32], dict[str, dict[str, Any]]]:
+        """Start an episode; ``seed`` seeds spawn poses and sensor noise."""
+        obs = self.core.reset(seed=seed)[0]
+        self.agents = list(self.possible_agents)
+        return (
+            {a: obs[i].copy() for a, i in self._index.items()},
+            {a: _info(self.core, None, 0, i) for a, i in self._index.items()},
+        )
+
+    def step(
+        self, actions: dict[str, npt.ArrayLike]
+    ) -> tuple[dict[str, F32], dict[str, float], dict[str, bool], dict[str, bool], dict[str, dict[str, Any]]]:
+        """Advance one control step; agents absent from ``actions`` keep still (``[-1, 0, 0]``).
+
+        Raises:
+            ValueError: An unknown or finished agent, a wrong shape or a non-finite value.
+            RuntimeError: ``step`` after the episode ended (call ``reset``).
+        """
+        if not self.agents:
+            raise RuntimeError("the episode is over; call reset() before step()")
+        act = self._actions
+        act[...] = 0.0
+        act[..., 0] = -1.0
+        for agent, a in actions.items():
+            i = self._index.get(agent)
+            if i is None:
+                raise ValueError(f"unknown agent {agent!r}; agents: {', '.join(self.possible_agents)}")
+            if agent not in self.agents:
+                raise ValueError(f"{agent} has finished its episode and cannot act")
+            if np.shape(a) != (3,):
+                raise ValueError(
+                    f"the action of {agent} must have shape (3,) = [v, omega, w_z]; got {np.shape(a)}"
+                )
+            act[0, i] = a
+        result = self.core.step(act)
+        obs: dict[str, F32] = {}
+        rew: dict[str, float] = {}
+        term: dict[str, bool] = {}
+        trunc: dict[str, bool] = {}
+        infos: dict[str, dict[str, Any]] = {}
+        for agent in self.agents:
+            i = self._index[agent]
+            obs[agent] = result.obs[0, i].copy()
+            rew[agent] = float(result.reward[0, i])
+            term[agent] = bool(result.terminated[0, i])
+            trunc[agent] = bool(result.truncated[0, i])
+            infos[agent] = _info(self.core, result, 0, i)
+        self.agents = [a for a in self.agents if not (term[a] or trunc[a])]
+        return obs, rew, term, trunc, infos
+
+    def state(self) -> F64:
+        """The global state: ``x, y, z, phi, theta, psi, u, v, w, p, q, r`` of every vehicle (N * 12)."""
+        return np.concatenate([self.core.poses[0], self.core.velocity[0]], axis=1).ravel()
+
+    def render(self) -> None:
+        """No renderer for the 3-D game yet."""
+        return None
+
+    def close(self) -> None:
+        """Release the simulation."""
+        self.core.close()
+
+
+def parallel_env_3d(scenario: Scenario | str = "dive_flat", **kwargs: Any) -> UPEG3DParallelEnv:
+    """Create the PettingZoo 3-D UPEG (see :class:`UPEG3DParallelEnv`)."""
+    return UPEG3DParallelEnv(scenario, **kwargs)
+
+
+# --- Gymnasium ----------------------------------------------------------------------------------------
+
+
+class UPEG3DSingleAgentEnv(gymnasium.Env[F32, F32]):
+    """One agent of the 3-D game (or 3-D goto) as a Gymnasium environment.
+
+    Args:
+        scenario: Scenario name, path or object (default ``"dive_flat"``).
+        agent: The learner (default: the first agent).
+        policies: The other agents' policies by agent name: a 3-D scripted policy's name
+            (:data:`~hptvsim.envs.policies3d.POLICY_NAMES_3D`) or an object with
+            ``act(obs, episode_start)`` returning normalised actions. Defaults: pursuers
+            ``pure_pursuit``, evaders ``potential_field`` (goto: ``pure_pursuit`` to the goal).
+        backend, task, max_steps, seed, reward, azimuth_beams, elevation_beams, goal_depth: As
+            :class:`Game3DCore`.
+        render_mode: ``None`` only (no 3-D renderer yet).
+
+    Observation and action spaces are the learner's; the episode ends when the learner
+    terminates or is truncated; ``info`` is the learner's (pose keys included).
+    """
+
+    metadata: dict[str, Any] = {"render_modes": []}  # noqa: RUF012 - Gymnasium's attribute
+
+    def __init__(
+        self,
+        scenario: Scenario | str = "dive_flat",
+        *,
+        agent: str | None = None,
+        policies: Mapping[str, Any] | None = None,
+        backend: Backend = "batched",
+        task: Literal["pursuit", "goto"] | None = None,
+        max_steps: int | None = None,
+        seed: int | None = None,
+        reward: Mapping[str, float] | None = None,
+        azimuth_beams: int = 12,
+        elevation_beams: int = 5,
+        goal_depth: float | None = None,
+        render_mode: str | None = None,
+    ) -> None:
+        from hptvsim.envs.policies3d import build_policies_3d
+
+        if render_mode is not None:
+            raise ValueError(
+                f"render_mode = {render_mode!r} is invalid; valid: None (no renderer in 3-D yet)"
+            )
+        self.core = Game3DCore(
+            scenario,
+            num_envs=1,
+            backend=backend,
+            task=task,
+            max_steps=max_steps,
+            seed=seed,
+            threads=1,
+            reward=reward,
+            azimuth_beams=azimuth_beams,
+            elevation_beams=elevation_beams,
+            goal_depth=goal_depth,
+        )
+        learner = agent or self.core.agents[0]
+        if learner not in self.core.agents:
+            raise ValueError(f"unknown agent {learner!r}; agents: {', '.join(self.core.agents)}")
+        self.agent = learner
+        self.index = self.core.agents.index(learner)
+        self.others = [i for i in range(self.core.num_agents) if i != self.index]
+        self.policies = build_policies_3d(
+            self.core, [self.core.agents[i] for i in self.others], policies, seed=seed
+        )
+        low, high = self.core.layout.bounds()
+        self.observation_space = gymnasium.spaces.Box(low, high, dtype=np.float32)
+        self.action_space = gymnasium.spaces.Box(
+            np.full(3, -1.0, dtype=np.float32), np.ones(3, dtype=np.float32), dtype=np.float32
+        )
+        self.render_mode = render_mode
+        self._actions = np.zeros((1, self.core.num_agents, 3))
+        self._episode_start = np.ones(1, dtype=bool)
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[F32, dict[str, Any]]:
+        """Start an episode (``seed`` seeds spawn poses and noise)."""
+        super().reset(seed=seed)
+        obs = self.core.reset(seed=seed)
+        self._episode_start[:] = True
+        return obs[0, self.index].copy(), _info(self.core, None, 0, self.index)
+
+    def step(self, action: npt.ArrayLike) -> tuple[F32, float, bool, bool, dict[str, Any]]:
+        """Advance one control step with the learner's normalised ``[a_v, a_omega, a_w]`` (clipped).
+
+        Raises:
+            ValueError: Wrong shape or a non-finite action.
+        """
+        a = np.asarray(action, dtype=np.float64)
+        if a.shape != (3,):
+            raise ValueError(f"the action must have shape (3,) = [v, omega, w_z]; got {a.shape}")
+        if not np.isfinite(a).all():
+            raise ValueError(f"the action must be finite; got {a.tolist()}")
+        obs = self.core.obs
+        act = self._actions
+        act[0, self.index] = a
+        for i in self.others:
+            act[:, i] = self.policies[self.core.agents[i]].act(obs[:, i], self._episode_start)
+        self._episode_start[:] = False
+        result = self.core.step(act)
+        i = self.index
+        return (
+            result.obs[0, i].copy(),
+            float(result.reward[0, i]),
+            bool(result.terminated[0, i]),
+            bool(result.truncated[0, i]),
+            _info(self.core, result, 0, i),
+        )
+
+    def render(self) -> None:
+        """No renderer for the 3-D game yet."""
+        return None
+
+    def close(self) -> None:
+        """Release the simulation."""
+        self.core.close()

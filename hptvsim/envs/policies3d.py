@@ -1,0 +1,234 @@
+"""Scripted policies of the 3-D game: baselines for learners and oracles for tests.
+
+Every policy follows the planar :class:`~hptvsim.envs.policies.Policy` interface
+(``act(obs, episode_start)``, vectorised over leading dimensions) on the 3-D observation
+(:class:`~hptvsim.envs.game3d.Obs3DLayout`) and returns the 3-D game's **normalised** actions
+``[a_v, a_omega, a_w]`` in ``[-1, 1]`` (``a_v = -1``: ``v_min``, ``+1``: ``v_max``; see
+:mod:`hptvsim.envs.game3d`). The names are the planar ones:
+
+* :class:`PurePursuit3D` (``"pure_pursuit"``): yaw rate towards the target's bearing, vertical
+  speed towards its depth, full speed;
+* :class:`PotentialField3D` (``"potential_field"``): the evader's flight away from the nearest
+  pursuer, steering clear of close sonar returns and keeping an altitude above the seabed;
+* :class:`Stationary3D` (``"stationary"``): ``v_min``, no turn, no vertical speed.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any, Final
+
+import numpy as np
+import numpy.typing as npt
+
+from hptvsim.envs.policies import Policy
+from hptvsim.envs.task import wrap
+
+if TYPE_CHECKING:
+    from hptvsim.envs.game3d import Game3DCore, Obs3DLayout
+
+__all__ = [
+    "POLICY_NAMES_3D",
+    "POLICY_ROLES_3D",
+    "PotentialField3D",
+    "PurePursuit3D",
+    "Stationary3D",
+    "build_policies_3d",
+    "make_policy_3d",
+]
+
+F64 = npt.NDArray[np.float64]
+
+
+class PurePursuit3D:
+    """Pure pursuit in 3-D: turn towards the target's bearing, climb or dive to its depth, full speed.
+
+    ``a_omega = clip(error / full_turn_error)``, where ``error`` is the direction to the target
+    relative to the heading plus, as the planar pure pursuit does, a Khatib-style repulsion
+    ``avoid_weight (1 / r - 1 / avoid_distance)`` from every return closer than
+    ``avoid_distance`` [m] of the beams within 45 degrees of the horizontal (teammates closing on
+    the same target, a slope ahead), so an error of ``full_turn_error`` [rad] turns at
+    ``omega_max``; ``a_w = max_vertical clip(dz / full_dive_error)`` with the depth difference
+    ``dz`` [m] to the target (positive: deeper); full speed, less ``dive_slowdown`` of it in proportion to
+    ``|a_w| / max_vertical`` (speed fraction ``1 - dive_slowdown |a_w| / max_vertical``).
+
+    Why not full vertical speed at full speed: the work-class UUV has no pitch control, and the
+    Munk moment trims it nose-up by about ``a u w_z / (k - a u^2)``
+    (:func:`~hptvsim.dynamics.controller6.munk_trim_pitch`): at 1.2 m/s, diving at 0.2 m/s pitches
+    it over. At half speed and 0.3 m/s (the defaults: ``max_vertical = 0.3`` of ``w_z_max = 1``)
+    its pitch stays within about 15 degrees. While the altitude is below ``min_altitude`` [m] the
+    vehicle does not dive (the seabed comes first), and it does not climb above ``min_depth`` [m].
+    """
+
+    def __init__(
+        self,
+        layout: Obs3DLayout,
+        *,
+        full_turn_error: float = math.radians(30.0),
+        full_dive_error: float = 5.0,
+        max_vertical: float = 0.3,
+        dive_slowdown: float = 0.5,
+        min_altitude: float = 4.0,
+        min_depth: float = 3.0,
+        avoid_distance: float = 12.0,
+        avoid_weight: float = 8.0,
+    ) -> None:
+        self.layout = layout
+        self.avoid_distance = avoid_distance  # m
+        self.avoid_weight = avoid_weight
+        self.near_level = np.flatnonzero(np.abs(layout.elevation) < math.radians(45.0))
+        self.full_turn_error = full_turn_error  # rad
+        self.full_dive_error = full_dive_error  # m
+        self.max_vertical = max_vertical  # fraction of w_z_max
+        self.dive_slowdown = dive_slowdown  # fraction of the speed range
+        self.min_altitude = min_altitude  # m
+        self.min_depth = min_depth  # m
+
+    def act(self, obs: npt.ArrayLike, episode_start: npt.ArrayLike | None = None) -> F64:
+        """See :class:`~hptvsim.envs.policies.Policy` (normalised actions ``(..., 3)``)."""
+        q = self.layout.decode(obs)
+        bearing = q["bearing"]
+        if self.avoid_weight > 0.0 and self.near_level.size:
+            r = np.maximum(q["ranges"][..., self.near_level], 0.5)
+            beam = self.layout.azimuth[self.near_level]
+            push = np.where(
+                r < self.avoid_distance, self.avoid_weight * (1.0 / r - 1.0 / self.avoid_distance), 0.0
+            )
+            dx = np.cos(bearing) - (push * np.cos(beam)).sum(axis=-1)
+            dy = np.sin(bearing) - (push * np.sin(beam)).sum(axis=-1)
+            bearing = np.arctan2(dy, dx)
+        a_omega = np.clip(bearing / self.full_turn_error, -1.0, 1.0)
+        a_w = self.max_vertical * np.clip(q["depth_difference"] / self.full_dive_error, -1.0, 1.0)
+        a_w = np.where(q["altitude"] < self.min_altitude, np.minimum(a_w, 0.0), a_w)
+        a_w = np.where(q["depth"] < self.min_depth, np.maximum(a_w, 0.0), a_w)
+        fraction = 1.0 - self.dive_slowdown * np.abs(a_w) / self.max_vertical  # of the speed range
+        result: F64 = np.stack([2.0 * fraction - 1.0, a_omega, a_w], axis=-1)
+        return result
+
+
+class PotentialField3D:
+    """The evader's flight in 3-D: away from the nearest pursuer, clear of obstacles and the seabed.
+
+    Horizontally, the desired direction is away from the pursuer (its bearing plus pi) plus a
+    Khatib-style repulsion ``weight (1 / r - 1 / influence)`` from each return of the level
+    sonar row closer than ``obstacle_influence`` [m] (other vehicles, the seabed rising ahead);
+    ``a_omega`` turns towards it as :class:`PurePursuit3D` does, at full speed. Vertically, it
+    moves away from the pursuer's depth at half its vertical speed, but climbs at full vertical
+    speed while its altitude is below ``keep_altitude`` [m] and dives while its depth is below
+    ``min_depth`` [m].
+    """
+
+    def __init__(
+        self,
+        layout: Obs3DLayout,
+        *,
+        keep_altitude: float = 10.0,
+        min_depth: float = 5.0,
+        obstacle_influence: float = 20.0,
+        obstacle_weight: float = 8.0,
+        full_turn_error: float = math.radians(30.0),
+    ) -> None:
+        self.layout = layout
+        self.keep_altitude = keep_altitude  # m
+        self.min_depth = min_depth  # m
+        self.obstacle_influence = obstacle_influence  # m
+        self.obstacle_weight = obstacle_weight
+        self.full_turn_error = full_turn_error  # rad
+        level = np.abs(layout.elevation)
+        self.row = np.flatnonzero(level == level.min())  # the beams nearest the horizontal
+
+    def act(self, obs: npt.ArrayLike, episode_start: npt.ArrayLike | None = None) -> F64:
+        """See :class:`~hptvsim.envs.policies.Policy` (normalised actions ``(..., 3)``)."""
+        q = self.layout.decode(obs)
+        away = q["bearing"] + math.pi  # rad, relative to the heading
+        r = np.maximum(q["ranges"][..., self.row], 0.5)
+        beam = self.layout.azimuth[self.row]
+        push = np.where(
+            r < self.obstacle_influence, self.obstacle_weight * (1.0 / r - 1.0 / self.obstacle_influence), 0.0
+        )
+        dx = np.cos(away) - (push * np.cos(beam)).sum(axis=-1)
+        dy = np.sin(away) - (push * np.sin(beam)).sum(axis=-1)
+        error = wrap(np.arctan2(dy, dx))
+        a_omega = np.clip(error / self.full_turn_error, -1.0, 1.0)
+        a_w = -0.5 * np.sign(q["depth_difference"])
+        a_w = np.where(q["altitude"] < self.keep_altitude, -1.0, a_w)
+        a_w = np.where(q["depth"] < self.min_depth, 1.0, a_w)
+        result: F64 = np.stack([np.ones_like(a_omega), a_omega, a_w], axis=-1)
+        return result
+
+
+class Stationary3D:
+    """Holds still: ``[-1, 0, 0]`` (``v_min``, no turn, no vertical speed; the controllers brake)."""
+
+    def act(self, obs: npt.ArrayLike, episode_start: npt.ArrayLike | None = None) -> F64:
+        """See :class:`~hptvsim.envs.policies.Policy` (normalised actions ``(..., 3)``)."""
+        result: F64 = np.zeros((*np.shape(obs)[:-1], 3))
+        result[..., 0] = -1.0
+        return result
+
+
+POLICY_NAMES_3D: Final = ("pure_pursuit", "potential_field", "stationary")
+"""Names of the 3-D scripted policies (the planar names of the same behaviours)."""
+
+POLICY_ROLES_3D: Final = {
+    "pure_pursuit": ("pursuer", "evader"),
+    "potential_field": ("evader",),
+    "stationary": ("pursuer", "evader"),
+}
+"""The roles each 3-D scripted policy is made for."""
+
+
+def make_policy_3d(name: str, layout: Obs3DLayout) -> Policy:
+    """Build a 3-D scripted policy by name.
+
+    Raises:
+        ValueError: Unknown name (the message lists the valid ones).
+    """
+    if name == "pure_pursuit":
+        return PurePursuit3D(layout)
+    if name == "potential_field":
+        return PotentialField3D(layout)
+    if name == "stationary":
+        return Stationary3D()
+    raise ValueError(f"unknown 3-D policy {name!r}; valid: {', '.join(POLICY_NAMES_3D)}")
+
+
+def build_policies_3d(
+    core: Game3DCore, agents: list[str], given: Mapping[str, Any] | None, *, seed: int | None = None
+) -> dict[str, Policy]:
+    """Policies for ``agents``: given ones (names or objects with ``act``), defaults otherwise.
+
+    Defaults: pursuers ``pure_pursuit``, evaders ``potential_field``; in goto every agent
+    ``pure_pursuit`` (its goal is its target). ``seed`` is accepted for the planar signature; the
+    3-D scripted policies draw no random numbers.
+
+    Raises:
+        ValueError: A policy for an unknown agent, an unknown name or one made for the other role.
+    """
+    given = dict(given or {})
+    unknown = sorted(set(given) - set(core.agents))
+    if unknown:
+        raise ValueError(f"policies given for unknown agents {unknown}; agents: {', '.join(core.agents)}")
+    out: dict[str, Policy] = {}
+    for agent in agents:
+        i = core.agents.index(agent)
+        role = "pursuer" if core.pursuer[i] else "evader"
+        default = "pure_pursuit" if core.goto or role == "pursuer" else "potential_field"
+        spec = given.get(agent, default)
+        if isinstance(spec, str):
+            name = spec.removeprefix("scripted:")
+            if name in POLICY_ROLES_3D and role not in POLICY_ROLES_3D[name] and not core.goto:
+                fits = [n for n, roles in POLICY_ROLES_3D.items() if role in roles]
+                raise ValueError(
+                    f"policy {spec!r} drives {' and '.join(POLICY_ROLES_3D[name])}, not {agent} ({role}); "
+                    f"valid for {agent}: {', '.join(fits)}"
+                )
+            out[agent] = make_policy_3d(name, core.layout)
+        elif isinstance(spec, Policy):
+            out[agent] = spec
+        else:
+            raise ValueError(
+                f"the policy of {agent} must be a 3-D scripted policy's name or have act(obs); got {spec!r}"
+            )
+    return out
