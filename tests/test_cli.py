@@ -20,7 +20,10 @@ def test_demo_writes_a_trajectory_plot(tmp_path: Path) -> None:
 def test_fmu_check_passes_on_the_committed_fmus() -> None:
     result = CliRunner().invoke(main, ["fmu", "check"])
     assert result.exit_code == 0, result.output
-    assert result.output.count("up to date") == 2
+    # the planar and the 6-DOF FMU of each built-in vehicle type
+    for name in ("WorkClassUUV", "SphericalUUV", "WorkClassUUV6DOF", "SphericalUUV6DOF"):
+        assert f"{name}.fmu: up to date" in result.output
+    assert result.output.count("up to date") == 4
 
 
 def test_bench_dynamics_quick_prints_ratios_to_the_floor() -> None:
