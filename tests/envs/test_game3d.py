@@ -183,28 +183,39 @@ def test_clear_errors() -> None:
 
 @pytest.mark.slow
 def test_sac_learns_to_reach_a_3d_goal() -> None:
+    """SAC reaches a goal 60 m away and 20 m deeper (dive_goto) after 6,000 steps; untrained it does not."""
     import torch
     from stable_baselines3 import SAC
 
     torch.set_num_threads(1)
 
-    def mean_return(model: SAC, env: gym.Env, episodes: int = 5) -> float:
-        total = 0.0
+    def evaluate(model: SAC, env: gym.Env, episodes: int = 10) -> tuple[float, float]:
+        """Share of episodes that reach the goal, and the mean final 3-D distance to it [m].
+
+        ``env`` is an environment of its own: resetting the training one would leave SAC's
+        last observation stale.
+        """
+        reached, distance = 0, 0.0
         for k in range(episodes):
             obs, _ = env.reset(seed=100 + k)
             done = False
             while not done:
-                action = model.predict(obs, deterministic=True)[0]
-                obs, r, term, trunc, _ = env.step(action)
-                total += float(r)
+                obs, _, term, trunc, info = env.step(model.predict(obs, deterministic=True)[0])
                 done = term or trunc
-        return total / episodes
+            reached += bool(info["reached"])
+            distance += float(info["distance"]) / episodes
+        return reached / episodes, distance
 
     env = gym.make("hptvsim/UPEG3D-Goto-v0", max_steps=300)
+    evaluation = gym.make("hptvsim/UPEG3D-Goto-v0", max_steps=300)
     model = SAC("MlpPolicy", env, seed=0, learning_starts=300, verbose=0)
-    before = mean_return(model, env)
-    model.learn(3000)
-    after = mean_return(model, env)
-    # measured: -1.3 untrained, 56.2 after 3000 steps (closer along the way; the goal not yet reached)
-    assert after > before + 25.0, (before, after)
+    before = evaluate(model, evaluation)
+    model.learn(6_000)
+    after = evaluate(model, evaluation)
     env.close()
+    evaluation.close()
+    # measured (2026-11-24, about 250 s with both cores busy): training seeds 0 and 1 each
+    # reached the goal (radius 10 m) in 10 of 10 episodes after 6,000 steps (final distance
+    # 10.0 and 9.9 m), from 0 of 10 untrained (64.0 and 62.8 m)
+    assert before[0] == 0.0 and before[1] > 50.0, before
+    assert after[0] >= 0.8 and after[1] < 12.0, after
