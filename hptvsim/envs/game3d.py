@@ -489,9 +489,22 @@ class Game3DCore:
         self.obs = np.zeros((b, n, self.layout.size), dtype=np.float32)
         self._time = np.zeros(b)  # s
         current = self.world.current
-        self._steady_uniform_current = bool(current.is_steady and current.is_uniform)
+        # a depth profile makes the current depend on where a vehicle is, as a field that varies
+        self._steady_uniform_current = bool(
+            current.is_steady and current.is_uniform and sc.site.current_profile == "uniform"
+        )
 
     # -- helpers ---------------------------------------------------------------------------------
+
+    def _sample_currents(self, envs: Any) -> None:
+        """The horizontal current at each vehicle of ``envs``, with the site's depth profile."""
+        xy = self.poses[envs, :, 0:2]
+        v = self.world.current.sample(self._time[envs][:, None], xy)
+        site = self.scenario.site
+        if site.current_profile != "uniform":
+            water = self.world.heightmap.depth_at(xy)  # m
+            v = v * site.current_factor(water - self.poses[envs, :, 2], water)[..., None]
+        self.system.currents[envs, :, 0:2] = v
 
     @property
     def num_agents(self) -> int:
@@ -677,6 +690,8 @@ class Game3DCore:
         self.system.currents[envs] = 0.0
         if self._steady_uniform_current:
             self.system.currents[envs, :, 0:2] = self.world.current.sample(0.0, self.poses[envs, :, 0:2])
+        else:
+            self._sample_currents(envs)
         for sonar in self.sonars:
             sonar.reset(envs)
         for k, link in enumerate(self.links):
@@ -718,9 +733,7 @@ class Game3DCore:
         cmd[..., 1:] = np.where(stop[..., None], 0.0, cmd[..., 1:])
         self.system.commands[...] = cmd
         if not self._steady_uniform_current:
-            self.system.currents[..., 0:2] = self.world.current.sample(
-                self._time[:, None], self.poses[..., 0:2]
-            )
+            self._sample_currents(slice(None))
         running = ~self.done
         held = np.flatnonzero(self.done)
         before = self.poses[held].copy()

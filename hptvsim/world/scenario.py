@@ -171,9 +171,34 @@ class Site:
         30.0, doc="depth of the plane the vehicles move in", unit="m", gt=0.0, le=MAX_DEPTH
     )
     clearance: float = spec(2.0, doc="water the vehicles keep under the keel", unit="m", ge=0.0, le=1000.0)
+    current_profile: Literal["uniform", "seventh_power"] = spec(
+        "uniform",
+        doc="how the currents vary with depth in the 3-D game: 'uniform', or 'seventh_power', the "
+        "1/7 power law of a tidal boundary layer (the given current at the surface, times "
+        "(height above the seabed / water depth)^(1/7))",
+    )
 
     def __post_init__(self) -> None:
         check_bounds(self)
+
+    def current_factor(self, altitude: npt.ArrayLike, water_depth: npt.ArrayLike) -> F64:
+        """Factor on the currents at a height above the seabed (3-D game): 1, or the 1/7 power law.
+
+        Args:
+            altitude: Height above the seabed [m] (clipped at 0).
+            water_depth: Seabed depth below the surface there [m].
+
+        Returns:
+            ``(altitude / water_depth)^(1/7)`` clipped to [0, 1] for ``seventh_power``
+            (Soulsby 1997, *Dynamics of Marine Sands*, sec. 3.3), else ones.
+        """
+        h = np.asarray(altitude, dtype=np.float64)
+        if self.current_profile == "uniform":
+            ones: F64 = np.ones_like(h)
+            return ones
+        d = np.maximum(np.asarray(water_depth, dtype=np.float64), 1e-9)
+        factor: F64 = np.clip(np.maximum(h, 0.0) / d, 0.0, 1.0) ** (1.0 / 7.0)
+        return factor
 
     @property
     def extent(self) -> tuple[float, float, float, float]:

@@ -14,7 +14,7 @@ from pettingzoo.test import parallel_api_test, parallel_seed_test
 import hptvsim.envs  # noqa: F401 - registers the ids
 from hptvsim.envs.game3d import ENV_IDS_3D, Game3DCore, UPEG3DParallelEnv, parallel_env_3d
 from hptvsim.envs.policies3d import PurePursuit3D, Stationary3D, build_policies_3d
-from hptvsim.world.scenario import load_scenario
+from hptvsim.world.scenario import Scenario, load_scenario
 
 POSE_KEYS = ("x", "y", "z", "phi", "theta", "psi")
 
@@ -219,3 +219,34 @@ def test_sac_learns_to_reach_a_3d_goal() -> None:
     # 10.0 and 9.9 m), from 0 of 10 untrained (64.0 and 62.8 m)
     assert before[0] == 0.0 and before[1] > 50.0, before
     assert after[0] >= 0.8 and after[1] < 12.0, after
+
+
+def test_currents_follow_the_seventh_power_profile_with_depth() -> None:
+    """With current_profile = 'seventh_power' a vehicle near the seabed feels less current."""
+    sc = load_scenario("dive_flat")
+    data = sc.to_dict()
+    data["currents"] = [{"kind": "uniform", "speed": 0.5, "direction": 0.0}]  # m/s, towards north
+    uniform = Scenario.from_dict(data, base_dir=sc.base_dir)
+    data["site"]["current_profile"] = "seventh_power"
+    profiled = Scenario.from_dict(data, base_dir=sc.base_dir)
+    flat = Game3DCore(uniform, num_envs=4, seed=2)
+    core = Game3DCore(profiled, num_envs=4, seed=2)
+    flat.reset()
+    core.reset()
+    np.testing.assert_array_equal(flat.system.currents[..., 0], 0.5)
+    water = core.world.heightmap.depth_at(core.poses[..., 0:2])
+    altitude = water - core.poses[..., 2]
+    expected = 0.5 * (altitude / water) ** (1.0 / 7.0)
+    np.testing.assert_allclose(core.system.currents[..., 0], expected, rtol=1e-12)
+    np.testing.assert_array_equal(core.system.currents[..., 1:], 0.0)
+    assert np.ptp(core.system.currents[..., 0]) > 0.005  # the vehicles start at different depths
+    # the current is sampled again as the vehicles move: at each step, where they start it
+    for _ in range(8):
+        before = core.poses.copy()
+        live = core.active.copy()
+        core.step(np.tile([0.0, 0.0, 1.0], (4, core.num_agents, 1)))
+    water = core.world.heightmap.depth_at(before[..., 0:2])
+    expected = 0.5 * ((water - before[..., 2]) / water) ** (1.0 / 7.0)
+    np.testing.assert_allclose(core.system.currents[..., 0][live], expected[live], rtol=1e-12)
+    core.close()
+    flat.close()
