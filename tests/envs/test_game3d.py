@@ -250,3 +250,30 @@ def test_currents_follow_the_seventh_power_profile_with_depth() -> None:
     np.testing.assert_allclose(core.system.currents[..., 0][live], expected[live], rtol=1e-12)
     core.close()
     flat.close()
+
+
+def test_potential_field_evader_flees_stationary_pursuers_without_hitting_the_seabed() -> None:
+    """The scripted evader opens the 3-D distance to the nearest pursuer and keeps off the seabed."""
+    from hptvsim.envs.policies3d import PotentialField3D
+
+    core = Game3DCore("dive_flat", num_envs=8, seed=11)
+    core.reset()
+    flee, still = PotentialField3D(core.layout), Stationary3D()
+    p = core.pursuer
+    pos = core.poses[..., 0:3]
+    start = np.linalg.norm(pos[:, p] - pos[:, ~p], axis=-1).min(axis=1)
+    act = np.zeros((core.num_envs, core.num_agents, 3))
+    seabed = np.zeros(core.num_envs, dtype=bool)
+    for _ in range(240):  # 60 s
+        act[:, p] = still.act(core.obs[:, p])
+        act[:, ~p] = flee.act(core.obs[:, ~p])
+        r = core.step(act)
+        seabed |= r.seabed.any(axis=1)
+        if core.done.all():
+            break
+    pos = core.poses[..., 0:3]
+    end = np.linalg.norm(pos[:, p] - pos[:, ~p], axis=-1).min(axis=1)
+    assert not seabed.any()
+    assert (end > start + 20.0).all(), (start, end)  # 0.8 m/s for 60 s, less turning
+    assert (core.altitude[:, ~p] > core.radii[~p]).all()
+    core.close()
