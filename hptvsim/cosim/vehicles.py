@@ -180,22 +180,14 @@ def _check_fmu(vt: ExternalVehicleType, where: str) -> None:
             raise VehicleFileError(f"{where}fmu.start.{name}: {vt.fmu.name} has no variable {name!r}")
 
 
-_SI: Final = {
-    "m": {"m": 1},
-    "m/s": {"m": 1, "s": -1},
-    "rad": {"rad": 1},
-    "rad/s": {"rad": 1, "s": -1},
-    "N": {"kg": 1, "m": 1, "s": -2},
-    "N.m": {"kg": 1, "m": 2, "s": -2},
-}
-
-
 def _same_si(definition: Any, ours: str) -> bool:
     """Whether an FMU's unit definition has the SI base-unit exponents of ``ours`` (factor 1)."""
     base = getattr(definition, "baseUnit", None)
     if base is None:
         return False
-    exps = _SI[ours]
+    from hptvsim.fmu.build import UNIT_EXPONENTS  # the units our FMUs declare, as SI exponents
+
+    exps = UNIT_EXPONENTS[ours]
     keys = ("kg", "m", "s", "A", "K", "mol", "cd", "rad")
     return all(getattr(base, k) == exps.get(k, 0) for k in keys) and base.factor == 1.0 and base.offset == 0.0
 

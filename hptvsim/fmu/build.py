@@ -65,6 +65,7 @@ __all__ = [
     "CROSS_COMPILERS",
     "DEFAULT_H_MAX",
     "DEFAULT_STEP",
+    "UNIT_EXPONENTS",
     "FmuBuildError",
     "FmuDrift",
     "build_all",
@@ -172,7 +173,7 @@ _SIXDOF_KIND: Final = _Kind(
 _DEFAULT_STOP: Final = 60.0  # s, default experiment length in modelDescription.xml
 
 # Unit name -> SI base-unit exponents (kg, m, s, rad), for <UnitDefinitions>.
-_UNITS: Final[dict[str, dict[str, int]]] = {
+UNIT_EXPONENTS: Final[dict[str, dict[str, int]]] = {
     "m": {"m": 1},
     "m/s": {"m": 1, "s": -1},
     "rad": {"rad": 1},
@@ -446,7 +447,7 @@ def _model_description(
     initial_xml = [f'      <Unknown index="{idx}"/>' for idx in output_index]
 
     units_xml = []
-    for unit, exps in _UNITS.items():
+    for unit, exps in UNIT_EXPONENTS.items():
         base = " ".join(f'{k}="{v}"' for k, v in exps.items())
         units_xml.append(f'    <Unit name="{escape(unit)}">\n      <BaseUnit {base}/>\n    </Unit>')
 
