@@ -271,16 +271,8 @@ class GameCore:
         vehicle_parameters: Mapping[str, Mapping[str, float]] | None = None,
         reward: Mapping[str, float] | None = None,
     ) -> None:
-        sc = load_scenario(scenario) if isinstance(scenario, str) else scenario
-        if not isinstance(sc, Scenario):
-            raise TypeError(
-                f"scenario must be a Scenario, a shipped scenario's name or a path; got {scenario!r}"
-            )
-        overrides: dict[str, Any] = {}
-        if task is not None and task != sc.task.kind:
-            if task not in ("pursuit", "goto"):
-                raise ValueError(f"task = {task!r} is invalid; valid: 'pursuit', 'goto'")
-            overrides["task"] = {"kind": task}
+        sc = scenario_argument(scenario)
+        overrides = common_overrides(sc, task=task, max_steps=max_steps, reward=reward)
         if sensor_fidelity is not None and sensor_fidelity != sc.sensors.sonar.fidelity:
             if sensor_fidelity not in ("geometric", "signal"):
                 raise ValueError(
@@ -290,10 +282,6 @@ class GameCore:
             overrides["vehicles"] = [
                 {"sonar": {"fidelity": sensor_fidelity}} if g.sonar else {} for g in sc.vehicles
             ]
-        if max_steps is not None:
-            if isinstance(max_steps, bool) or not float(max_steps).is_integer() or max_steps < 1:
-                raise ValueError(f"max_steps = {max_steps!r} is invalid; valid: an integer >= 1")
-            overrides["simulation"] = {"max_steps": int(max_steps)}
         if vehicle_parameters:
             roles = {"pursuer", "evader"}
             unknown = sorted(set(vehicle_parameters) - roles)
@@ -307,8 +295,6 @@ class GameCore:
                         **dict(sc.vehicles[g].parameters),
                         **{k: float(v) for k, v in extra.items()},
                     }
-        if reward:
-            overrides.setdefault("task", {})["reward"] = {k: float(v) for k, v in reward.items()}
         if overrides:
             sc = sc.with_overrides(overrides)
         if num_envs < 1:
@@ -551,6 +537,45 @@ class GameCore:
     def close(self) -> None:
         """Release the simulation's native resources."""
         self.system.close()
+
+
+def scenario_argument(scenario: Scenario | str) -> Scenario:
+    """A game's ``scenario`` argument as a Scenario (a shipped name or a path is loaded).
+
+    Raises:
+        TypeError: Neither a Scenario nor a string.
+        ScenarioError: No such scenario, or an invalid one.
+    """
+    sc = load_scenario(scenario) if isinstance(scenario, str) else scenario
+    if not isinstance(sc, Scenario):
+        raise TypeError(f"scenario must be a Scenario, a shipped scenario's name or a path; got {scenario!r}")
+    return sc
+
+
+def common_overrides(
+    sc: Scenario,
+    *,
+    task: str | None = None,
+    max_steps: int | None = None,
+    reward: Mapping[str, float] | None = None,
+) -> dict[str, Any]:
+    """The scenario changes that the planar and the 3-D game's ``task``, ``max_steps`` and ``reward`` ask.
+
+    Raises:
+        ValueError: An invalid task or step limit (the message says what is valid).
+    """
+    overrides: dict[str, Any] = {}
+    if task is not None and task != sc.task.kind:
+        if task not in ("pursuit", "goto"):
+            raise ValueError(f"task = {task!r} is invalid; valid: 'pursuit', 'goto'")
+        overrides["task"] = {"kind": task}
+    if max_steps is not None:
+        if isinstance(max_steps, bool) or not float(max_steps).is_integer() or max_steps < 1:
+            raise ValueError(f"max_steps = {max_steps!r} is invalid; valid: an integer >= 1")
+        overrides["simulation"] = {"max_steps": int(max_steps)}
+    if reward:
+        overrides.setdefault("task", {})["reward"] = {k: float(v) for k, v in reward.items()}
+    return overrides
 
 
 def _overrides(agent: Any) -> dict[str, float]:

@@ -83,8 +83,9 @@ import numpy.typing as npt
 from pettingzoo import ParallelEnv
 
 from hptvsim.cosim.system import SIXDOF_LAYOUT, SystemSpec, VehicleSpec, VehicleSystem, make_system
+from hptvsim.envs.core import common_overrides, scenario_argument
 from hptvsim.envs.task import EndFlags, RewardTerms, bookkeeping, reward_terms, wrap
-from hptvsim.world.scenario import Scenario, Task, World, load_scenario
+from hptvsim.world.scenario import Scenario, Task, World
 
 __all__ = [
     "ENV_IDS_3D",
@@ -331,22 +332,8 @@ class Game3DCore:
         from hptvsim.sensors import AcousticLink
         from hptvsim.sensors.sonar3d import Sonar3d, Sonar3dConfig, beam_grid
 
-        sc = load_scenario(scenario) if isinstance(scenario, str) else scenario
-        if not isinstance(sc, Scenario):
-            raise TypeError(
-                f"scenario must be a Scenario, a shipped scenario's name or a path; got {scenario!r}"
-            )
-        overrides: dict[str, Any] = {}
-        if task is not None and task != sc.task.kind:
-            if task not in ("pursuit", "goto"):
-                raise ValueError(f"task = {task!r} is invalid; valid: 'pursuit', 'goto'")
-            overrides["task"] = {"kind": task}
-        if max_steps is not None:
-            if isinstance(max_steps, bool) or not float(max_steps).is_integer() or max_steps < 1:
-                raise ValueError(f"max_steps = {max_steps!r} is invalid; valid: an integer >= 1")
-            overrides["simulation"] = {"max_steps": int(max_steps)}
-        if reward:
-            overrides.setdefault("task", {})["reward"] = {k: float(v) for k, v in reward.items()}
+        sc = scenario_argument(scenario)
+        overrides = common_overrides(sc, task=task, max_steps=max_steps, reward=reward)
         if overrides:
             sc = sc.with_overrides(overrides)
         if isinstance(num_envs, bool) or num_envs < 1:
