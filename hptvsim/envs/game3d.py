@@ -71,7 +71,6 @@ Deterministic: the same seed gives the same episode bit for bit.
 
 from __future__ import annotations
 
-import functools
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -84,6 +83,7 @@ from pettingzoo import ParallelEnv
 
 from hptvsim.cosim.system import SIXDOF_LAYOUT, SystemSpec, VehicleSpec, VehicleSystem, make_system
 from hptvsim.envs.core import common_overrides, scenario_argument
+from hptvsim.envs.parallel import AgentSpaces
 from hptvsim.envs.task import EndFlags, RewardTerms, bookkeeping, reward_terms, wrap
 from hptvsim.world.scenario import Scenario, Task, World
 
@@ -811,7 +811,7 @@ def _action_box() -> gymnasium.spaces.Box:
 # --- PettingZoo -------------------------------------------------------------------------------------
 
 
-class UPEG3DParallelEnv(ParallelEnv[str, F32, F32]):  # type: ignore[misc]  # pettingzoo is untyped here
+class UPEG3DParallelEnv(AgentSpaces, ParallelEnv[str, F32, F32]):  # type: ignore[misc]  # pettingzoo is untyped here
     """The 3-D UPEG as a PettingZoo ParallelEnv (rules: the module docstring).
 
     ## Action Space
@@ -876,21 +876,6 @@ class UPEG3DParallelEnv(ParallelEnv[str, F32, F32]):  # type: ignore[misc]  # pe
         self._act_space = {a: _action_box() for a in self.possible_agents}
         self._actions = np.zeros((1, len(self.possible_agents), 3))
         self.max_cycles = self.core.max_steps
-
-    @functools.cache  # noqa: B019 - one space object per agent, as PettingZoo asks
-    def observation_space(self, agent: str) -> gymnasium.spaces.Box:
-        """The agent's observation space (:class:`Obs3DLayout`)."""
-        return self._obs_space[self._agent(agent)]
-
-    @functools.cache  # noqa: B019 - one space object per agent, as PettingZoo asks
-    def action_space(self, agent: str) -> gymnasium.spaces.Box:
-        """The agent's action space ``[-1, 1]^3``."""
-        return self._act_space[self._agent(agent)]
-
-    def _agent(self, agent: str) -> str:
-        if agent not in self._index:
-            raise ValueError(f"unknown agent {agent!r}; agents: {', '.join(self.possible_agents)}")
-        return agent
 
     def reset(
         self, seed: int | None = None, options: dict[str, Any] | None = None

@@ -17,7 +17,35 @@ from hptvsim.world.scenario import Scenario
 __all__ = ["UPEGParallelEnv", "make_renderer", "parallel_env", "render_core"]
 
 
-class UPEGParallelEnv(ParallelEnv[str, npt.NDArray[np.float32], npt.NDArray[np.float32]]):  # type: ignore[misc]  # pettingzoo is untyped here
+class AgentSpaces:
+    """Per-agent spaces of a PettingZoo environment, one object per agent, and the name check.
+
+    The environment sets ``possible_agents``, ``_index`` (name to index) and the spaces by name,
+    ``_obs_space`` and ``_act_space``.
+    """
+
+    possible_agents: list[str]
+    _index: dict[str, int]
+    _obs_space: dict[str, gymnasium.spaces.Box]
+    _act_space: dict[str, gymnasium.spaces.Box]
+
+    @functools.cache  # noqa: B019 - one space object per agent, as PettingZoo asks
+    def observation_space(self, agent: str) -> gymnasium.spaces.Box:
+        """The agent's observation space (the environment's observation layout)."""
+        return self._obs_space[self._agent(agent)]
+
+    @functools.cache  # noqa: B019 - one space object per agent, as PettingZoo asks
+    def action_space(self, agent: str) -> gymnasium.spaces.Box:
+        """The agent's action space (planar: ``[v, omega]``, Eqs. 15-16; 3-D: ``[-1, 1]^3``)."""
+        return self._act_space[self._agent(agent)]
+
+    def _agent(self, agent: str) -> str:
+        if agent not in self._index:
+            raise ValueError(f"unknown agent {agent!r}; agents: {', '.join(self.possible_agents)}")
+        return agent
+
+
+class UPEGParallelEnv(AgentSpaces, ParallelEnv[str, npt.NDArray[np.float32], npt.NDArray[np.float32]]):  # type: ignore[misc]  # pettingzoo is untyped here
     """UPEG: work-class UUVs pursue a spherical robot over seabed terrain (paper section IV-A).
 
     ## Description
@@ -121,23 +149,6 @@ class UPEGParallelEnv(ParallelEnv[str, npt.NDArray[np.float32], npt.NDArray[np.f
         self._actions = np.zeros((1, len(self.possible_agents), 2))
         self._renderer: Any = None
         self.max_cycles = self.core.max_steps
-
-    # -- spaces ------------------------------------------------------------------------------------
-
-    @functools.cache  # noqa: B019 - one space object per agent, as PettingZoo asks
-    def observation_space(self, agent: str) -> gymnasium.spaces.Box:
-        """The agent's observation space (Eq. 14)."""
-        return self._obs_space[self._agent(agent)]
-
-    @functools.cache  # noqa: B019 - one space object per agent, as PettingZoo asks
-    def action_space(self, agent: str) -> gymnasium.spaces.Box:
-        """The agent's action space ``[v, omega]`` (Eqs. 15-16)."""
-        return self._act_space[self._agent(agent)]
-
-    def _agent(self, agent: str) -> str:
-        if agent not in self._index:
-            raise ValueError(f"unknown agent {agent!r}; agents: {', '.join(self.possible_agents)}")
-        return agent
 
     # -- the API -----------------------------------------------------------------------------------
 
