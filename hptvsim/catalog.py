@@ -68,6 +68,7 @@ class PolicyEntry:
         roles: Roles it drives.
         description: One line.
         aliases: Other accepted spellings (a scripted policy's bare name).
+        games: Games it plays (``planar``, ``3d``; :attr:`hptvsim.zoo.PolicyInfo.games`).
     """
 
     name: str
@@ -75,6 +76,7 @@ class PolicyEntry:
     roles: tuple[str, ...]
     description: str
     aliases: tuple[str, ...] = ()
+    games: tuple[str, ...] = ("planar",)
 
 
 def scenario_names() -> list[str]:
@@ -125,39 +127,45 @@ def shipped_scenario(name: str) -> Any:
     return scenario
 
 
-def policies(role: Role | None = None) -> list[PolicyEntry]:
-    """The named policies (for ``role`` only, if given), scripted ones first."""
+def policies(role: Role | None = None, game: str | None = None) -> list[PolicyEntry]:
+    """The named policies (for ``role`` and ``game`` only, if given), scripted ones first."""
     from hptvsim.zoo import list_policies
 
     out = []
     for p in list_policies():
-        if role is not None and role not in p.roles:
+        if (role is not None and role not in p.roles) or (game is not None and game not in p.games):
             continue
         aliases = (p.name.removeprefix("scripted:"),) if p.kind == "scripted" else ()
-        out.append(PolicyEntry(p.name, p.kind, tuple(p.roles), p.description, aliases))
+        out.append(PolicyEntry(p.name, p.kind, tuple(p.roles), p.description, aliases, tuple(p.games)))
     return out
 
 
-def check_policy(name: Any, role: Role | None = None) -> str:
-    """The canonical name of the policy ``name`` (for ``role``, if given).
+def check_policy(name: Any, role: Role | None = None, game: str | None = None) -> str:
+    """The canonical name of the policy ``name`` (for ``role`` and ``game``, if given).
 
     Raises:
         CatalogError: Not a named policy (a checkpoint path, an unknown name), or one that
-            does not drive ``role``; lists the valid names.
+            does not drive ``role`` or play ``game``; lists the valid names.
     """
     every = policies()
+    valid = [p.name for p in every if (role is None or role in p.roles) and (game is None or game in p.games)]
     for p in every:
         if name == p.name or name in p.aliases:
             if role is not None and role not in p.roles:
-                valid = [q.name for q in every if role in q.roles]
                 raise CatalogError(
                     "policy",
                     f"{p.name} drives {', '.join(p.roles)}, not {'an' if role == 'evader' else 'a'} {role}; "
                     f"valid: {', '.join(valid)}",
                     valid,
                 )
+            if game is not None and game not in p.games:
+                raise CatalogError(
+                    "policy",
+                    f"{p.name} plays the {' and '.join(p.games)} game, not this scenario's {game} game; "
+                    f"valid: {', '.join(valid)}",
+                    valid,
+                )
             return p.name
-    valid = [p.name for p in every if role is None or role in p.roles]
     shown = repr(name) if len(repr(name)) <= 80 else repr(name)[:77] + "..."
     raise CatalogError("policy", f"{shown} is not a named policy; valid: {', '.join(valid)}", valid)
 

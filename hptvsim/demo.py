@@ -282,7 +282,7 @@ def episode_figure(result: EpisodeResult) -> Any:
         if info.role == "pursuer" or not pursuit:
             ax_d.plot(traj.time, a.distance, color=info.color, lw=1.8, label=info.name)
         if info.goal is not None:  # goto: the goal and the distance within which it counts
-            gx, gy = info.goal
+            gx, gy = info.goal[0], info.goal[1]
             ax_map.plot(gy, gx, marker="*", ms=14, color=info.color, mec=_OUTLINE, ls="none", zorder=4)
             ax_map.add_patch(
                 Circle((gy, gx), info.goal_radius or 1.0, fill=False, ec=info.color, lw=1.2, ls="--")

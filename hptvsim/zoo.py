@@ -1,11 +1,13 @@
 """The policy zoo: every policy by name, whatever made it (scripted, SB3, Decision Transformer).
 
 A policy is anything with ``act(obs, episode_start=None) -> (..., 2)`` actions ``[v, omega]``
-in SI units (:class:`hptvsim.envs.policies.Policy`). The zoo names them so the environments'
+in SI units (:class:`hptvsim.envs.policies.Policy`); in the 3-D game (:mod:`hptvsim.envs.game3d`)
+``(..., 3)`` actions ``[v, omega, w_z]`` in SI units. The zoo names them so the environments'
 single-agent views, ``hptvsim evaluate``, the service and the dashboard can all use the same
 ones:
 
-* ``scripted:<name>``: :data:`hptvsim.envs.policies.POLICY_NAMES` (always available);
+* ``scripted:<name>``: :data:`hptvsim.envs.policies.POLICY_NAMES` (always available; those of
+  :data:`hptvsim.envs.policies3d.POLICY_NAMES_3D` in the 3-D game as well);
 * shipped trained policies listed in ``policies/index.toml`` (the repository's ``policies/``
   folder, or the copy in an installed wheel): each entry names its kind (``sb3`` or ``dt``),
   file, roles and the command, config and seed that made it;
@@ -23,13 +25,19 @@ import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Final
+
+import numpy as np
+import numpy.typing as npt
 
 from hptvsim._paths import shipped_dir
 from hptvsim.envs.core import GameCore
+from hptvsim.envs.game3d import Game3DCore
 from hptvsim.envs.policies import POLICY_NAMES, POLICY_ROLES, Limits, Policy, make_policy
+from hptvsim.envs.policies3d import POLICY_NAMES_3D, make_policy_3d
 
 __all__ = [
+    "GAMES",
     "PolicyInfo",
     "PolicyLoader",
     "UnknownPolicyError",
@@ -40,6 +48,9 @@ __all__ = [
     "policy_dir",
     "register_loader",
 ]
+
+GAMES: Final = ("planar", "3d")
+"""The games a policy may play (:attr:`hptvsim.world.scenario.Simulation.game`)."""
 
 PolicyLoader = Callable[[Path, GameCore, str], Policy]
 """Builds a policy for agent ``agent`` of ``core`` from a checkpoint file."""
@@ -66,6 +77,8 @@ class PolicyInfo:
         description: One line.
         provenance: How it was made (command, config, seed, versions), for trained ones.
         default_for: Tasks (``pursuit``, ``goto``) in which it is the default for its roles.
+        games: Games it plays (:data:`GAMES`): the scripted policies of both games play both;
+            trained ones the game of their observation (``games`` in the index; default planar).
     """
 
     name: str
@@ -76,6 +89,7 @@ class PolicyInfo:
     description: str = ""
     provenance: dict[str, Any] = field(default_factory=dict)
     default_for: tuple[str, ...] = ()
+    games: tuple[str, ...] = ("planar",)
 
 
 def register_loader(kind: str, loader: PolicyLoader) -> None:
@@ -105,7 +119,11 @@ def list_policies(folder: Path | None = None) -> list[PolicyInfo]:
     """Every named policy: the scripted ones, then the shipped trained ones."""
     out = [
         PolicyInfo(
-            name=f"scripted:{n}", kind="scripted", roles=_SCRIPTED_ROLES[n], description=f"scripted {n}"
+            name=f"scripted:{n}",
+            kind="scripted",
+            roles=_SCRIPTED_ROLES[n],
+            description=f"scripted {n}",
+            games=GAMES if n in POLICY_NAMES_3D else ("planar",),
         )
         for n in POLICY_NAMES
     ]
@@ -127,27 +145,29 @@ def list_policies(folder: Path | None = None) -> list[PolicyInfo]:
                     description=str(entry.get("description", "")),
                     provenance=dict(entry.get("provenance", {})),
                     default_for=tuple(entry.get("default_for", ())),
+                    games=tuple(entry.get("games", ("planar",))),
                 )
             )
     return out
 
 
-def default_policy(role: str, task: str) -> str:
-    """The policy an agent of ``role`` follows in ``task`` when none is named.
+def default_policy(role: str, task: str, game: str = "planar") -> str:
+    """The policy an agent of ``role`` follows in ``task`` of ``game`` when none is named.
 
-    A shipped trained policy whose ``default_for`` lists the task (``policies/index.toml``), else
-    the scripted baseline: pure pursuit for pursuers (and for everyone in goto), the potential
-    field for evaders. The demo, the episode runner, the service and the dashboard all ask here.
+    A shipped trained policy of the game whose ``default_for`` lists the task
+    (``policies/index.toml``), else the scripted baseline: pure pursuit for pursuers (and for
+    everyone in goto), the potential field for evaders. The demo, the episode runner, the service
+    and the dashboard all ask here.
     """
     for p in list_policies():
-        if p.kind != "scripted" and task in p.default_for and role in p.roles:
+        if p.kind != "scripted" and task in p.default_for and role in p.roles and game in p.games:
             return p.name
     if task == "goto" or role == "pursuer":
         return "scripted:pure_pursuit"
     return "scripted:potential_field"
 
 
-def _role(core: GameCore, agent: str) -> str:
+def _role(core: GameCore | Game3DCore, agent: str) -> str:
     return "pursuer" if core.pursuer[core.agents.index(agent)] else "evader"
 
 
@@ -155,7 +175,9 @@ class UnknownPolicyError(ValueError):
     """A policy spec names no policy of the zoo (the message lists the valid names)."""
 
 
-def check_policy_spec(spec: str, role: str, *, allow_paths: bool = False, agent: str | None = None) -> None:
+def check_policy_spec(
+    spec: str, role: str, *, allow_paths: bool = False, agent: str | None = None, game: str = "planar"
+) -> None:
     """Check, without loading anything, that ``spec`` names a policy that drives ``role``.
 
     The same rule as the service's (:func:`hptvsim.catalog.check_policy`): a scripted or shipped
@@ -167,15 +189,16 @@ def check_policy_spec(spec: str, role: str, *, allow_paths: bool = False, agent:
         role: ``"pursuer"`` or ``"evader"``.
         allow_paths: Accept ``<kind>:<path>`` checkpoint files.
         agent: The agent's name, for the message.
+        game: The game it will play (:data:`GAMES`).
 
     Raises:
         UnknownPolicyError: Not a name of the zoo, nor (with ``allow_paths``) a checkpoint spec;
             the message lists the policies that drive ``role``.
-        ValueError: A policy for another role, a path while paths are not allowed, or a
-            checkpoint file that does not exist.
+        ValueError: A policy for another role or game, a path while paths are not allowed, or a
+            checkpoint file that does not exist (or any checkpoint in the 3-D game).
     """
     infos = list_policies()
-    valid = [p.name for p in infos if role in p.roles]
+    valid = [p.name for p in infos if role in p.roles and game in p.games]
     who = f"{agent} ({'an' if role == 'evader' else 'a'} {role})" if agent else f"a {role}"
     name = spec.removeprefix("scripted:")
     info = next((p for p in infos if p.name == spec), None)
@@ -186,9 +209,19 @@ def check_policy_spec(spec: str, role: str, *, allow_paths: bool = False, agent:
             raise ValueError(
                 f"policy {spec!r} drives {', '.join(info.roles)}, not {who}; valid: {', '.join(valid)}"
             )
+        if game not in info.games:
+            raise ValueError(
+                f"policy {spec!r} plays the {' and '.join(info.games)} game, not the {game} game of "
+                f"this scenario; valid for {who}: {', '.join(valid)}"
+            )
         return
     kind, sep, path = spec.partition(":")
     if sep and kind in _LOADER_MODULES:
+        if game != "planar":
+            raise ValueError(
+                f"policy {spec!r}: checkpoint files play the planar game only so far; "
+                f"valid in the {game} game: {', '.join(valid)}"
+            )
         if not allow_paths:
             raise ValueError(
                 f"policy {spec!r} names a checkpoint file, which is not allowed here; "
@@ -201,15 +234,31 @@ def check_policy_spec(spec: str, role: str, *, allow_paths: bool = False, agent:
     raise UnknownPolicyError(f"unknown policy {spec!r}; valid for {who}: {', '.join(valid)}{files}")
 
 
+class _Commands3D:
+    """A 3-D scripted policy with SI actions ``[v, omega, w_z]`` (the zoo's convention)."""
+
+    def __init__(self, policy: Policy, core: Game3DCore, index: int) -> None:
+        self.policy = policy
+        self.core = core
+        self.index = index
+
+    def act(self, obs: npt.ArrayLike, episode_start: npt.ArrayLike | None = None) -> npt.NDArray[np.float64]:
+        """``(..., 3)`` commands ``[v, omega, w_z]`` [m/s, rad/s, m/s]."""
+        a = np.asarray(self.policy.act(obs, episode_start), dtype=np.float64)
+        return self.core.commands_of(a, self.index)
+
+
 def load_policy(
-    spec: str, core: GameCore, agent: str, *, seed: int | None = None, allow_paths: bool = False
+    spec: str, core: GameCore | Game3DCore, agent: str, *, seed: int | None = None, allow_paths: bool = False
 ) -> Policy:
     """Build the policy ``spec`` for ``agent`` of the game ``core``.
 
     Args:
         spec: A zoo name (:func:`list_policies`), ``scripted:<name>`` (or just ``<name>`` of a
             scripted policy), or, with ``allow_paths``, ``<kind>:<path>`` for a checkpoint file.
-        core: The game the policy will play (observation layout, limits, beams).
+        core: The game the policy will play (observation layout, limits, beams): planar, or
+            the 3-D game (scripted policies of :data:`~hptvsim.envs.policies3d.POLICY_NAMES_3D`
+            only; their actions ``[v, omega, w_z]`` in SI units).
         agent: The agent it drives.
         seed: Seed of stochastic policies (``random``).
         allow_paths: Also load a checkpoint file the spec names. A checkpoint is code (SB3 zips
@@ -223,8 +272,11 @@ def load_policy(
     """
     if agent not in core.agents:
         raise ValueError(f"unknown agent {agent!r}; agents: {', '.join(core.agents)}")
-    check_policy_spec(spec, _role(core, agent), allow_paths=allow_paths, agent=agent)
+    game = "3d" if isinstance(core, Game3DCore) else "planar"
+    check_policy_spec(spec, _role(core, agent), allow_paths=allow_paths, agent=agent, game=game)
     name = spec.removeprefix("scripted:")
+    if isinstance(core, Game3DCore):
+        return _Commands3D(make_policy_3d(name, core.layout), core, core.agents.index(agent))
     if name in POLICY_NAMES:
         i = core.agents.index(agent)
         v_min, v_max, om = core.robots.limits[i]

@@ -512,6 +512,33 @@ class Game3DCore:
         out[..., 2] = a[..., 2] * lim[:, 3]
         return out
 
+    def commands_of(self, actions: npt.ArrayLike, agent: int) -> F64:
+        """One agent's :meth:`commands`: normalised ``(..., 3)`` to ``[v, omega, w_z]``."""
+        a = np.clip(np.asarray(actions, dtype=np.float64), -1.0, 1.0)
+        v_min, v_max, omega_max, w_z_max = self.limits[agent]
+        out = np.empty_like(a)
+        out[..., 0] = v_min + 0.5 * (a[..., 0] + 1.0) * (v_max - v_min)
+        out[..., 1] = a[..., 1] * omega_max
+        out[..., 2] = a[..., 2] * w_z_max
+        return out
+
+    def normalised(self, commands: npt.ArrayLike) -> F64:
+        """The inverse of :meth:`commands`: commands as normalised actions in ``[-1, 1]``.
+
+        Args:
+            commands: ``(..., N, 3)`` ``[v, omega, w_z]`` [m/s, rad/s, m/s]; clipped to each
+                agent's limits.
+        """
+        c = np.asarray(commands, dtype=np.float64)
+        lim = self.limits
+        out = np.empty_like(c)
+        span = np.maximum(lim[:, 1] - lim[:, 0], 1e-12)
+        out[..., 0] = 2.0 * (c[..., 0] - lim[:, 0]) / span - 1.0
+        out[..., 1] = c[..., 1] / lim[:, 2]
+        out[..., 2] = c[..., 2] / lim[:, 3]
+        clipped: F64 = np.clip(out, -1.0, 1.0)
+        return clipped
+
     def _read_system(self) -> None:
         y = self.system.outputs
         self.poses[...] = y[..., 0:6]

@@ -323,13 +323,22 @@ def build_routers(settings: Settings) -> tuple[APIRouter, APIRouter]:
         role: Annotated[
             Literal["pursuer", "evader"] | None, Query(description="only policies for this role")
         ] = None,
+        game: Annotated[
+            Literal["planar", "3d"] | None, Query(description="only policies that play this game")
+        ] = None,
     ) -> list[dict[str, Any]]:
         """Every named policy (scripted and shipped trained ones)."""
         from hptvsim.catalog import policies
 
         return [
-            {"name": p.name, "kind": p.kind, "roles": list(p.roles), "description": p.description}
-            for p in policies(role)
+            {
+                "name": p.name,
+                "kind": p.kind,
+                "roles": list(p.roles),
+                "games": list(p.games),
+                "description": p.description,
+            }
+            for p in policies(role, game)
         ]
 
     @router.get("/config", tags=["service"])

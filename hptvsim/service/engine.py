@@ -30,7 +30,10 @@ import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from hptvsim.viz.frames import AgentInfo
 
 __all__ = [
     "RECORDING_FILE",
@@ -235,6 +238,17 @@ def read_result(out_dir: str | Path) -> dict[str, Any] | None:
     return data
 
 
+def _action_space(a: AgentInfo) -> dict[str, Any]:
+    """An agent's action box: ``[v, omega]`` (m/s, rad/s), or ``[v, omega, w_z]`` in the 3-D game."""
+    if a.w_z_max is not None:
+        return {
+            "low": [a.v_min, -a.omega_max, -a.w_z_max],
+            "high": [a.v_max, a.omega_max, a.w_z_max],
+            "shape": [3],
+        }
+    return {"low": [a.v_min, -a.omega_max], "high": [a.v_max, a.omega_max], "shape": [2]}
+
+
 def _progress(step: int, max_steps: int, sim_time: float, started: float) -> dict[str, Any]:
     return {"step": step, "max_steps": max_steps, "t": sim_time, "wall_s": time.perf_counter() - started}
 
@@ -362,10 +376,7 @@ class InteractiveEpisode:
             "observations": self.observations(),
             "spaces": {
                 "observation": {"low": low.tolist(), "high": high.tolist(), "shape": [int(low.size)]},
-                "action": {
-                    a.name: {"low": [a.v_min, -a.omega_max], "high": [a.v_max, a.omega_max], "shape": [2]}
-                    for a in static.agents
-                },
+                "action": {a.name: _action_space(a) for a in static.agents},
             },
         }
 
@@ -407,7 +418,8 @@ class InteractiveEpisode:
         active = {a.name for a in frame.agents if a.active}
         missing = [a for a in self.control if a in active and a not in actions]
         if missing:
-            raise ValueError(f"actions.{missing[0]}: missing; give [v, omega] for every controlled agent")
+            shape = "[v, omega, w_z]" if self.stepper.game == "3d" else "[v, omega]"
+            raise ValueError(f"actions.{missing[0]}: missing; give {shape} for every controlled agent")
         try:
             frame = self.stepper.step({a: v for a, v in actions.items() if a in active})
         except ValueError as exc:

@@ -192,6 +192,9 @@ class ScenarioOut(BaseModel):
     colors: dict[str, str] = Field(
         description="each agent's display colour `#rrggbb` (hptvsim.palette: the same in every view)"
     )
+    game: Literal["planar", "3d"] = Field(
+        "planar", description="the game episodes play: planar (the paper's) or 3d (vehicles that dive)"
+    )
     default_policies: dict[str, str] = Field(
         description="the policy each role follows when a request names none (hptvsim.zoo.default_policy)"
     )
@@ -205,10 +208,11 @@ class PolicyOut(BaseModel):
     name: str
     kind: str
     roles: list[str]
+    games: list[str] = Field(description="games it plays: planar, 3d")
     description: str
 
 
-ActionValue = tuple[StrictFloat, StrictFloat]
+ActionValue = tuple[StrictFloat, StrictFloat] | tuple[StrictFloat, StrictFloat, StrictFloat]
 
 
 class StepIn(Strict):
@@ -217,6 +221,7 @@ class StepIn(Strict):
     actions: dict[AgentName, ActionValue] = Field(
         default_factory=dict,
         description="[v, omega] per controlled agent (m/s, rad/s; clipped to the vehicle's limits); "
+        "in the 3-D game [v, omega, w_z] (w_z: vertical speed, m/s, positive down); "
         "agents left out keep still",
         max_length=64,
     )

@@ -85,7 +85,10 @@ def scenario_summary(scenario: Any) -> dict[str, Any]:
         "agents": [a.name for a in agents],
         "roles": {a.name: a.role for a in agents},
         "colors": agent_colors((a.name, a.role) for a in agents),
-        "default_policies": {role: default_policy(role, scenario.task.kind) for role in ROLES},
+        "game": scenario.simulation.game,
+        "default_policies": {
+            role: default_policy(role, scenario.task.kind, scenario.simulation.game) for role in ROLES
+        },
         "max_steps": int(scenario.simulation.max_steps),
         "dt": float(scenario.simulation.dt),
     }
@@ -285,12 +288,12 @@ def resolve_request(req: EpisodeCreate, settings: Settings) -> tuple[Resolved, A
         if agent in control:
             raise ApiError(422, f"{field}: {agent} is stepped by the client (control)", field)
         try:
-            policies[agent] = check_policy(name, roles[agent])
+            policies[agent] = check_policy(name, roles[agent], scenario.simulation.game)
         except CatalogError as exc:
             raise ApiError(422, f"{field}: {exc}", field) from None
     for agent in agents:
         if agent not in control and agent not in policies:
-            policies[agent] = default_policy(roles[agent], scenario.task.kind)
+            policies[agent] = default_policy(roles[agent], scenario.task.kind, scenario.simulation.game)
     return (
         Resolved(
             scenario_ref=ref,

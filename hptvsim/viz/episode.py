@@ -10,6 +10,11 @@ Both only need plain, picklable arguments (a scenario name or dict, policy specs
 seed), so a service calls them in a worker process; frames reach the parent through
 ``on_frame`` (e.g. put on a queue) and ``cancel`` may be a ``multiprocessing.Event``.
 
+The scenario's ``simulation.game`` decides the game: ``planar`` (:class:`~hptvsim.envs.core.GameCore`,
+actions ``[v, omega]``) or ``3d`` (:class:`~hptvsim.envs.game3d.Game3DCore`, actions
+``[v, omega, w_z]``, frames with depth and attitude); both give frames of the one schema
+(:mod:`hptvsim.viz.frames`).
+
 Policies are zoo specs (:func:`hptvsim.zoo.load_policy`): ``scripted:pure_pursuit``, a shipped
 trained policy's name, ... An agent without a spec follows its role's default
 (:func:`hptvsim.zoo.default_policy`: the shipped trained policy of its role where there is one,
@@ -32,6 +37,7 @@ import numpy.typing as npt
 from hptvsim.cosim.fmi2 import FmuError
 from hptvsim.cosim.orchestrator import SimulationFailedError
 from hptvsim.envs.core import Backend, GameCore, StepResult
+from hptvsim.envs.game3d import Game3DCore, Step3D
 from hptvsim.train.evaluate import EpisodeMetrics
 from hptvsim.viz.frames import (
     AgentInfo,
@@ -41,6 +47,7 @@ from hptvsim.viz.frames import (
     Frame,
     FrameOptions,
     Outcome,
+    Point,
     SiteInfo,
     Trajectories,
     agent_color,
@@ -133,15 +140,24 @@ def resolve_scenario(scenario: ScenarioLike, *, allow_paths: bool = False) -> Sc
     return sc
 
 
-def default_policy(core: GameCore, agent: str) -> str:
+AnyCore = GameCore | Game3DCore
+"""The core of either game."""
+
+
+def game_of(core: AnyCore) -> Literal["planar", "3d"]:
+    """Which game ``core`` plays."""
+    return "3d" if isinstance(core, Game3DCore) else "planar"
+
+
+def default_policy(core: AnyCore, agent: str) -> str:
     """The zoo spec an agent follows when none is given (:func:`hptvsim.zoo.default_policy`)."""
     from hptvsim.zoo import default_policy as zoo_default
 
     role = "pursuer" if core.pursuer[core.agents.index(agent)] else "evader"
-    return zoo_default(role, "goto" if core.goto else "pursuit")
+    return zoo_default(role, "goto" if core.goto else "pursuit", game_of(core))
 
 
-def _policy_specs(core: GameCore, policies: Mapping[str, str] | None) -> dict[str, str]:
+def _policy_specs(core: AnyCore, policies: Mapping[str, str] | None) -> dict[str, str]:
     given = dict(policies or {})
     unknown = sorted(set(given) - set(core.agents))
     if unknown:
@@ -153,7 +169,7 @@ def _policy_specs(core: GameCore, policies: Mapping[str, str] | None) -> dict[st
 
 
 def build_static(
-    core: GameCore,
+    core: AnyCore,
     policies: Mapping[str, str],
     *,
     options: FrameOptions | None = None,
@@ -166,15 +182,24 @@ def build_static(
     obstacles = core.world.obstacles
     counters: dict[str, int] = {}
     agents: list[AgentInfo] = []
-    state_goals = core.state.goals
+    three_d = isinstance(core, Game3DCore)
+    if isinstance(core, Game3DCore):
+        state_goals, limits = core.goals, core.limits
+        beams, elevations = core.layout.azimuth, core.layout.elevation
+        max_range, fence, radii = core.layout.max_range, False, core.radii
+    else:
+        state_goals, limits = core.state.goals, core.robots.limits
+        beams, elevations = core.robots.beam_angles, None
+        max_range, fence, radii = core.robots.max_range, core.fence, core.robots.radii
     for i, spec in enumerate(sc.agents):
         k = counters.get(spec.role, 0)
         counters[spec.role] = k + 1
-        v_min, v_max, om = (float(v) for v in core.robots.limits[i])
-        goal = None
+        v_min, v_max, om = (float(v) for v in limits[i, :3])
+        goal: Point | None = None
         goal_radius = None
         if core.goto and state_goals is not None:
-            goal = (float(state_goals[0, i, 0]), float(state_goals[0, i, 1]))
+            g = [float(v) for v in state_goals[0, i]]
+            goal = (g[0], g[1], g[2]) if three_d else (g[0], g[1])
             goal_radius = float(core.goal_radius[i])
         agents.append(
             AgentInfo(
@@ -183,14 +208,16 @@ def build_static(
                 vehicle_type=spec.vehicle_type,
                 policy=policies[spec.name],
                 color=agent_color(spec.role, k),
-                radius=float(core.robots.radii[i]),
+                radius=float(radii[i]),
                 v_min=v_min,
                 v_max=v_max,
                 omega_max=om,
-                beam_angles=tuple(float(a) for a in core.robots.beam_angles),
-                max_range=float(core.robots.max_range),
+                beam_angles=tuple(float(a) for a in beams),
+                max_range=float(max_range),
                 goal=goal,
                 goal_radius=goal_radius,
+                w_z_max=float(limits[i, 3]) if three_d else None,
+                beam_elevations=tuple(float(e) for e in elevations) if elevations is not None else None,
             )
         )
     return EpisodeStatic(
@@ -214,11 +241,12 @@ def build_static(
             obstacles.occupied,
             resolution=obstacles.geometry.resolution,
             extent=obstacles.geometry.extent,
-            fence=core.fence,
+            fence=fence,
             max_cells=opts.obstacle_cells,
         ),
         agents=tuple(agents),
         options=opts,
+        game=game_of(core),
     )
 
 
@@ -375,15 +403,25 @@ class EpisodeStepper:
         sc = resolve_scenario(scenario, allow_paths=allow_paths)
         if seed is not None and (not isinstance(seed, int) or seed < 0):
             raise ValueError(f"seed = {seed!r} is invalid; valid: an integer >= 0")
-        self.core = GameCore(
-            sc,
-            num_envs=1,
-            backend=backend,
-            sensor_fidelity=sensor_fidelity,
-            max_steps=max_steps,
-            seed=seed,
-            threads=1,
-        )
+        self.core: AnyCore
+        if sc.simulation.game == "3d":
+            if sensor_fidelity not in (None, "geometric"):
+                raise ValueError(
+                    f"sensor_fidelity = {sensor_fidelity!r} is invalid in the 3-D game; valid: 'geometric'"
+                )
+            self.core = Game3DCore(sc, num_envs=1, backend=backend, max_steps=max_steps, seed=seed, threads=1)
+        else:
+            self.core = GameCore(
+                sc,
+                num_envs=1,
+                backend=backend,
+                sensor_fidelity=sensor_fidelity,
+                max_steps=max_steps,
+                seed=seed,
+                threads=1,
+            )
+        self.game = game_of(self.core)
+        self.action_size = 3 if self.game == "3d" else 2
         self.seed = int(self.core.seed)
         self.options = options if options is not None else FrameOptions()
         self.policy_specs = _policy_specs(self.core, policies)
@@ -436,9 +474,26 @@ class EpisodeStepper:
         """Why the episode ended (``running`` until it does)."""
         return "cancelled" if self._cancelled else self._outcome
 
+    def _obs(self) -> F32:
+        core = self.core
+        obs: F32 = core.obs[0] if isinstance(core, Game3DCore) else core.state.obs[0]
+        return obs
+
+    def _active(self) -> npt.NDArray[np.bool_]:
+        core = self.core
+        active: npt.NDArray[np.bool_] = (
+            core.active[0] if isinstance(core, Game3DCore) else core.state.active[0]
+        )
+        return active
+
+    def _returns(self) -> F64:
+        core = self.core
+        ret: F64 = core.episode_return[0] if isinstance(core, Game3DCore) else core.state.episode_return[0]
+        return ret
+
     def observations(self) -> dict[str, F32]:
-        """Each agent's current observation (Eq. 14)."""
-        obs = self.core.state.obs[0]
+        """Each agent's current observation (Eq. 14; 3-D game: :class:`~hptvsim.envs.game3d.Obs3DLayout`)."""
+        obs = self._obs()
         return {a: obs[i].copy() for a, i in self._index.items()}
 
     # -- driving ---------------------------------------------------------------------------------
@@ -463,7 +518,7 @@ class EpisodeStepper:
         self._cancelled = False
         self._episode_start = True
         self._columns = _Columns(self.core.agents, self.core.pursuer)
-        zeros = np.zeros((self.core.num_agents, 2))
+        zeros = np.zeros((self.core.num_agents, self.action_size))
         frame = self._make_frame(None, zeros)
         if self._recording_path is not None:
             from hptvsim.viz.recording import RecordingWriter
@@ -476,10 +531,11 @@ class EpisodeStepper:
 
     def policy_actions(self) -> dict[str, F64]:
         """What each agent's policy would do now (agents with :data:`EXTERNAL` left out)."""
-        obs = self.core.state.obs[0]
+        obs = self._obs()
         start = np.array([self._episode_start])
+        k = self.action_size
         return {
-            agent: np.asarray(pol.act(obs[self._index[agent]][None], start), dtype=np.float64).reshape(2)
+            agent: np.asarray(pol.act(obs[self._index[agent]][None], start), dtype=np.float64).reshape(k)
             for agent, pol in self._policies.items()
         }
 
@@ -487,9 +543,9 @@ class EpisodeStepper:
         """Advance one control step and return its frame.
 
         Args:
-            actions: ``{agent: [v, omega]}`` [m/s, rad/s] for some agents (clipped to their
-                limits, Eq. 15); the others follow their policies. Actions of agents that are
-                already done are ignored.
+            actions: ``{agent: [v, omega]}`` [m/s, rad/s] (3-D game: ``[v, omega, w_z]`` [m/s,
+                rad/s, m/s]) for some agents (clipped to their limits, Eq. 15); the others follow
+                their policies. Actions of agents that are already done are ignored.
 
         Raises:
             RuntimeError: The episode is over (call :meth:`reset`).
@@ -504,8 +560,10 @@ class EpisodeStepper:
             raise ValueError(
                 f"actions given for unknown agent(s) {unknown}; agents: {', '.join(self.agents)}"
             )
-        active = self.core.state.active[0]
-        act = np.zeros((1, self.core.num_agents, 2))
+        active = self._active()
+        k = self.action_size
+        shape = "[v, omega, w_z]" if k == 3 else "[v, omega]"
+        act = np.zeros((1, self.core.num_agents, k))
         missing = [
             a for a in self.agents if a not in given and a not in self._policies and active[self._index[a]]
         ]
@@ -515,9 +573,9 @@ class EpisodeStepper:
         for agent, i in self._index.items():
             if agent in given:
                 arr = np.asarray(given[agent], dtype=np.float64)
-                if arr.shape != (2,):
+                if arr.shape != (k,):
                     raise ValueError(
-                        f"the action of {agent} must be [v, omega] (shape (2,)); got shape {arr.shape}"
+                        f"the action of {agent} must be {shape} (shape ({k},)); got shape {arr.shape}"
                     )
                 if not np.isfinite(arr).all():
                     raise ValueError(f"the action of {agent} is not finite: {arr.tolist()}")
@@ -525,10 +583,18 @@ class EpisodeStepper:
             elif agent in from_policy:
                 act[0, i] = from_policy[agent]
         self._episode_start = False
-        applied = self.core.robots.clip(act)[0]
-        applied[~active] = 0.0
+        core = self.core
+        result: StepResult | Step3D
         try:
-            result = self.core.step(act)
+            if isinstance(core, Game3DCore):
+                normalised = core.normalised(act)
+                applied = core.commands(normalised)[0]
+                applied[~active] = 0.0
+                result = core.step(normalised)
+            else:
+                applied = core.robots.clip(act)[0]
+                applied[~active] = 0.0
+                result = core.step(act)
         except (SimulationFailedError, FmuError) as exc:  # it cannot go on: end it, keep what ran
             self._cancelled = True
             self._close_recorder(None)
@@ -552,8 +618,8 @@ class EpisodeStepper:
     def summary(self) -> EpisodeSummary:
         """The summary so far: status ``finished`` once the episode ended, ``cancelled`` before."""
         assert self._columns is not None
-        s = self.core.state
-        returns = {a: float(s.episode_return[0, i]) for a, i in self._index.items()}
+        ret = self._returns()
+        returns = {a: float(ret[i]) for a, i in self._index.items()}
         frame = self.frame
         metrics = self._columns.metrics(self.seed, frame.step, self.core.dt, returns)
         return EpisodeSummary(
@@ -609,24 +675,42 @@ class EpisodeStepper:
             paths = None
             if self._columns is not None:
                 cols = self._columns.cols
-                paths = {a: np.column_stack([cols[a]["x"], cols[a]["y"]]) for a in self.agents}
+                keys = ("x", "y", "z") if self.game == "3d" else ("x", "y")
+                paths = {a: np.column_stack([cols[a][c] for c in keys]) for a in self.agents}
             rec.close(summary, paths=paths)
 
-    def _make_frame(self, result: StepResult | None, applied: F64) -> Frame:
+    def _make_frame(self, result: StepResult | Step3D | None, applied: F64) -> Frame:
         core = self.core
-        s = core.state
-        step = int(s.steps[0])
-        pos = s.positions[0].tolist()
-        yaw = s.yaw[0].tolist()
-        vel = s.velocity[0].tolist()
-        dist = s.distance[0].tolist()
-        ranges = s.ranges[0]
-        min_range = ranges.min(axis=1).tolist()
-        ret = s.episode_return[0].tolist()
-        act = applied.tolist()
-        active = s.active[0].tolist()
-        sonar = self.options.sonar_at(step)
         n = core.num_agents
+        none: list[float | None] = [None] * n
+        z, phi, theta, w, alt = none, none, none, none, none
+        hits: list[tuple[Point, ...] | None] = [None] * n
+        if isinstance(core, Game3DCore):
+            step = int(core.steps[0])
+            pose = core.poses[0]
+            nu = core.velocity[0]
+            pos = pose[:, 0:2].tolist()
+            yaw = pose[:, 5].tolist()
+            vel = nu[:, [0, 1, 5]].tolist()
+            z, phi, theta = pose[:, 2].tolist(), pose[:, 3].tolist(), pose[:, 4].tolist()
+            w, alt = nu[:, 2].tolist(), core.altitude[0].tolist()
+            dist = core.distance[0].tolist()
+            ranges = core.ranges[0]
+            ret = core.episode_return[0].tolist()
+            active = core.active[0].tolist()
+        else:
+            s = core.state
+            step = int(s.steps[0])
+            pos = s.positions[0].tolist()
+            yaw = s.yaw[0].tolist()
+            vel = s.velocity[0].tolist()
+            dist = s.distance[0].tolist()
+            ranges = s.ranges[0]
+            ret = s.episode_return[0].tolist()
+            active = s.active[0].tolist()
+        min_range = ranges.min(axis=1).tolist()
+        act = applied.tolist()
+        sonar = self.options.sonar_at(step)
         if result is None:
             reward = [0.0] * n
             r_C = r_E1 = r_E2 = reward
@@ -649,12 +733,19 @@ class EpisodeStepper:
             done = bool(result.done[0])
             if done:
                 self._outcome = _outcome(captured, collision, out_of_site, reached, trunc_all)
-        hits: list[tuple[tuple[float, float], ...] | None] = [None] * n
         if sonar and self.options.hits:
-            hits = _hit_points(
-                s.positions[0], s.yaw[0], ranges, core.robots.beam_angles, core.robots.max_range
-            )
-        obs = s.obs[0].tolist() if self.options.obs else None
+            if isinstance(core, Game3DCore):
+                lay = core.layout
+                hits = _hit_points_3d(core.poses[0], ranges, lay.azimuth, lay.elevation, lay.max_range)
+            else:
+                hits = _hit_points(
+                    core.state.positions[0],
+                    core.state.yaw[0],
+                    ranges,
+                    core.robots.beam_angles,
+                    core.robots.max_range,
+                )
+        obs = self._obs().tolist() if self.options.obs else None
         agents = tuple(
             AgentState(
                 name=name,
@@ -664,7 +755,7 @@ class EpisodeStepper:
                 u=vel[i][0],
                 v=vel[i][1],
                 r=vel[i][2],
-                action=(act[i][0], act[i][1]),
+                action=(act[i][0], act[i][1], act[i][2]) if self.action_size == 3 else (act[i][0], act[i][1]),
                 reward=reward[i],
                 episode_return=ret[i],
                 r_C=r_C[i],
@@ -681,6 +772,11 @@ class EpisodeStepper:
                 collision=collision[i],
                 out_of_site=out_of_site[i],
                 reached=reached[i],
+                z=z[i],
+                phi=phi[i],
+                theta=theta[i],
+                w=w[i],
+                altitude=alt[i],
             )
             for i, name in enumerate(core.agents)
         )
@@ -713,16 +809,38 @@ def _outcome(
 
 def _hit_points(
     positions: F64, yaw: F64, ranges: F64, beam_angles: F64, max_range: float
-) -> list[tuple[tuple[float, float], ...] | None]:
+) -> list[tuple[Point, ...] | None]:
     """Points where each agent's beams returned an echo, ``(x, y)`` [m]."""
     ang = yaw[:, None] + beam_angles[None, :]
     hx = positions[:, 0:1] + ranges * np.cos(ang)
     hy = positions[:, 1:2] + ranges * np.sin(ang)
     hit = ranges < HIT_FRACTION * max_range
-    out: list[tuple[tuple[float, float], ...] | None] = []
+    out: list[tuple[Point, ...] | None] = []
     for i in range(positions.shape[0]):
         m = hit[i]
         out.append(tuple(zip(hx[i, m].tolist(), hy[i, m].tolist(), strict=True)))
+    return out
+
+
+def _hit_points_3d(
+    poses: F64, ranges: F64, azimuth: F64, elevation: F64, max_range: float
+) -> list[tuple[Point, ...] | None]:
+    """Points where each agent's 3-D beams returned an echo, ``(x, y, z)`` [m].
+
+    The beams are those of :class:`~hptvsim.sensors.sonar3d.Sonar3d`: fixed in the body frame
+    (azimuth from the bow, elevation positive down), turned into NED by the vehicle's roll,
+    pitch and yaw.
+    """
+    from hptvsim.sensors.sonar3d import rotation_zyx
+
+    ce = np.cos(elevation)
+    body = np.stack([ce * np.cos(azimuth), ce * np.sin(azimuth), np.sin(elevation)], axis=-1)  # (K, 3)
+    rot = rotation_zyx(poses[:, 3], poses[:, 4], poses[:, 5])  # (N, 3, 3)
+    out: list[tuple[Point, ...] | None] = []
+    for i in range(poses.shape[0]):
+        m = ranges[i] < HIT_FRACTION * max_range
+        pts = poses[i, 0:3][None, :] + ranges[i, m, None] * (body[m] @ rot[i].T)
+        out.append(tuple((q[0], q[1], q[2]) for q in pts.tolist()))
     return out
 
 

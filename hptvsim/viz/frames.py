@@ -13,11 +13,19 @@ dashboard (``web/``) all read and write these types:
 * :class:`Trajectories`: every step of every agent as columns (for JSON, CSV and Parquet).
 
 **Conventions.** Positions are North-East-Down (NED): ``x`` north [m], ``y`` east [m], ``z``
-down [m] (terrain vertices carry the seabed depth as ``z``; vehicles move in the plane
-``z = operating_depth``). Yaw ``psi`` [rad] is measured clockwise from north seen from above,
-wrapped to ``[-pi, pi)``; ``u, v`` [m/s] are surge and sway speed in the body frame and ``r``
-[rad/s] the yaw rate (Fossen's notation). Sonar beam ``k`` points along
-``(cos(psi + beam_angles[k]), sin(psi + beam_angles[k]))``. Times in seconds.
+down [m] (terrain vertices carry the seabed depth as ``z``). Yaw ``psi`` [rad] is measured
+clockwise from north seen from above, wrapped to ``[-pi, pi)``; ``u, v`` [m/s] are surge and
+sway speed in the body frame and ``r`` [rad/s] the yaw rate (Fossen's notation). Times in seconds.
+
+**Two games** (:attr:`EpisodeStatic.game`). In the ``planar`` game (the paper's) the vehicles
+move in the plane ``z = operating_depth``: the 3-D fields of :class:`AgentState` and
+:class:`AgentTrajectory` are None, actions are ``[v, omega]``, hit points ``(x, y)``, and sonar
+beam ``k`` points along ``(cos(psi + beam_angles[k]), sin(psi + beam_angles[k]))``. In the
+``3d`` game (:mod:`hptvsim.envs.game3d`) every state also carries its depth ``z``, roll ``phi``,
+pitch ``theta``, heave speed ``w`` and altitude above the seabed; actions are
+``[v, omega, w_z]``; hit points ``(x, y, z)``; and beam ``k`` points, in the body frame, along
+azimuth ``beam_angles[k]`` (from the bow, towards starboard) and elevation
+``beam_elevations[k]`` (positive down), turned into NED by the vehicle's roll, pitch and yaw.
 
 **JSON.** Every type has ``to_dict()`` / ``from_dict()`` (plain JSON-ready data) and
 ``to_json()`` / ``from_json()`` (text). Reading is strict: an unknown or missing key, or a value
@@ -75,11 +83,17 @@ __all__ = [
 
 F64 = npt.NDArray[np.float64]
 
-SCHEMA_VERSION: Final = "hptvsim-frames/1"
+SCHEMA_VERSION: Final = "hptvsim-frames/2"
 """Version tag carried by :class:`EpisodeStatic`; bumped when a type changes incompatibly."""
 
 Outcome = Literal["captured", "collision", "out_of_site", "reached", "truncated", "cancelled", "running"]
 """Why an episode ended (``running`` while it has not)."""
+
+Point = tuple[float, float] | tuple[float, float, float]
+"""A point ``(x, y)`` [m] (planar game) or ``(x, y, z)`` [m] (3-D game)."""
+
+Game = Literal["planar", "3d"]
+"""Which game an episode plays (see the module docstring)."""
 
 
 class FrameSchemaError(ValueError):
@@ -238,10 +252,13 @@ class AgentInfo(SchemaObject):
         v_min: Smallest commanded surge speed [m/s] (Eq. 15).
         v_max: Largest commanded surge speed [m/s] (Eq. 15).
         omega_max: Largest commanded yaw rate [rad/s] (Eq. 15).
-        beam_angles: Sonar beam angles relative to the bow [rad], clockwise positive.
+        beam_angles: Sonar beam angles relative to the bow [rad], clockwise positive (3-D
+            game: each beam's azimuth).
         max_range: Sonar maximum range [m].
-        goal: Goto task: the goal point ``(x, y)`` [m], else None.
+        goal: Goto task: the goal point ``(x, y)`` [m] (3-D game: ``(x, y, z)``), else None.
         goal_radius: Goto task: distance within which the goal counts as reached [m], else None.
+        w_z_max: 3-D game: largest commanded vertical speed [m/s], else None.
+        beam_elevations: 3-D game: each beam's elevation [rad], positive down, else None.
     """
 
     name: str
@@ -255,8 +272,10 @@ class AgentInfo(SchemaObject):
     omega_max: float
     beam_angles: tuple[float, ...]
     max_range: float
-    goal: tuple[float, float] | None = None
+    goal: Point | None = None
     goal_radius: float | None = None
+    w_z_max: float | None = None
+    beam_elevations: tuple[float, ...] | None = None
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -280,6 +299,7 @@ class EpisodeStatic(SchemaObject):
         obstacles: The obstacle map summary.
         agents: The agents, in the order of every frame's ``agents``.
         options: What the frames carry.
+        game: ``planar`` or ``3d`` (see the module docstring).
     """
 
     schema: str = SCHEMA_VERSION
@@ -298,6 +318,7 @@ class EpisodeStatic(SchemaObject):
     obstacles: ObstacleSummary
     agents: tuple[AgentInfo, ...]
     options: FrameOptions
+    game: Game = "planar"
 
     @property
     def agent_names(self) -> tuple[str, ...]:
@@ -321,7 +342,8 @@ class AgentState(SchemaObject):
         v: Sway speed [m/s].
         r: Yaw rate [rad/s].
         action: The command applied during the step ``[v, omega]`` [m/s, rad/s] (Eq. 16,
-            clipped to Eq. 15's box; zero once the agent is done and in the reset frame).
+            clipped to Eq. 15's box; zero once the agent is done and in the reset frame); 3-D
+            game: ``[v, omega, w_z]`` [m/s, rad/s, m/s], ``w_z`` the vertical speed (positive down).
         reward: Reward of the step (Eq. 20: ``delta_C r_C + delta_E1 r_E1 + delta_E2 r_E2``).
         episode_return: Sum of rewards so far.
         r_C: The step's obstacle term (Eq. 17), before its weight ``delta_C``.
@@ -331,7 +353,8 @@ class AgentState(SchemaObject):
             goto: the goal).
         min_range: Smallest sonar range [m].
         ranges: Sonar ranges per beam [m] (None in frames without sonar, see ``FrameOptions``).
-        hits: Points ``(x, y)`` [m] where beams returned an echo (None without sonar or hits).
+        hits: Points ``(x, y)`` [m] where beams returned an echo (3-D game: ``(x, y, z)``; None
+            without sonar or hits).
         obs: The observation vector (Eq. 14; None unless ``FrameOptions.obs``).
         active: Whether the agent is still in the episode after this step.
         terminated: The agent's episode ended by a task rule at this step.
@@ -339,6 +362,11 @@ class AgentState(SchemaObject):
         collision: The agent touches terrain or another vehicle.
         out_of_site: The agent's centre left the site.
         reached: Goto: the agent is within its goal's radius.
+        z: 3-D game: depth [m], positive down, else None (the site's operating depth).
+        phi: 3-D game: roll [rad], else None.
+        theta: 3-D game: pitch [rad], positive nose up, else None.
+        w: 3-D game: heave speed in the body frame [m/s], else None.
+        altitude: 3-D game: height above the seabed [m], else None.
     """
 
     name: str
@@ -348,7 +376,7 @@ class AgentState(SchemaObject):
     u: float
     v: float
     r: float
-    action: tuple[float, float]
+    action: tuple[float, float] | tuple[float, float, float]
     reward: float
     episode_return: float
     distance: float
@@ -357,7 +385,7 @@ class AgentState(SchemaObject):
     r_E1: float = 0.0
     r_E2: float = 0.0
     ranges: tuple[float, ...] | None = None
-    hits: tuple[tuple[float, float], ...] | None = None
+    hits: tuple[Point, ...] | None = None
     obs: tuple[float, ...] | None = None
     active: bool = True
     terminated: bool = False
@@ -365,6 +393,11 @@ class AgentState(SchemaObject):
     collision: bool = False
     out_of_site: bool = False
     reached: bool = False
+    z: float | None = None
+    phi: float | None = None
+    theta: float | None = None
+    w: float | None = None
+    altitude: float | None = None
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -450,6 +483,12 @@ class AgentTrajectory(SchemaObject):
         r_E2: Capture term of each step (Eq. 19, unweighted; None likewise).
         ranges: Sonar ranges per beam [m] of each step; an empty tuple at steps whose frame
             carried no sonar (``FrameOptions.sonar_every``); None when not stored at all.
+        z: 3-D game: depth [m], positive down (None in the planar game).
+        phi: 3-D game: roll [rad] (None in the planar game).
+        theta: 3-D game: pitch [rad] (None in the planar game).
+        w: 3-D game: heave speed [m/s] (None in the planar game).
+        w_cmd: 3-D game: commanded vertical speed [m/s], positive down (None in the planar game).
+        altitude: 3-D game: height above the seabed [m] (None in the planar game).
     """
 
     name: str
@@ -468,6 +507,15 @@ class AgentTrajectory(SchemaObject):
     r_E1: tuple[float, ...] | None = None
     r_E2: tuple[float, ...] | None = None
     ranges: tuple[tuple[float, ...], ...] | None = None
+    z: tuple[float, ...] | None = None
+    phi: tuple[float, ...] | None = None
+    theta: tuple[float, ...] | None = None
+    w: tuple[float, ...] | None = None
+    w_cmd: tuple[float, ...] | None = None
+    altitude: tuple[float, ...] | None = None
+
+    COLUMNS_3D: ClassVar[tuple[str, ...]] = ("z", "phi", "theta", "w", "w_cmd", "altitude")
+    """The columns only the 3-D game fills (None in planar trajectories)."""
 
     COLUMNS: ClassVar[tuple[str, ...]] = (
         "x",
@@ -484,6 +532,7 @@ class AgentTrajectory(SchemaObject):
         "r_C",
         "r_E1",
         "r_E2",
+        *COLUMNS_3D,
     )
     """The scalar columns, one value per step (the long table's columns after ``step, time, agent``)."""
 
@@ -582,15 +631,24 @@ def append_state(cols: dict[str, list[Any]], a: AgentState) -> None:
     cols["r_E1"].append(a.r_E1)
     cols["r_E2"].append(a.r_E2)
     cols["ranges"].append(a.ranges if a.ranges is not None else ())
+    cols["z"].append(a.z)
+    cols["phi"].append(a.phi)
+    cols["theta"].append(a.theta)
+    cols["w"].append(a.w)
+    cols["w_cmd"].append(a.action[2] if len(a.action) > 2 else None)
+    cols["altitude"].append(a.altitude)
 
 
 def trajectory_of(name: str, cols: dict[str, list[Any]]) -> AgentTrajectory:
-    """The :class:`AgentTrajectory` of columns filled by :func:`append_state`."""
-    return AgentTrajectory(
-        name=name,
-        **{k: tuple(v) for k, v in cols.items() if k != "ranges"},
-        ranges=tuple(tuple(r) for r in cols["ranges"]),
-    )
+    """The :class:`AgentTrajectory` of columns filled by :func:`append_state`.
+
+    A 3-D column (:attr:`AgentTrajectory.COLUMNS_3D`) holding None (planar states) is None.
+    """
+    values: dict[str, Any] = {k: tuple(v) for k, v in cols.items() if k != "ranges"}
+    for k in AgentTrajectory.COLUMNS_3D:
+        if any(v is None for v in values[k]):
+            values[k] = None
+    return AgentTrajectory(name=name, **values, ranges=tuple(tuple(r) for r in cols["ranges"]))
 
 
 # --- building the static part -----------------------------------------------------------------

@@ -454,6 +454,13 @@ class Simulation:
         le=10.0,
     )
     seed: int = spec(0, doc="seed of spawn positions and sensor noise", ge=0, le=MAX_SEED)
+    game: Literal["planar", "3d"] = spec(
+        "planar",
+        doc="the game the episode runner, the service and the dashboard play on this scenario: "
+        "'planar' (the paper's game: every vehicle at site.operating_depth, hptvsim.envs) or '3d' "
+        "(6-DOF vehicles that dive, hptvsim.envs.game3d); the Gymnasium and PettingZoo "
+        "environments take any scenario",
+    )
 
     def __post_init__(self) -> None:
         check_bounds(self)

@@ -35,7 +35,7 @@ def test_viz_schema_check_and_write(tmp_path: Path) -> None:
     wrote = CliRunner().invoke(main, ["viz", "schema", "--out", str(tmp_path)])
     assert wrote.exit_code == 0
     assert (
-        json.loads((tmp_path / "schema" / "frames.schema.json").read_text())["version"] == "hptvsim-frames/1"
+        json.loads((tmp_path / "schema" / "frames.schema.json").read_text())["version"] == "hptvsim-frames/2"
     )
     assert CliRunner().invoke(main, ["viz", "schema", "--check", "--out", str(tmp_path)]).exit_code == 0
 

@@ -96,7 +96,7 @@ def test_frame_contents_are_consistent() -> None:
             assert info.v_min <= a.action[0] <= info.v_max and abs(a.action[1]) <= info.omega_max
             # every hit lies at its beam's measured range from the vehicle
             assert a.hits is not None
-            d = sorted(math.hypot(hx - a.x, hy - a.y) for hx, hy in a.hits)
+            d = sorted(math.hypot(h[0] - a.x, h[1] - a.y) for h in a.hits)
             r = sorted(x for x in a.ranges if x < 0.98 * info.max_range)
             np.testing.assert_allclose(d, r, rtol=1e-9, atol=1e-9)
         # the stepper replays run_episode's first step

@@ -20,6 +20,7 @@
  * @property {ObstacleSummary} obstacles The obstacle map summary.
  * @property {Array<AgentInfo>} agents The agents, in the order of every frame's `agents`.
  * @property {FrameOptions} options What the frames carry.
+ * @property {("planar" | "3d")} [game] `planar` or `3d` (see the module docstring).
  */
 
 /**
@@ -63,10 +64,12 @@
  * @property {number} v_min Smallest commanded surge speed [m/s] (Eq. 15).
  * @property {number} v_max Largest commanded surge speed [m/s] (Eq. 15).
  * @property {number} omega_max Largest commanded yaw rate [rad/s] (Eq. 15).
- * @property {Array<number>} beam_angles Sonar beam angles relative to the bow [rad], clockwise positive.
+ * @property {Array<number>} beam_angles Sonar beam angles relative to the bow [rad], clockwise positive (3-D game: each beam's azimuth).
  * @property {number} max_range Sonar maximum range [m].
- * @property {([number, number] | null)} [goal] Goto task: the goal point `(x, y)` [m], else None.
+ * @property {([number, number] | [number, number, number] | null)} [goal] Goto task: the goal point `(x, y)` [m] (3-D game: `(x, y, z)`), else None.
  * @property {(number | null)} [goal_radius] Goto task: distance within which the goal counts as reached [m], else None.
+ * @property {(number | null)} [w_z_max] 3-D game: largest commanded vertical speed [m/s], else None.
+ * @property {(Array<number> | null)} [beam_elevations] 3-D game: each beam's elevation [rad], positive down, else None.
  */
 
 /**
@@ -101,7 +104,7 @@
  * @property {number} u Surge speed [m/s].
  * @property {number} v Sway speed [m/s].
  * @property {number} r Yaw rate [rad/s].
- * @property {[number, number]} action The command applied during the step `[v, omega]` [m/s, rad/s] (Eq. 16, clipped to Eq. 15's box; zero once the agent is done and in the reset frame).
+ * @property {([number, number] | [number, number, number])} action The command applied during the step `[v, omega]` [m/s, rad/s] (Eq. 16, clipped to Eq. 15's box; zero once the agent is done and in the reset frame); 3-D game: `[v, omega, w_z]` [m/s, rad/s, m/s], `w_z` the vertical speed (positive down).
  * @property {number} reward Reward of the step (Eq. 20: `delta_C r_C + delta_E1 r_E1 + delta_E2 r_E2`).
  * @property {number} episode_return Sum of rewards so far.
  * @property {number} distance Distance to the target [m] (pursuer: the evader; evader: the nearest pursuer; goto: the goal).
@@ -110,7 +113,7 @@
  * @property {number} [r_E1] The step's approach term (Eq. 18), before its weight `delta_E1`.
  * @property {number} [r_E2] The step's capture term (Eq. 19), before its weight `delta_E2`.
  * @property {(Array<number> | null)} [ranges] Sonar ranges per beam [m] (None in frames without sonar, see `FrameOptions`).
- * @property {(Array<[number, number]> | null)} [hits] Points `(x, y)` [m] where beams returned an echo (None without sonar or hits).
+ * @property {(Array<([number, number] | [number, number, number])> | null)} [hits] Points `(x, y)` [m] where beams returned an echo (3-D game: `(x, y, z)`; None without sonar or hits).
  * @property {(Array<number> | null)} [obs] The observation vector (Eq. 14; None unless `FrameOptions.obs`).
  * @property {boolean} [active] Whether the agent is still in the episode after this step.
  * @property {boolean} [terminated] The agent's episode ended by a task rule at this step.
@@ -118,6 +121,11 @@
  * @property {boolean} [collision] The agent touches terrain or another vehicle.
  * @property {boolean} [out_of_site] The agent's centre left the site.
  * @property {boolean} [reached] Goto: the agent is within its goal's radius.
+ * @property {(number | null)} [z] 3-D game: depth [m], positive down, else None (the site's operating depth).
+ * @property {(number | null)} [phi] 3-D game: roll [rad], else None.
+ * @property {(number | null)} [theta] 3-D game: pitch [rad], positive nose up, else None.
+ * @property {(number | null)} [w] 3-D game: heave speed in the body frame [m/s], else None.
+ * @property {(number | null)} [altitude] 3-D game: height above the seabed [m], else None.
  */
 
 /**
@@ -174,16 +182,22 @@
  * @property {(Array<number> | null)} [r_E1] Approach term of each step (Eq. 18, unweighted; None likewise).
  * @property {(Array<number> | null)} [r_E2] Capture term of each step (Eq. 19, unweighted; None likewise).
  * @property {(Array<Array<number>> | null)} [ranges] Sonar ranges per beam [m] of each step; an empty tuple at steps whose frame carried no sonar (`FrameOptions.sonar_every`); None when not stored at all.
+ * @property {(Array<number> | null)} [z] 3-D game: depth [m], positive down (None in the planar game).
+ * @property {(Array<number> | null)} [phi] 3-D game: roll [rad] (None in the planar game).
+ * @property {(Array<number> | null)} [theta] 3-D game: pitch [rad] (None in the planar game).
+ * @property {(Array<number> | null)} [w] 3-D game: heave speed [m/s] (None in the planar game).
+ * @property {(Array<number> | null)} [w_cmd] 3-D game: commanded vertical speed [m/s], positive down (None in the planar game).
+ * @property {(Array<number> | null)} [altitude] 3-D game: height above the seabed [m] (None in the planar game).
  */
 
-export const SCHEMA_VERSION = "hptvsim-frames/1";
+export const SCHEMA_VERSION = "hptvsim-frames/2";
 
 export const FRAME_SCHEMA = {
   "$schema": "https://json-schema.org/draft/2020-12/schema",
   "$id": "https://hptvsim.dev/schema/frames.schema.json",
   "title": "hptvsim frames",
-  "description": "hptvsim-frames/1: the episode frame schema shared by recordings, the API, viser and the dashboard. Generated from hptvsim/viz/frames.py by `hptvsim viz schema`; do not edit.",
-  "version": "hptvsim-frames/1",
+  "description": "hptvsim-frames/2: the episode frame schema shared by recordings, the API, viser and the dashboard. Generated from hptvsim/viz/frames.py by `hptvsim viz schema`; do not edit.",
+  "version": "hptvsim-frames/2",
   "anyOf": [
     {
       "$ref": "#/$defs/EpisodeStatic"
@@ -206,7 +220,7 @@ export const FRAME_SCHEMA = {
         "schema": {
           "description": "Schema version (`SCHEMA_VERSION`).",
           "type": "string",
-          "default": "hptvsim-frames/1"
+          "default": "hptvsim-frames/2"
         },
         "scenario": {
           "description": "Scenario name.",
@@ -273,6 +287,14 @@ export const FRAME_SCHEMA = {
         "options": {
           "description": "What the frames carry.",
           "$ref": "#/$defs/FrameOptions"
+        },
+        "game": {
+          "description": "`planar` or `3d` (see the module docstring).",
+          "enum": [
+            "planar",
+            "3d"
+          ],
+          "default": "planar"
         }
       },
       "required": [
@@ -536,7 +558,7 @@ export const FRAME_SCHEMA = {
           "type": "number"
         },
         "beam_angles": {
-          "description": "Sonar beam angles relative to the bow [rad], clockwise positive.",
+          "description": "Sonar beam angles relative to the bow [rad], clockwise positive (3-D game: each beam's azimuth).",
           "type": "array",
           "items": {
             "type": "number"
@@ -547,7 +569,7 @@ export const FRAME_SCHEMA = {
           "type": "number"
         },
         "goal": {
-          "description": "Goto task: the goal point `(x, y)` [m], else None.",
+          "description": "Goto task: the goal point `(x, y)` [m] (3-D game: `(x, y, z)`), else None.",
           "anyOf": [
             {
               "type": "array",
@@ -563,6 +585,22 @@ export const FRAME_SCHEMA = {
               "maxItems": 2
             },
             {
+              "type": "array",
+              "prefixItems": [
+                {
+                  "type": "number"
+                },
+                {
+                  "type": "number"
+                },
+                {
+                  "type": "number"
+                }
+              ],
+              "minItems": 3,
+              "maxItems": 3
+            },
+            {
               "type": "null"
             }
           ],
@@ -573,6 +611,33 @@ export const FRAME_SCHEMA = {
           "anyOf": [
             {
               "type": "number"
+            },
+            {
+              "type": "null"
+            }
+          ],
+          "default": null
+        },
+        "w_z_max": {
+          "description": "3-D game: largest commanded vertical speed [m/s], else None.",
+          "anyOf": [
+            {
+              "type": "number"
+            },
+            {
+              "type": "null"
+            }
+          ],
+          "default": null
+        },
+        "beam_elevations": {
+          "description": "3-D game: each beam's elevation [rad], positive down, else None.",
+          "anyOf": [
+            {
+              "type": "array",
+              "items": {
+                "type": "number"
+              }
             },
             {
               "type": "null"
@@ -717,18 +782,38 @@ export const FRAME_SCHEMA = {
           "type": "number"
         },
         "action": {
-          "description": "The command applied during the step `[v, omega]` [m/s, rad/s] (Eq. 16, clipped to Eq. 15's box; zero once the agent is done and in the reset frame).",
-          "type": "array",
-          "prefixItems": [
+          "description": "The command applied during the step `[v, omega]` [m/s, rad/s] (Eq. 16, clipped to Eq. 15's box; zero once the agent is done and in the reset frame); 3-D game: `[v, omega, w_z]` [m/s, rad/s, m/s], `w_z` the vertical speed (positive down).",
+          "anyOf": [
             {
-              "type": "number"
+              "type": "array",
+              "prefixItems": [
+                {
+                  "type": "number"
+                },
+                {
+                  "type": "number"
+                }
+              ],
+              "minItems": 2,
+              "maxItems": 2
             },
             {
-              "type": "number"
+              "type": "array",
+              "prefixItems": [
+                {
+                  "type": "number"
+                },
+                {
+                  "type": "number"
+                },
+                {
+                  "type": "number"
+                }
+              ],
+              "minItems": 3,
+              "maxItems": 3
             }
-          ],
-          "minItems": 2,
-          "maxItems": 2
+          ]
         },
         "reward": {
           "description": "Reward of the step (Eq. 20: `delta_C r_C + delta_E1 r_E1 + delta_E2 r_E2`).",
@@ -777,22 +862,42 @@ export const FRAME_SCHEMA = {
           "default": null
         },
         "hits": {
-          "description": "Points `(x, y)` [m] where beams returned an echo (None without sonar or hits).",
+          "description": "Points `(x, y)` [m] where beams returned an echo (3-D game: `(x, y, z)`; None without sonar or hits).",
           "anyOf": [
             {
               "type": "array",
               "items": {
-                "type": "array",
-                "prefixItems": [
+                "anyOf": [
                   {
-                    "type": "number"
+                    "type": "array",
+                    "prefixItems": [
+                      {
+                        "type": "number"
+                      },
+                      {
+                        "type": "number"
+                      }
+                    ],
+                    "minItems": 2,
+                    "maxItems": 2
                   },
                   {
-                    "type": "number"
+                    "type": "array",
+                    "prefixItems": [
+                      {
+                        "type": "number"
+                      },
+                      {
+                        "type": "number"
+                      },
+                      {
+                        "type": "number"
+                      }
+                    ],
+                    "minItems": 3,
+                    "maxItems": 3
                   }
-                ],
-                "minItems": 2,
-                "maxItems": 2
+                ]
               }
             },
             {
@@ -845,6 +950,66 @@ export const FRAME_SCHEMA = {
           "description": "Goto: the agent is within its goal's radius.",
           "type": "boolean",
           "default": false
+        },
+        "z": {
+          "description": "3-D game: depth [m], positive down, else None (the site's operating depth).",
+          "anyOf": [
+            {
+              "type": "number"
+            },
+            {
+              "type": "null"
+            }
+          ],
+          "default": null
+        },
+        "phi": {
+          "description": "3-D game: roll [rad], else None.",
+          "anyOf": [
+            {
+              "type": "number"
+            },
+            {
+              "type": "null"
+            }
+          ],
+          "default": null
+        },
+        "theta": {
+          "description": "3-D game: pitch [rad], positive nose up, else None.",
+          "anyOf": [
+            {
+              "type": "number"
+            },
+            {
+              "type": "null"
+            }
+          ],
+          "default": null
+        },
+        "w": {
+          "description": "3-D game: heave speed in the body frame [m/s], else None.",
+          "anyOf": [
+            {
+              "type": "number"
+            },
+            {
+              "type": "null"
+            }
+          ],
+          "default": null
+        },
+        "altitude": {
+          "description": "3-D game: height above the seabed [m], else None.",
+          "anyOf": [
+            {
+              "type": "number"
+            },
+            {
+              "type": "null"
+            }
+          ],
+          "default": null
         }
       },
       "required": [
@@ -1185,6 +1350,96 @@ export const FRAME_SCHEMA = {
                 "items": {
                   "type": "number"
                 }
+              }
+            },
+            {
+              "type": "null"
+            }
+          ],
+          "default": null
+        },
+        "z": {
+          "description": "3-D game: depth [m], positive down (None in the planar game).",
+          "anyOf": [
+            {
+              "type": "array",
+              "items": {
+                "type": "number"
+              }
+            },
+            {
+              "type": "null"
+            }
+          ],
+          "default": null
+        },
+        "phi": {
+          "description": "3-D game: roll [rad] (None in the planar game).",
+          "anyOf": [
+            {
+              "type": "array",
+              "items": {
+                "type": "number"
+              }
+            },
+            {
+              "type": "null"
+            }
+          ],
+          "default": null
+        },
+        "theta": {
+          "description": "3-D game: pitch [rad] (None in the planar game).",
+          "anyOf": [
+            {
+              "type": "array",
+              "items": {
+                "type": "number"
+              }
+            },
+            {
+              "type": "null"
+            }
+          ],
+          "default": null
+        },
+        "w": {
+          "description": "3-D game: heave speed [m/s] (None in the planar game).",
+          "anyOf": [
+            {
+              "type": "array",
+              "items": {
+                "type": "number"
+              }
+            },
+            {
+              "type": "null"
+            }
+          ],
+          "default": null
+        },
+        "w_cmd": {
+          "description": "3-D game: commanded vertical speed [m/s], positive down (None in the planar game).",
+          "anyOf": [
+            {
+              "type": "array",
+              "items": {
+                "type": "number"
+              }
+            },
+            {
+              "type": "null"
+            }
+          ],
+          "default": null
+        },
+        "altitude": {
+          "description": "3-D game: height above the seabed [m] (None in the planar game).",
+          "anyOf": [
+            {
+              "type": "array",
+              "items": {
+                "type": "number"
               }
             },
             {
