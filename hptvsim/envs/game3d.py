@@ -157,6 +157,7 @@ class Obs3DLayout:
         max_range: Sonar maximum range [m].
         diagonal: Site diagonal [m].
         depth_scale: Deepest seabed of the site [m].
+        site_size: ``(L_x, L_y)`` extent of the site north x east [m] (scales ``north``, ``east``).
         azimuth: ``(K,)`` beam azimuths [rad] (clockwise from the bow).
         elevation: ``(K,)`` beam elevations [rad] (positive down).
     """
@@ -167,6 +168,7 @@ class Obs3DLayout:
     max_range: float
     diagonal: float
     depth_scale: float
+    site_size: tuple[float, float] = (1.0, 1.0)
     azimuth: F64 = field(compare=False, repr=False)
     elevation: F64 = field(compare=False, repr=False)
 
@@ -205,7 +207,8 @@ class Obs3DLayout:
 
         Returns:
             The names of :meth:`index`, plus ``ranges`` [m] and ``bearing`` [rad]; the speeds stay
-            normalised (their limits are per agent).
+            normalised (their limits are per agent); ``north`` and ``east`` are metres from the
+            site's south-west corner.
         """
         o = np.asarray(obs, dtype=np.float64)
         k = self.beams
@@ -215,6 +218,8 @@ class Obs3DLayout:
         for name in ("depth", "altitude", "depth_difference"):
             out[name] = out[name] * self.depth_scale
         out["distance"] = out["distance"] * self.diagonal
+        out["north"] = out["north"] * self.site_size[0]
+        out["east"] = out["east"] * self.site_size[1]
         out["phi"] = out["phi"] * math.pi
         out["theta"] = out["theta"] * 0.5 * math.pi
         out["psi"] = out["psi"] * math.pi
@@ -410,6 +415,7 @@ class Game3DCore:
             max_range=cfg3[0].max_range,
             diagonal=math.hypot(lx, ly),
             depth_scale=depth_scale,
+            site_size=(float(lx), float(ly)),
             azimuth=az,
             elevation=el,
         )

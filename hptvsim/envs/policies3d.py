@@ -112,8 +112,10 @@ class PotentialField3D:
 
     Horizontally, the desired direction is away from the pursuer (its bearing plus pi) plus a
     Khatib-style repulsion ``weight (1 / r - 1 / influence)`` from each return of the level
-    sonar row closer than ``obstacle_influence`` [m] (other vehicles, the seabed rising ahead);
-    ``a_omega`` turns towards it as :class:`PurePursuit3D` does, at full speed. Vertically, it
+    sonar row closer than ``obstacle_influence`` [m] (other vehicles, the seabed rising ahead)
+    and from each edge of the site closer than ``edge_influence`` [m] (leaving the site ends the
+    episode, and the 3-D sonar does not see the edge); ``a_omega`` turns towards it as
+    :class:`PurePursuit3D` does, at full speed. Vertically, it
     moves away from the pursuer's depth at half its vertical speed, but climbs at full vertical
     speed while its altitude is below ``keep_altitude`` [m] and dives while its depth is below
     ``min_depth`` [m].
@@ -127,6 +129,7 @@ class PotentialField3D:
         min_depth: float = 5.0,
         obstacle_influence: float = 20.0,
         obstacle_weight: float = 8.0,
+        edge_influence: float = 40.0,
         full_turn_error: float = math.radians(30.0),
     ) -> None:
         self.layout = layout
@@ -134,6 +137,7 @@ class PotentialField3D:
         self.min_depth = min_depth  # m
         self.obstacle_influence = obstacle_influence  # m
         self.obstacle_weight = obstacle_weight
+        self.edge_influence = edge_influence  # m
         self.full_turn_error = full_turn_error  # rad
         level = np.abs(layout.elevation)
         self.row = np.flatnonzero(level == level.min())  # the beams nearest the horizontal
@@ -149,6 +153,14 @@ class PotentialField3D:
         )
         dx = np.cos(away) - (push * np.cos(beam)).sum(axis=-1)
         dy = np.sin(away) - (push * np.sin(beam)).sum(axis=-1)
+        # the site's edges, in NED, turned into the body's heading frame
+        lx, ly = self.layout.site_size
+        north, east = q["north"], q["east"]
+        px = self._edge(north) - self._edge(lx - north)
+        py = self._edge(east) - self._edge(ly - east)
+        cp, sp = np.cos(q["psi"]), np.sin(q["psi"])
+        dx = dx + px * cp + py * sp
+        dy = dy - px * sp + py * cp
         error = wrap(np.arctan2(dy, dx))
         a_omega = np.clip(error / self.full_turn_error, -1.0, 1.0)
         a_w = -0.5 * np.sign(q["depth_difference"])
@@ -156,6 +168,14 @@ class PotentialField3D:
         a_w = np.where(q["depth"] < self.min_depth, 1.0, a_w)
         result: F64 = np.stack([np.ones_like(a_omega), a_omega, a_w], axis=-1)
         return result
+
+    def _edge(self, d: F64) -> F64:
+        """Repulsion from an edge ``d`` [m] away (0 beyond ``edge_influence``)."""
+        gap = np.maximum(d, 1.0)
+        push: F64 = np.where(
+            gap < self.edge_influence, self.obstacle_weight * (1.0 / gap - 1.0 / self.edge_influence), 0.0
+        )
+        return push
 
 
 class Stationary3D:

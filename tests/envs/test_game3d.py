@@ -277,3 +277,28 @@ def test_potential_field_evader_flees_stationary_pursuers_without_hitting_the_se
     assert (end > start + 20.0).all(), (start, end)  # 0.8 m/s for 60 s, less turning
     assert (core.altitude[:, ~p] > core.radii[~p]).all()
     core.close()
+
+
+def test_potential_field_evader_stays_inside_the_site() -> None:
+    """Fleeing stationary pursuers for 10 minutes, the evader turns back at the site's edges."""
+    from hptvsim.envs.policies3d import PotentialField3D
+
+    core = Game3DCore("dive_flat", num_envs=8, seed=5, max_steps=2400)
+    core.reset()
+    flee, still = PotentialField3D(core.layout), Stationary3D()
+    p = core.pursuer
+    act = np.zeros((core.num_envs, core.num_agents, 3))
+    out = np.zeros(core.num_envs, dtype=bool)
+    closest = np.full(core.num_envs, np.inf)  # m, nearest approach to an edge
+    x0, x1, y0, y1 = core.extent
+    for _ in range(2400):  # 600 s: at 0.8 m/s the evader would cross the site 1.6 times
+        act[:, p] = still.act(core.obs[:, p])
+        act[:, ~p] = flee.act(core.obs[:, ~p])
+        r = core.step(act)
+        out |= r.flags.out_of_site.any(axis=1)
+        x, y = core.poses[:, ~p, 0][:, 0], core.poses[:, ~p, 1][:, 0]
+        closest = np.minimum(closest, np.minimum.reduce([x - x0, x1 - x, y - y0, y1 - y]))
+    assert not out.any()
+    assert (closest > 0.5).all(), closest  # m
+    assert (closest < 40.0).any()  # it did reach the edges' influence and turned back
+    core.close()

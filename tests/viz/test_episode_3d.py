@@ -137,3 +137,12 @@ def test_goto_3d_episode_reaches_its_goal() -> None:
     a = r.final_frame.agents[0]
     assert a.z is not None
     assert math.dist((a.x, a.y, a.z), goal) <= (r.static.agents[0].goal_radius or 0.0) + 1e-9
+
+
+def test_default_3d_episode_over_the_ridge_ends_in_capture() -> None:
+    """Default policies (3-D pure pursuit vs the 3-D potential field) play to a capture."""
+    r = run_episode("ridge_3d", seed=0)
+    assert r.outcome == "captured"
+    assert r.metrics.captured and not r.metrics.collision
+    assert r.static.agents[0].policy == "scripted:pure_pursuit"
+    assert r.static.agents[-1].policy == "scripted:potential_field"
