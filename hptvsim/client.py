@@ -284,8 +284,11 @@ class Client:
         return data
 
     def step(self, episode_id: str, actions: Mapping[str, Sequence[float]]) -> dict[str, Any]:
-        """One step of an interactive episode with ``{agent: [v, omega]}`` of the controlled agents."""
-        body = {"actions": {a: [float(v[0]), float(v[1])] for a, v in actions.items()}}
+        """One step of an interactive episode with ``{agent: [v, omega]}`` of the controlled agents.
+
+        In the 3-D game each action is ``[v, omega, w_z]`` (m/s, rad/s, m/s).
+        """
+        body = {"actions": {a: [float(x) for x in v] for a, v in actions.items()}}
         data: dict[str, Any] = self._post(f"/episodes/{episode_id}/step", body)
         return data
 
@@ -320,9 +323,9 @@ class EpisodeSocket:
         return answer["data"]
 
     def step(self, actions: Mapping[str, Sequence[float]]) -> dict[str, Any]:
-        """One step with ``{agent: [v, omega]}``."""
+        """One step with ``{agent: [v, omega]}`` (3-D game: ``[v, omega, w_z]``)."""
         data: dict[str, Any] = self._call(
-            {"op": "step", "actions": {a: [float(v[0]), float(v[1])] for a, v in actions.items()}}
+            {"op": "step", "actions": {a: [float(x) for x in v] for a, v in actions.items()}}
         )
         return data
 
@@ -345,10 +348,11 @@ class RemoteEnv(gymnasium.Env[F32, F32]):
     """One agent of a game that runs on an hptvsim service, as a Gymnasium environment.
 
     Each ``reset`` creates an interactive episode on the service (``mode="interactive"``,
-    ``control=[agent]``); ``step`` sends the agent's ``[v, omega]`` and the service steps every
-    other agent with its policy. Spaces are the agent's (Eq. 14 observations; Eqs. 15-16 actions),
-    read from the service. Every episode is stored on the service with its trajectories and,
-    when ``record``, its recording; :attr:`episode_id` is the current one's id.
+    ``control=[agent]``); ``step`` sends the agent's ``[v, omega]`` (in a 3-D scenario
+    ``[v, omega, w_z]``) and the service steps every other agent with its policy. Spaces are the
+    agent's (Eq. 14 observations; Eqs. 15-16 actions), read from the service. Every episode is
+    stored on the service with its trajectories and, when ``record``, its recording;
+    :attr:`episode_id` is the current one's id.
 
     Args:
         url: The service's base URL.
@@ -483,13 +487,15 @@ class RemoteEnv(gymnasium.Env[F32, F32]):
         return obs.copy(), {"seed": self._seed_used}
 
     def step(self, action: npt.ArrayLike) -> tuple[F32, float, bool, bool, dict[str, Any]]:
-        """Send the agent's ``[v, omega]``; returns the Gymnasium step tuple."""
+        """Send the agent's ``[v, omega]`` (3-D: ``[v, omega, w_z]``); returns the Gymnasium step tuple."""
         if self.episode_id is None or self._done:
             raise RuntimeError("the episode is over; call reset()")
         a = np.asarray(action, dtype=np.float64).reshape(-1)
-        if a.shape != (2,):
-            raise ValueError(f"the action must be [v, omega] (shape (2,)); got shape {a.shape}")
-        actions = {self.agent: [float(a[0]), float(a[1])]}
+        want = self.action_space.shape
+        if a.shape != want:
+            names = "[v, omega, w_z]" if want == (3,) else "[v, omega]"
+            raise ValueError(f"the action must be {names} (shape {want}); got shape {a.shape}")
+        actions = {self.agent: [float(x) for x in a]}
         self._fresh = False
         if self._socket is not None:
             out = self._socket.step(actions)
