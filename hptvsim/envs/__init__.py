@@ -62,6 +62,7 @@ def _register() -> None:
             gymnasium.register(
                 id=env_id,
                 entry_point="hptvsim.envs.game3d:UPEG3DSingleAgentEnv",
+                vector_entry_point="hptvsim.envs.game3d:UPEG3DVectorEnv",
                 kwargs=dict(kwargs),
                 disable_env_checker=False,
             )

@@ -79,6 +79,7 @@ from typing import Any, ClassVar, Final, Literal
 import gymnasium
 import numpy as np
 import numpy.typing as npt
+from gymnasium.vector import AutoresetMode
 from pettingzoo import ParallelEnv
 
 from hptvsim.cosim.system import SIXDOF_LAYOUT, SystemSpec, VehicleSpec, VehicleSystem, make_system
@@ -96,6 +97,8 @@ __all__ = [
     "Step3D",
     "UPEG3DParallelEnv",
     "UPEG3DSingleAgentEnv",
+    "UPEG3DVectorEnv",
+    "make_sb3_vec_env_3d",
     "parallel_env_3d",
 ]
 
@@ -1099,3 +1102,147 @@ class UPEG3DSingleAgentEnv(gymnasium.Env[F32, F32]):
     def close(self) -> None:
         """Release the simulation."""
         self.core.close()
+
+
+class UPEG3DVectorEnv(gymnasium.vector.VectorEnv[F32, F32, F32]):
+    """B single-agent views of the 3-D game stepped as one batch (batched backend, same-step autoreset).
+
+    Args:
+        num_envs: B.
+        scenario, agent, policies, task, max_steps, seed, reward, azimuth_beams, elevation_beams,
+            goal_depth: As for :class:`UPEG3DSingleAgentEnv`.
+        threads: Threads of the batched backend and the sonar (``None``: up to 2).
+
+    ``step`` takes ``(B, 3)`` normalised actions and returns arrays over B; ``infos`` holds
+    per-environment arrays (``distance``, ``captured``, ``collision``, ``seabed``, ``surface``,
+    ``out_of_site``, ``reached``, ``altitude``, ``z``, the reward terms) and, for environments
+    whose learner's episode ended in this step, ``final_obs``/``final_info`` with ``_final_obs``
+    marking them (Gymnasium's ``SAME_STEP`` autoreset, as
+    :class:`~hptvsim.envs.single.UPEGVectorEnv`). With B = 1 and the same seed it plays the
+    episodes of :class:`UPEG3DSingleAgentEnv` on the batched backend.
+    """
+
+    metadata: dict[str, Any] = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}  # noqa: RUF012
+
+    def __init__(
+        self,
+        num_envs: int = 1,
+        scenario: Scenario | str = "dive_flat",
+        *,
+        agent: str | None = None,
+        policies: Mapping[str, Any] | None = None,
+        task: Literal["pursuit", "goto"] | None = None,
+        max_steps: int | None = None,
+        seed: int | None = None,
+        reward: Mapping[str, float] | None = None,
+        azimuth_beams: int = 12,
+        elevation_beams: int = 5,
+        goal_depth: float | None = None,
+        threads: int | None = None,
+    ) -> None:
+        from hptvsim.envs.policies3d import build_policies_3d
+
+        self.core = Game3DCore(
+            scenario,
+            num_envs=num_envs,
+            backend="batched",
+            task=task,
+            max_steps=max_steps,
+            seed=seed,
+            threads=threads,
+            reward=reward,
+            azimuth_beams=azimuth_beams,
+            elevation_beams=elevation_beams,
+            goal_depth=goal_depth,
+        )
+        core = self.core
+        self.num_envs = core.num_envs
+        learner = agent or core.agents[0]
+        if learner not in core.agents:
+            raise ValueError(f"unknown agent {learner!r}; agents: {', '.join(core.agents)}")
+        self.agent = learner
+        self.index = core.agents.index(learner)
+        self.others = [i for i in range(core.num_agents) if i != self.index]
+        self.policies = build_policies_3d(core, [core.agents[i] for i in self.others], policies, seed=seed)
+        low, high = core.layout.bounds()
+        self.single_observation_space = gymnasium.spaces.Box(low, high, dtype=np.float32)
+        self.single_action_space = _action_box()
+        self.observation_space = gymnasium.vector.utils.batch_space(
+            self.single_observation_space, self.num_envs
+        )
+        self.action_space = gymnasium.vector.utils.batch_space(self.single_action_space, self.num_envs)
+        self._actions = np.zeros((self.num_envs, core.num_agents, 3))
+        self._episode_start = np.ones(self.num_envs, dtype=bool)
+
+    def reset(
+        self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[F32, dict[str, Any]]:
+        """Reset every sub-environment (``seed``: one int seeds the whole batch)."""
+        if isinstance(seed, list):
+            seed = seed[0] if seed else None
+        obs = self.core.reset(seed=seed)
+        self._episode_start[:] = True
+        i = self.index
+        return obs[:, i].copy(), {"distance": self.core.distance[:, i].copy()}
+
+    def step(  # type: ignore[override]  # rewards are float64 and flags bool, not the base's float32
+        self, actions: npt.ArrayLike
+    ) -> tuple[F32, F64, Bool, Bool, dict[str, Any]]:
+        """Step all sub-environments with the learners' ``(B, 3)`` normalised actions; ended ones reset.
+
+        Raises:
+            ValueError: Wrong shape or a non-finite action.
+        """
+        from hptvsim.envs.single import autoreset
+
+        core = self.core
+        b = self.num_envs
+        a = np.asarray(actions, dtype=np.float64)
+        if a.shape != (b, 3):
+            raise ValueError(f"actions must have shape (num_envs, 3) = ({b}, 3); got {a.shape}")
+        if not np.isfinite(a).all():
+            raise ValueError("actions must be finite")
+        i = self.index
+        act = self._actions
+        act[:, i] = a
+        for k in self.others:
+            act[:, k] = self.policies[core.agents[k]].act(core.obs[:, k], self._episode_start)
+        self._episode_start[:] = False
+        result = core.step(act)
+        obs = result.obs[:, i].copy()
+        reward = result.reward[:, i].copy()
+        terminated = result.terminated[:, i].copy()
+        truncated = result.truncated[:, i].copy()
+        f = result.flags
+        infos: dict[str, Any] = {
+            "distance": core.distance[:, i].copy(),
+            "captured": f.captured.copy(),
+            "collision": f.collision[:, i].copy(),
+            "seabed": result.seabed[:, i].copy(),
+            "surface": result.surface[:, i].copy(),
+            "out_of_site": f.out_of_site[:, i].copy(),
+            "reached": f.reached[:, i].copy(),
+            "altitude": core.altitude[:, i].copy(),
+            "z": core.poses[:, i, 2].copy(),
+            "r_C": result.terms.r_C[:, i].copy(),
+            "r_E1": result.terms.r_E1[:, i].copy(),
+            "r_E2": result.terms.r_E2[:, i].copy(),
+        }
+        autoreset(obs, terminated, truncated, infos, lambda envs: core.reset(envs)[envs, i])
+        self._episode_start[terminated | truncated] = True
+        return obs, reward, terminated, truncated, infos
+
+    def close_extras(self, **kwargs: Any) -> None:
+        """Release the simulation."""
+        self.core.close()
+
+
+def make_sb3_vec_env_3d(num_envs: int = 1, scenario: Scenario | str = "dive_flat", **kwargs: Any) -> Any:
+    """A stable-baselines3 ``VecEnv`` of ``num_envs`` batched 3-D sub-environments (:class:`UPEG3DVectorEnv`).
+
+    Finished sub-environments reset in the same step, their last observation in
+    ``infos[k]["terminal_observation"]``, as SB3 expects.
+    """
+    from hptvsim.envs.single import sb3_vec_env
+
+    return sb3_vec_env(UPEG3DVectorEnv(num_envs, scenario, **kwargs))

@@ -15,7 +15,7 @@ objects: scripted ones by name (defaults: pursuers ``pure_pursuit``, the evader
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any, Literal
 
 import gymnasium
@@ -27,7 +27,16 @@ from hptvsim.envs.core import Backend, GameCore, StepResult
 from hptvsim.envs.policies import POLICY_ROLES, Limits, Policy, make_policy
 from hptvsim.world.scenario import Scenario
 
-__all__ = ["PolicySpec", "SB3VecEnv", "UPEGSingleAgentEnv", "UPEGVectorEnv", "build_policies"]
+__all__ = [
+    "PolicySpec",
+    "SB3VecEnv",
+    "UPEGSingleAgentEnv",
+    "UPEGVectorEnv",
+    "autoreset",
+    "build_policies",
+    "make_sb3_vec_env",
+    "sb3_vec_env",
+]
 
 F32 = npt.NDArray[np.float32]
 F64 = npt.NDArray[np.float64]
@@ -346,24 +355,38 @@ class UPEGVectorEnv(gymnasium.vector.VectorEnv[F32, F32, F32]):
             "r_E1": result.terms.r_E1[:, i].copy(),
             "r_E2": result.terms.r_E2[:, i].copy(),
         }
-        ended = terminated | truncated
         # the learner's episode ends even if others could go on (goto): finish the environment
-        ended_envs = np.flatnonzero(ended)
-        if ended_envs.size:
-            infos["final_obs"] = np.where(ended[:, None], obs, 0.0).astype(np.float32)
-            infos["_final_obs"] = ended.copy()
-            infos["final_info"] = {
-                k: v.copy() for k, v in infos.items() if not k.startswith(("final", "_final"))
-            }
-            infos["_final_info"] = ended.copy()
-            new = self.core.reset(ended_envs)
-            obs[ended_envs] = new[ended_envs, i]
-            self.driver.episode_start[ended_envs] = True
+        core = self.core
+        autoreset(obs, terminated, truncated, infos, lambda envs: core.reset(envs)[envs, i])
+        self.driver.episode_start[terminated | truncated] = True
         return obs, reward, terminated, truncated, infos
 
     def close_extras(self, **kwargs: Any) -> None:
         """Release the simulation."""
         self.core.close()
+
+
+def autoreset(
+    obs: F32,
+    terminated: npt.NDArray[np.bool_],
+    truncated: npt.NDArray[np.bool_],
+    infos: dict[str, Any],
+    reset: Callable[[npt.NDArray[np.intp]], F32],
+) -> None:
+    """Gymnasium's ``SAME_STEP`` autoreset of the environments whose learner's episode ended.
+
+    In place: ``infos`` gains ``final_obs``/``_final_obs`` and ``final_info``/``_final_info``
+    (the ended episodes' last observations and infos), and the rows of ``obs`` of the ended
+    environments become the first observations of new episodes, ``reset(envs)`` ``(E, obs)``.
+    """
+    ended = terminated | truncated
+    ended_envs = np.flatnonzero(ended)
+    if ended_envs.size:
+        infos["final_obs"] = np.where(ended[:, None], obs, 0.0).astype(np.float32)
+        infos["_final_obs"] = ended.copy()
+        infos["final_info"] = {k: v.copy() for k, v in infos.items() if not k.startswith(("final", "_final"))}
+        infos["_final_info"] = ended.copy()
+        obs[ended_envs] = reset(ended_envs)
 
 
 class SB3VecEnv:
@@ -380,9 +403,18 @@ def make_sb3_vec_env(num_envs: int = 1, scenario: Scenario | str = "source", **k
     ``infos[k]["terminal_observation"]`` (with ``"TimeLimit.truncated"`` on truncation), as SB3
     expects; the others go on.
     """
+    return sb3_vec_env(UPEGVectorEnv(num_envs, scenario, **kwargs))
+
+
+def sb3_vec_env(vec: gymnasium.vector.VectorEnv[Any, Any, Any]) -> Any:
+    """A stable-baselines3 ``VecEnv`` over a same-step-autoreset vector env of this package.
+
+    ``vec`` is a :class:`UPEGVectorEnv` or a :class:`~hptvsim.envs.game3d.UPEG3DVectorEnv`
+    (``infos`` arrays ``distance``, ``captured``, ``collision``, ``out_of_site``, ``reached``).
+    """
     from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 
-    vec = UPEGVectorEnv(num_envs, scenario, **kwargs)
+    num_envs = vec.num_envs
 
     class _Adapter(VecEnv):
         def __init__(self) -> None:
@@ -391,7 +423,7 @@ def make_sb3_vec_env(num_envs: int = 1, scenario: Scenario | str = "source", **k
             self._actions: F64 | None = None
 
         def reset(self) -> F32:
-            obs, _ = vec.reset(seed=self._seeds[0] if self._seeds else None)
+            obs: F32 = vec.reset(seed=self._seeds[0] if self._seeds else None)[0]
             self._reset_seeds()
             return obs
 

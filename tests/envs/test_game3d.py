@@ -302,3 +302,60 @@ def test_potential_field_evader_stays_inside_the_site() -> None:
     assert (closest > 0.5).all(), closest  # m
     assert (closest < 40.0).any()  # it did reach the edges' influence and turned back
     core.close()
+
+
+def test_vector_env_with_one_env_plays_the_single_agent_episode() -> None:
+    from hptvsim.envs.game3d import UPEG3DSingleAgentEnv, UPEG3DVectorEnv
+
+    vec = UPEG3DVectorEnv(1, "dive_flat", agent="evader_0", seed=3, max_steps=80, threads=1)
+    one = UPEG3DSingleAgentEnv("dive_flat", agent="evader_0", seed=3, max_steps=80)
+    obs_v, _ = vec.reset(seed=3)
+    obs_1, _ = one.reset(seed=3)
+    np.testing.assert_array_equal(obs_v[0], obs_1)
+    rng = np.random.default_rng(0)
+    for _ in range(80):
+        a = rng.uniform(-1.0, 1.0, 3).astype(np.float32)
+        o_v, r_v, t_v, u_v, info_v = vec.step(a[None])
+        o_1, r_1, t_1, u_1, _ = one.step(a)
+        assert (r_v[0], bool(t_v[0]), bool(u_v[0])) == (r_1, t_1, u_1)
+        if t_1 or u_1:
+            np.testing.assert_array_equal(info_v["final_obs"][0], o_1)
+            assert info_v["_final_obs"][0]
+            break
+        np.testing.assert_array_equal(o_v[0], o_1)
+    else:
+        pytest.fail("the episode should end within its 80 steps")
+    vec.close()
+    one.close()
+
+
+def test_vector_env_resets_ended_environments_in_the_same_step() -> None:
+    vec = gym.make_vec(
+        "hptvsim/UPEG3D-Goto-v0", num_envs=4, vectorization_mode="vector_entry_point", max_steps=15, seed=1
+    )
+    obs, _ = vec.reset(seed=1)
+    assert obs.shape == (4, 12 * 5 + 16) and vec.action_space.shape == (4, 3)
+    for step in range(15):
+        obs, reward, term, trunc, infos = vec.step(np.zeros((4, 3), dtype=np.float32))
+        assert reward.shape == (4,) and {"z", "altitude", "seabed"} <= set(infos)
+        if step < 14:
+            assert not (term | trunc).any()
+    assert trunc.all() and infos["_final_obs"].all()
+    core = vec.unwrapped.core  # type: ignore[attr-defined]
+    assert (core.steps == 0).all()  # every environment started a new episode
+    assert not np.array_equal(obs, infos["final_obs"])
+    vec.close()
+
+
+def test_sb3_trains_on_the_batched_3d_vector_env() -> None:
+    import torch
+    from stable_baselines3 import SAC
+
+    from hptvsim.envs.game3d import make_sb3_vec_env_3d
+
+    torch.set_num_threads(1)
+    env = make_sb3_vec_env_3d(4, "dive_goto", seed=0, max_steps=50, threads=1)
+    model = SAC("MlpPolicy", env, learning_starts=50, batch_size=32, seed=0, device="cpu")
+    model.learn(total_timesteps=240)
+    assert model.num_timesteps == 240 and model.replay_buffer.size() == 240 // 4
+    env.close()
