@@ -216,14 +216,26 @@ def bench_dynamics_cmd(quick: bool, vehicle_type: str, as_json: bool) -> None:
     help="Simulated seconds.",
 )
 @click.option("--no-episode", is_flag=True, help="Skip the pursuit-evasion episode.")
-def demo(out_dir: Path, duration: float, no_episode: bool) -> None:
+@click.option(
+    "--scenario",
+    default="target",
+    show_default=True,
+    help="Shipped scenario of the episode (a 3-D one, e.g. ridge_3d, adds a depth plot).",
+)
+def demo(out_dir: Path, duration: float, no_episode: bool, scenario: str) -> None:
     """The vehicles through their FMUs, then one pursuit episode with the default policies."""
     from hptvsim.demo import plot_episode, run_demo
+    from hptvsim.world.scenario import list_scenarios
 
+    if scenario not in list_scenarios():
+        raise click.BadParameter(
+            f"no shipped scenario {scenario!r}; valid: {', '.join(list_scenarios())}", param_hint="--scenario"
+        )
     path = run_demo(out_dir, duration=duration)
     click.echo(f"trajectory plot: {path.resolve()}")
     if not no_episode:
-        click.echo(f"episode plot: {plot_episode(out_dir).resolve()}")
+        steps = None if scenario != "target" else 1200
+        click.echo(f"episode plot: {plot_episode(out_dir, scenario=scenario, max_steps=steps).resolve()}")
 
 
 def _register() -> None:

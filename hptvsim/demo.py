@@ -182,8 +182,12 @@ def _seabed_cmap() -> Any:
     )
 
 
-def _draw_seabed(ax: Any, fig: Any, world: World) -> None:
-    """Shaded seabed depth (land in a land colour), obstacles filled and outlined, a depth bar."""
+def _draw_seabed(ax: Any, fig: Any, world: World, *, obstacles: bool = True) -> None:
+    """Shaded seabed depth (land in a land colour), obstacles filled and outlined, a depth bar.
+
+    ``obstacles=False`` (the 3-D game, where vehicles may pass over them) leaves the planar
+    game's obstacle map out: the shading shows the seabed.
+    """
     from matplotlib import cm
     from matplotlib.colors import Normalize
 
@@ -194,10 +198,11 @@ def _draw_seabed(ax: Any, fig: Any, world: World) -> None:
     cmap = _seabed_cmap()
     rgb, lo, hi = shaded_depth(hm, cmap)
     ax.imshow(rgb, origin="lower", extent=(y0, y1, x0, x1), interpolation="bilinear")
-    draw_obstacles(ax, world.obstacles, alpha=0.8, edge=_OUTLINE, linewidth=0.8)
+    if obstacles:
+        draw_obstacles(ax, world.obstacles, alpha=0.8, edge=_OUTLINE, linewidth=0.8)
     bar = fig.colorbar(cm.ScalarMappable(norm=Normalize(vmin=lo, vmax=hi), cmap=cmap), ax=ax, shrink=0.85)
     bar.ax.invert_yaxis()  # deep at the bottom
-    bar.set_label("seabed depth [m] (obstacles: brown)")
+    bar.set_label("seabed depth [m] (obstacles: brown)" if obstacles else "seabed depth [m]")
 
 
 def _collision_times(frames: list[Any]) -> dict[str, float]:
@@ -215,7 +220,7 @@ def plot_episode(
     *,
     scenario: str = "target",
     seed: int = 0,
-    max_steps: int = 1200,
+    max_steps: int | None = 1200,
     echo: Callable[[str], None] | None = print,
 ) -> Path:
     """Play one episode with the default policies on the FMU backend; report it; write ``episode.png``.
@@ -224,7 +229,7 @@ def plot_episode(
         out_dir: Folder of the figure (created if needed).
         scenario: Shipped scenario.
         seed: Episode seed.
-        max_steps: Step limit.
+        max_steps: Step limit (None: the scenario's).
         echo: Receives the report's lines (:func:`episode_report`); None: silent.
 
     Returns:
@@ -250,7 +255,8 @@ def episode_figure(result: EpisodeResult) -> Any:
 
     Returns:
         A matplotlib figure; its first axes is the map (one track per agent, in the agent's
-        colour), its second the distance plot (one line per pursuer, or per agent in goto).
+        colour), its second the distance plot (one line per pursuer, or per agent in goto); in
+        the 3-D game a third, the depth of every agent over time with the seabed under it.
     """
     from matplotlib.lines import Line2D
     from matplotlib.patches import Circle
@@ -267,9 +273,17 @@ def episode_figure(result: EpisodeResult) -> Any:
     x_max, y_max = x_min + lx, y_min + ly  # m
     map_h = 5.0  # in, the map's height
     map_w = map_h * (y_max - y_min) / (x_max - x_min) + 1.4  # in, with its depth bar
-    fig = plt.figure(figsize=(map_w + 6.8, map_h + 1.9), layout="constrained")
-    ax_map, ax_d = fig.subplots(1, 2, width_ratios=(map_w, 6.8))
-    _draw_seabed(ax_map, fig, world)
+    three_d = st.game == "3d"
+    fig = plt.figure(figsize=(map_w + 6.8, map_h + (4.3 if three_d else 1.9)), layout="constrained")
+    if three_d:
+        grid = fig.add_gridspec(2, 2, width_ratios=(map_w, 6.8))
+        ax_map = fig.add_subplot(grid[:, 0])
+        ax_d = fig.add_subplot(grid[0, 1])
+        ax_z = fig.add_subplot(grid[1, 1], sharex=ax_d)
+        _depth_panel(ax_z, result)
+    else:
+        ax_map, ax_d = fig.subplots(1, 2, width_ratios=(map_w, 6.8))
+    _draw_seabed(ax_map, fig, world, obstacles=not three_d)
     handles: list[Any] = []
     for info, a in zip(st.agents, traj.agents, strict=True):
         x, y = np.asarray(a.x), np.asarray(a.y)
@@ -321,6 +335,29 @@ def episode_figure(result: EpisodeResult) -> Any:
     policies = " vs ".join(dict.fromkeys(a.policy for a in st.agents))
     fig.suptitle(f"{st.scenario}, seed {st.seed}, {policies}: {outcome}", fontsize=11)
     return fig
+
+
+def _depth_panel(ax: Any, result: EpisodeResult) -> None:
+    """3-D game: each agent's depth over time (surface at the top) and the seabed under it (dashed)."""
+    st, traj = result.static, result.trajectories
+    deepest = 0.0  # m
+    for info, a in zip(st.agents, traj.agents, strict=True):
+        if a.z is None or a.altitude is None:
+            continue
+        z = np.asarray(a.z)
+        seabed = z + np.asarray(a.altitude)  # m, the seabed's depth under the agent
+        deepest = max(deepest, float(seabed.max()))
+        ax.plot(traj.time, z, color=info.color, lw=1.8, label=info.name)
+        ax.plot(traj.time, seabed, color=info.color, lw=1.0, ls="--", alpha=0.8)
+        if info.goal is not None and len(info.goal) == 3:
+            ax.axhline(info.goal[2], color=info.color, ls=":", lw=1.0)
+    ax.plot([], [], color="0.4", lw=1.0, ls="--", label="seabed under it")
+    ax.set_ylim(1.05 * max(deepest, 1.0), 0.0)  # depth grows downwards; the surface at the top
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("depth z [m]")
+    ax.set_title("each agent's depth (dashed: the seabed under it)", fontsize=10)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="lower right", ncols=2)
 
 
 def _padded(lo: float, hi: float, pad: float = 0.08, least: float = 2.0) -> tuple[float, float]:

@@ -137,6 +137,7 @@ CASES: dict[str, tuple[list[str], tuple[str, ...]]] = {
     "replay-missing": (["replay", "missing.rrd"], ("missing.rrd", "does not exist")),
     "viz-schema": (["viz", "schema", "--out", "bad.toml/web"], ("bad.toml/web", "cannot make")),
     "demo-duration": (["demo", "--duration", "-1"], ("-1", "x>0")),
+    "demo-scenario": (["demo", "--scenario", "atlantis", "--no-episode"], ("atlantis", "ridge_3d")),
     "fmu-build": (["fmu", "build", "--type", "nosuch", "--out", "fmus"], ("nosuch", "work_class")),
     "fmu-build-vehicle-file": (
         ["fmu", "build", "--vehicle-file", "bad.toml", "--out", "fmus"],

@@ -154,3 +154,31 @@ def test_the_trajectories_figure_uses_the_palette_and_labels_its_axes(tmp_path: 
             assert {to_hex(ln.get_color()) for ln in ax.lines} == set(VEHICLE_COLORS.values())
     finally:
         plt.close(fig)
+
+
+def test_the_3d_episode_figure_adds_each_agents_depth_over_time(tmp_path: Path) -> None:
+    import matplotlib.pyplot as plt
+
+    result = run_episode("ridge_3d", {}, seed=0, max_steps=300)
+    fig = episode_figure(result)
+    try:
+        ax_z = fig.axes[2]
+        assert ax_z.get_ylabel() == "depth z [m]" and ax_z.get_xlabel() == "time [s]"
+        low, high = ax_z.get_ylim()
+        assert low > high == 0.0  # depth grows downwards: the surface at the top
+        depth = {ln.get_label(): ln for ln in ax_z.lines if not ln.get_label().startswith("_")}
+        names = [a.name for a in result.static.agents]
+        assert {n: to_hex(depth[n].get_color()) for n in names} == {n: color_of(n) for n in names}
+        for a in result.trajectories.agents:  # the plotted depths are the trajectories'
+            assert a.z is not None
+            np.testing.assert_array_equal(depth[a.name].get_ydata(), a.z)
+        # the seabed under each agent (dashed) reaches the ridge's crest, shallower than 60 m
+        seabeds = [ln for ln in ax_z.lines if ln.get_linestyle() == "--" and ln.get_label().startswith("_")]
+        assert len(seabeds) == len(names)
+        assert min(float(np.min(ln.get_ydata())) for ln in seabeds) < 59.0
+        assert fig.axes[3].get_ylabel() == "seabed depth [m]"  # no planar obstacles drawn in 3-D
+        pixels = _pixels(fig, ax_z, tmp_path)
+        for name in names:
+            assert _count(pixels, color_of(name)) > 40, name
+    finally:
+        plt.close(fig)
