@@ -304,6 +304,13 @@ COMMANDS: dict[str, tuple[Run | Help, ...]] = {
             slow=True,
         ),
     ),
+    "hptvsim demo --scenario ridge_3d --out hptvsim-out": (
+        Run(  # the 3-D episode with its depth plot (captured at step 1089, about 4 s)
+            "hptvsim demo --scenario ridge_3d --out {tmp} --duration 5",
+            r"outcome: captured at 272\.25 s[\s\S]*episode plot: ",
+            ("{tmp}/trajectories.png", "{tmp}/episode.png"),
+        ),
+    ),
     "hptvsim episode --scenario target": (
         Run(
             "hptvsim episode --scenario target --max-steps 50 --json {tmp}/episode.json",

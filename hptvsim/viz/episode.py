@@ -238,7 +238,8 @@ def build_static(
         ),
         terrain=terrain_mesh(hm.depth, hm.geometry.extent, max_cells=opts.terrain_cells),
         obstacles=obstacle_summary(
-            obstacles.occupied,
+            # the 3-D game has no obstacle map: the seabed (the terrain mesh) is what vehicles hit
+            np.zeros_like(obstacles.occupied) if three_d else obstacles.occupied,
             resolution=obstacles.geometry.resolution,
             extent=obstacles.geometry.extent,
             fence=fence,

@@ -218,6 +218,8 @@ class TerrainMesh(SchemaObject):
 class ObstacleSummary(SchemaObject):
     """The obstacle map at the operating depth, coarsened for drawing.
 
+    Empty in the 3-D game, where the vehicles hit the seabed of the terrain mesh instead.
+
     Attributes:
         resolution: Cell size of the simulation's obstacle map [m].
         shape: ``(nx, ny)`` cells of the simulation's obstacle map.

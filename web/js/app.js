@@ -111,18 +111,48 @@ function option(value, text = value) {
   return o;
 }
 
+/** The game a scenario plays ("planar" or "3d"; scenarios listed by an older service: planar). */
+function gameOf(name) {
+  return state.scenarios.find((s) => s.name === name)?.game || "planar";
+}
+
+/** A scenario's name as the choosers show it: 3-D scenarios are tagged. */
+function scenarioText(s) {
+  return s.game === "3d" ? `${s.name} · 3-D` : s.name;
+}
+
+/** A small tag that marks a 3-D scenario or episode. */
+function tag3d() {
+  const t = document.createElement("span");
+  t.className = "tag game-3d";
+  t.textContent = "3-D";
+  t.title = "the 3-D game: vehicles that dive";
+  return t;
+}
+
 async function loadChoices() {
   state.scenarios = await api("/scenarios");
   state.policies = await api("/policies");
   const sel = $("f-scenario");
-  sel.replaceChildren(...state.scenarios.map((s) => option(s.name)));
+  sel.replaceChildren(...state.scenarios.map((s) => option(s.name, scenarioText(s))));
   sel.value = state.scenarios.some((s) => s.name === "target") ? "target" : state.scenarios[0]?.name;
-  $("filter-scenario").replaceChildren(option("", "any"), ...state.scenarios.map((s) => option(s.name)));
+  $("filter-scenario").replaceChildren(option("", "any"), ...state.scenarios.map((s) => option(s.name, scenarioText(s))));
   $("filter-policy").replaceChildren(option("", "any"), ...state.policies.map((p) => option(p.name)));
-  const byRole = (role) => state.policies.filter((p) => p.roles.includes(role)).map((p) => option(p.name));
-  $("f-pursuer-policy").replaceChildren(...byRole("pursuer"));
-  $("f-evader-policy").replaceChildren(...byRole("evader"));
   showScenario(true);
+}
+
+/**
+ * Offer for each role only the policies that play the scenario's game (`games` of GET /policies;
+ * a policy listed without it plays every game), keeping a choice that still fits.
+ */
+function fillPolicies(game) {
+  for (const [role, id] of [["pursuer", "f-pursuer-policy"], ["evader", "f-evader-policy"]]) {
+    const sel = $(id);
+    const keep = sel.value;
+    const fits = state.policies.filter((p) => p.roles.includes(role) && (!p.games || p.games.includes(game)));
+    sel.replaceChildren(...fits.map((p) => option(p.name)));
+    if (fits.some((p) => p.name === keep)) sel.value = keep;
+  }
 }
 
 const previewMap = new TopDownMap($("scenario-canvas"), { compact: true });
@@ -135,10 +165,12 @@ async function showScenario(setDefaults = true) {
   const n = s.agents.length;
   const roles = Object.values(s.roles || {});
   const p = roles.filter((r) => r === "pursuer").length;
-  $("scenario-info").textContent =
+  const text =
     `${s.description || ""} ${s.task} task, ${s.site_size[0]} m × ${s.site_size[1]} m, ` +
     `${p} pursuer(s) and ${n - p} evader(s), dt ${s.dt} s, up to ${s.max_steps} steps.`;
+  $("scenario-info").replaceChildren(...(s.game === "3d" ? [tag3d(), " "] : []), text);
   $("f-max-steps").placeholder = `scenario's (${s.max_steps})`;
+  fillPolicies(s.game || "planar");
   if (setDefaults && s.default_policies) {
     // the service's defaults (hptvsim.zoo.default_policy): the shipped trained policies
     for (const [role, id] of [["pursuer", "f-pursuer-policy"], ["evader", "f-evader-policy"]]) {
@@ -167,7 +199,7 @@ async function showScenario(setDefaults = true) {
     previewMap.caption = "spawn poses";
     previewMap.showFrame(checkSchema("Frame", pv.frame));
   } catch (err) {
-    $("scenario-info").textContent += ` (no map: ${err.message})`;
+    $("scenario-info").append(` (no map: ${err.message})`);
   }
 }
 
@@ -223,7 +255,8 @@ const TERMS = [
 
 function newSeries(st) {
   const per = () => new Map(st.agents.map((a) => [a.name, []]));
-  return { t: [], distance: per(), terms: { r_C: per(), r_E1: per(), r_E2: per() }, hasTerms: true };
+  // depth and seabed (depth z + altitude) [m]: 3-D game only
+  return { t: [], distance: per(), terms: { r_C: per(), r_E1: per(), r_E2: per() }, hasTerms: true, depth: per(), seabed: per() };
 }
 
 /** Series of a finished episode's trajectories: distances and the running sums of the terms. */
@@ -232,6 +265,10 @@ function seriesOfTrajectory(st, traj) {
   s.t = traj.time;
   for (const a of traj.agents) {
     s.distance.set(a.name, a.distance);
+    if (a.z) {
+      s.depth.set(a.name, a.z);
+      s.seabed.set(a.name, a.altitude ? a.z.map((z, k) => z + a.altitude[k]) : []);
+    }
     for (const [term] of TERMS) {
       if (!a[term]) {
         s.hasTerms = false;
@@ -248,6 +285,10 @@ function addFrame(s, f) {
   s.t.push(f.time);
   for (const a of f.agents) {
     s.distance.get(a.name)?.push(a.distance);
+    if (Number.isFinite(a.z)) {
+      s.depth.get(a.name)?.push(a.z);
+      s.seabed.get(a.name)?.push(Number.isFinite(a.altitude) ? a.z + a.altitude : NaN);
+    }
     for (const [term] of TERMS) {
       const ys = s.terms[term].get(a.name);
       if (ys) ys.push((ys.length ? ys[ys.length - 1] : 0) + (f.step === 0 ? 0 : a[term]));
@@ -278,6 +319,42 @@ function drawEpisodePlots(st, series, cursor) {
       empty: series.hasTerms ? "no data yet" : "this episode was stored without its reward terms",
     },
   );
+  drawDepthPlot(st, series, cursor);
+}
+
+const SEABED_FILL = "rgba(217, 199, 154, 0.07)"; // the palette's land colour, faint: below the seabed
+
+/**
+ * The 3-D game's depth over time: one line per vehicle in its colour, depth growing downward from
+ * the surface at the top; the seabed under each vehicle (its depth z + altitude) dashed in the same
+ * colour with the ground below it shaded; the goal's depth in goto. Hidden in the planar game.
+ */
+function drawDepthPlot(st, series, cursor) {
+  const canvas = $("plot-depth");
+  canvas.hidden = st.game !== "3d";
+  if (canvas.hidden) return;
+  const seabed = st.agents.map((a) => ({
+    label: "",
+    color: a.color,
+    dash: [5, 4],
+    fill: SEABED_FILL,
+    xs: series.t,
+    ys: series.seabed.get(a.name) || [],
+  }));
+  const depth = st.agents.map((a) => ({ label: a.name, color: a.color, xs: series.t, ys: series.depth.get(a.name) || [] }));
+  const key = { label: "seabed under each (dashed)", color: "#93a4b8", dash: [5, 4], xs: [], ys: [] };
+  const goal = st.agents.find((a) => a.goal && a.goal.length > 2 && Number.isFinite(a.goal[2]));
+  const areas = lineChart(canvas, [...seabed, ...depth, key], {
+    title: "depth of each vehicle (surface at the top)",
+    ylabel: "depth z [m]",
+    xlabel: "simulated time [s]",
+    flip: true,
+    ymin: 0,
+    hline: goal ? { y: goal.goal[2], label: `goal depth (${+goal.goal[2].toFixed(1)} m)` } : null,
+    cursor,
+  });
+  // what is drawn, for tests: the series' agents and lengths, and where the plot area is
+  state.depthPlot = { agents: depth.map((d) => d.label), points: depth.map((d) => d.ys.length), area: areas?.[0] || null };
 }
 
 // --- watching one episode ---------------------------------------------------------------------
@@ -314,6 +391,7 @@ function watch(ep) {
   $("live-text").textContent = `${ep.scenario}, seed ${ep.seed}: ${ep.status}`;
   setStatus(ep.status);
   setTimeline(false);
+  $("plot-depth").hidden = gameOf(ep.scenario) !== "3d"; // until the episode's static part says
   highlightRow();
   if (!ACTIVE.has(ep.status)) {
     showFinished(ep.id);
@@ -339,6 +417,8 @@ function watch(ep) {
     state.current.series = newSeries(st);
     map.caption = "";
     map.setStatic(st);
+    if (st.game === "3d") drawDepthPlot(st, state.current.series, null);
+    else $("plot-depth").hidden = true;
   });
   es.addEventListener("progress", (e) => {
     if (!mine()) return;
@@ -392,6 +472,7 @@ async function showFinished(id) {
         console.info("no static part:", err.message);
       }
     }
+    if (c.static?.game === "3d" && !ep.has_trajectory) drawDepthPlot(c.static, c.series || newSeries(c.static), null);
     if (ep.has_trajectory && c.static) {
       const traj = checkSchema("Trajectories", await api(`/episodes/${id}/trajectory?format=json`));
       if (state.current !== c) return;
@@ -582,7 +663,7 @@ function renderList() {
         pick,
         cell(new Date(ep.created_at).toLocaleTimeString()),
         cell(ep.id.slice(0, 8), "mono"),
-        cell(ep.label ? `${ep.scenario} (${ep.label})` : ep.scenario),
+        scenarioCell(ep),
         cell(pols, "policies"),
         cell(String(ep.seed)),
         st,
@@ -597,6 +678,12 @@ function renderList() {
   );
   highlightRow();
   updateCompareButton();
+}
+
+function scenarioCell(ep) {
+  const td = cell(ep.label ? `${ep.scenario} (${ep.label})` : ep.scenario);
+  if (gameOf(ep.scenario) === "3d") td.append(" ", tag3d());
+  return td;
 }
 
 function updateCompareButton() {

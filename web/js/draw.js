@@ -45,6 +45,49 @@ export function rangeColor(frac) {
   return `rgb(${c[0]},${c[1]},${c[2]})`;
 }
 
+/**
+ * Where each sonar beam of a 3-D-game agent ends, in NED [m] (frame schema, "Two games"): beam k
+ * points along b = (cos e cos a, cos e sin a, sin e) in the body frame (azimuth a = beam_angles[k]
+ * from the bow towards starboard, elevation e = beam_elevations[k] positive down), turned into NED
+ * by R = Rz(psi) Ry(theta) Rx(phi) (hptvsim/sensors/sonar3d.py). The ends are the frame's hits.
+ *
+ * @param {{x: number, y: number, z: number, phi?: number, theta?: number, psi: number, ranges: number[]}} a
+ * @param {{beam_angles: number[], beam_elevations: number[], max_range: number}} info
+ * A beam without an echo that rises to the surface ends there (the sea surface is no echo), so its
+ * end is put there rather than at max_range.
+ *
+ * @returns {Array<{x: number, y: number, z: number, r: number, hit: boolean, level: boolean}>}
+ *   r: the measured range; level: the beam is in the row nearest the body's x-y plane
+ *   (elevation closest to 0).
+ */
+export function beamEnds3d(a, info) {
+  const els = info.beam_elevations || [];
+  const flat = Math.min(...els.map(Math.abs));
+  const [cf, sf] = [Math.cos(a.phi || 0), Math.sin(a.phi || 0)];
+  const [ct, st] = [Math.cos(a.theta || 0), Math.sin(a.theta || 0)];
+  const [cp, sp] = [Math.cos(a.psi), Math.sin(a.psi)];
+  return a.ranges.map((r, k) => {
+    const az = info.beam_angles[k];
+    const el = els[k] || 0;
+    const b = [Math.cos(el) * Math.cos(az), Math.cos(el) * Math.sin(az), Math.sin(el)];
+    const d = [
+      cp * ct * b[0] + (-sp * cf + cp * st * sf) * b[1] + (sp * sf + cp * cf * st) * b[2],
+      sp * ct * b[0] + (cp * cf + sf * st * sp) * b[1] + (-cp * sf + st * sp * cf) * b[2],
+      -st * b[0] + ct * sf * b[1] + ct * cf * b[2],
+    ];
+    const hit = r < HIT_FRACTION * info.max_range;
+    const len = !hit && d[2] < 0 && a.z >= 0 ? Math.min(r, a.z / -d[2]) : r;
+    return {
+      x: a.x + len * d[0],
+      y: a.y + len * d[1],
+      z: a.z + len * d[2],
+      r,
+      hit,
+      level: Math.abs(Math.abs(el) - flat) < 1e-9,
+    };
+  });
+}
+
 function niceStep(raw) {
   const mag = 10 ** Math.floor(Math.log10(raw));
   return [1, 2, 5, 10].map((m) => m * mag).find((s) => s >= raw) || raw;
@@ -154,7 +197,7 @@ export class TopDownMap {
     this.draw();
   }
 
-  /** Agents' states to draw now: [{name, x, y, psi, ranges, active}]. */
+  /** Agents' states to draw now: [{name, x, y, psi, ranges, active}] (3-D game: also z, phi, theta, altitude). */
   current() {
     if (this.replay && this.step !== null) {
       const k = this.step;
@@ -170,7 +213,9 @@ export class TopDownMap {
             }
           }
         }
-        return { name: a.name, x: a.x[k], y: a.y[k], psi: a.psi[k], ranges, active: k < last };
+        const s = { name: a.name, x: a.x[k], y: a.y[k], psi: a.psi[k], ranges, active: k < last };
+        if (a.z) Object.assign(s, { z: a.z[k], phi: a.phi?.[k] ?? 0, theta: a.theta?.[k] ?? 0, altitude: a.altitude?.[k] ?? null });
+        return s;
       });
     }
     return this.frame ? this.frame.agents : [];
@@ -213,6 +258,7 @@ export class TopDownMap {
     ctx.fillStyle = AXIS;
     ctx.strokeStyle = AXIS;
     const nTicks = this.compact ? 3 : 5;
+    this.goalLabels = []; // boxes of the goal labels (3-D game), which depth labels keep clear of
     ctx.textAlign = "center";
     ctx.textBaseline = "top";
     for (const t of niceTicks(y0, y0 + ly, nTicks)) {
@@ -252,9 +298,20 @@ export class TopDownMap {
       ctx.lineWidth = 1.5;
       ctx.setLineDash([3, 3]);
       ctx.beginPath();
-      ctx.arc(gx, gy, Math.max(3, (a.goal_radius || 1) * this.scale), 0, 2 * Math.PI);
+      const rad = Math.max(3, (a.goal_radius || 1) * this.scale);
+      ctx.arc(gx, gy, rad, 0, 2 * Math.PI);
       ctx.stroke();
       ctx.setLineDash([]);
+      if (a.goal.length > 2 && Number.isFinite(a.goal[2])) {
+        // 3-D game: the goal is a point at a depth
+        ctx.fillStyle = a.color;
+        ctx.font = FONT;
+        ctx.textAlign = "left";
+        ctx.textBaseline = "middle";
+        const text = `goal z ${+a.goal[2].toFixed(1)} m`;
+        ctx.fillText(text, gx + rad + 3, gy);
+        this.goalLabels.push([gx + rad + 3, gy - 7, ctx.measureText(text).width, 14]);
+      }
     }
     return bg;
   }
@@ -425,9 +482,18 @@ export class TopDownMap {
     ctx.fillText(`${metres} m`, x + len / 2, y - 3);
   }
 
+  /** True when the episode plays the 3-D game (vehicles that dive). */
+  get is3d() {
+    return this.static?.game === "3d";
+  }
+
   /** One vehicle's sonar fan: a translucent coverage polygon and the beams coloured by range. */
   drawFan(ctx, a, info) {
     if (!a.ranges || !a.ranges.length) return;
+    if (this.is3d && info.beam_elevations && Number.isFinite(a.z)) {
+      this.drawFan3d(ctx, a, info);
+      return;
+    }
     const n = a.ranges.length;
     const maxR = info.max_range;
     const ends = a.ranges.map((r, k) => {
@@ -463,6 +529,86 @@ export class TopDownMap {
         ctx.fill();
       }
     });
+  }
+
+  /**
+   * A 3-D-game vehicle's sonar seen from above: every beam's end projected on the horizontal
+   * plane (beamEnds3d, the frame's hit points). The level row's footprint is the translucent
+   * polygon and its beams without an echo are faint lines; each beam with an echo is a ray to
+   * its hit, coloured by range (the other rows' beams without an echo end at the surface or in
+   * open water, and are left out).
+   */
+  drawFan3d(ctx, a, info) {
+    const ends = beamEnds3d(a, info);
+    const [cx, cy] = this.px(a.x, a.y);
+    const level = ends.filter((e) => e.level);
+    if (level.length > 2) {
+      ctx.fillStyle = info.color + "22";
+      ctx.beginPath();
+      level.forEach((e, k) => {
+        const [px, py] = this.px(e.x, e.y);
+        if (k === 0) ctx.moveTo(px, py);
+        else ctx.lineTo(px, py);
+      });
+      ctx.closePath();
+      ctx.fill();
+    }
+    ctx.strokeStyle = "rgba(200, 215, 230, 0.22)";
+    ctx.lineWidth = 1;
+    for (const e of level) {
+      if (e.hit) continue;
+      const [px, py] = this.px(e.x, e.y);
+      ctx.beginPath();
+      ctx.moveTo(cx, cy);
+      ctx.lineTo(px, py);
+      ctx.stroke();
+    }
+    // far hits first, so the near (red) ones stay on top
+    const hits = ends.filter((e) => e.hit).sort((p, q) => q.r - p.r);
+    for (const e of hits) {
+      const [px, py] = this.px(e.x, e.y);
+      const c = rangeColor(e.r / info.max_range);
+      ctx.strokeStyle = c;
+      ctx.lineWidth = 1.8;
+      ctx.beginPath();
+      ctx.moveTo(cx, cy);
+      ctx.lineTo(px, py);
+      ctx.stroke();
+      ctx.fillStyle = c;
+      ctx.beginPath();
+      ctx.arc(px, py, 2.4, 0, 2 * Math.PI);
+      ctx.fill();
+    }
+  }
+
+  /**
+   * A 3-D-game vehicle's depth beside its marker: "z 28.4 m". placed: the boxes of the labels
+   * drawn already; the label takes the first place beside the marker that overlaps none of them.
+   */
+  depthLabel(ctx, a, color, placed) {
+    const [px, py] = this.px(a.x, a.y);
+    const text = `z ${a.z.toFixed(1)} m`;
+    ctx.font = FONT;
+    const w = ctx.measureText(text).width + 4;
+    const h = 14;
+    const [sx, sy] = [this.ox, this.oy];
+    const places = [];
+    for (let row = 0; row < 4; row++) {
+      for (const side of [1, -1]) {
+        const x = side > 0 ? px + 10 : px - 10 - w;
+        places.push([x, py - 17 - h * row], [x, py + 3 + h * row]);
+      }
+    }
+    const inSite = ([x, y]) => x >= sx && x + w <= sx + this.siteW && y >= sy && y + h <= sy + this.siteH;
+    const free = ([x, y]) => placed.every((b) => x + w <= b[0] || b[0] + b[2] <= x || y + h <= b[1] || b[1] + b[3] <= y);
+    const [x, y] = places.find((q) => inSite(q) && free(q)) || places.find(inSite) || places[0];
+    placed.push([x, y, w, h]);
+    ctx.fillStyle = "rgba(13, 21, 32, 0.72)";
+    ctx.fillRect(x, y, w, h);
+    ctx.fillStyle = color;
+    ctx.textAlign = "left";
+    ctx.textBaseline = "middle";
+    ctx.fillText(text, x + 2, y + 7.5);
   }
 
   draw() {
@@ -531,6 +677,12 @@ export class TopDownMap {
         ctx.stroke();
       }
     }
+    if (this.is3d) {
+      // markers are not to be covered by labels: they count as placed boxes
+      const placed = agents.map((a) => this.px(a.x, a.y)).map(([x, y]) => [x - 7, y - 7, 14, 14]);
+      placed.push(...(this.goalLabels || []));
+      for (const a of agents) if (Number.isFinite(a.z)) this.depthLabel(ctx, a, info.get(a.name)?.color || "#fff", placed);
+    }
     ctx.restore();
     const now = this.time();
     ctx.font = FONT;
@@ -551,10 +703,16 @@ export class TopDownMap {
 /**
  * Line plots on one canvas, in panels stacked vertically that share the time axis.
  *
+ * A panel may set flip (y grows downward, as depth does), ymin (the y axis starts exactly there,
+ * e.g. the surface at depth 0). A series may set dash, fill (a colour filled from the line to the
+ * panel's lower edge on screen, e.g. the seabed) and may be legend-only (no points).
+ *
  * @param {HTMLCanvasElement} canvas
- * @param {Array<{title: string, ylabel?: string, series: Array<{label, color, xs, ys, dash?}>,
- *   hline?: {y: number, label: string}}>} panels
+ * @param {Array<{title: string, ylabel?: string, series: Array<{label, color, xs, ys, dash?, fill?}>,
+ *   hline?: {y: number, label: string}, flip?: boolean, ymin?: number}>} panels
  * @param {{xlabel?: string, cursor?: number|null, empty?: string}} options cursor: a time [s] marked by a vertical line.
+ * @returns {Array<{left, right, top, bottom, x0, x1, y0, y1, flip}>|null} each panel's plot area
+ *   [px] and the data range it shows (null with no data): where a value is drawn.
  */
 export function panelChart(canvas, panels, options = {}) {
   const ctx = canvas.getContext("2d");
@@ -615,10 +773,11 @@ export function panelChart(canvas, panels, options = {}) {
     panels.forEach((p, i) => ctx.fillText(p.title, m.l, m.t + gap * (i + 1) + ph * i - 4));
     ctx.textAlign = "center";
     ctx.fillText(options.empty || "no data yet", W / 2, H / 2);
-    return;
+    return null;
   }
   if (x1 === x0) x1 = x0 + 1;
   const X = (x) => m.l + ((x - x0) / (x1 - x0)) * (W - m.l - m.r);
+  const areas = [];
   panels.forEach((p, i) => {
     const top = m.t + gap * (i + 1) + ph * i;
     const bottom = top + ph;
@@ -629,7 +788,9 @@ export function panelChart(canvas, panels, options = {}) {
     if (y1 === y0) { y1 += 1; y0 -= 1; }
     const pad = 0.06 * (y1 - y0);
     y0 -= pad; y1 += pad;
-    const Y = (y) => bottom - ((y - y0) / (y1 - y0)) * ph;
+    if (Number.isFinite(p.ymin)) { y0 = p.ymin; if (!(y1 > y0)) y1 = y0 + 1; }
+    const Y = p.flip ? (y) => top + ((y - y0) / (y1 - y0)) * ph : (y) => bottom - ((y - y0) / (y1 - y0)) * ph;
+    areas.push({ left: m.l, right: W - m.r, top, bottom, x0, x1, y0, y1, flip: !!p.flip });
     ctx.strokeStyle = GRID;
     ctx.fillStyle = AXIS;
     ctx.lineWidth = 1;
@@ -663,6 +824,21 @@ export function panelChart(canvas, panels, options = {}) {
     ctx.beginPath();
     ctx.rect(m.l, top, W - m.l - m.r, ph);
     ctx.clip();
+    for (const s of p.series) {
+      if (!s.fill || s.xs.length < 2) continue;
+      // the area between the line and the panel's lower edge on screen
+      ctx.fillStyle = s.fill;
+      ctx.beginPath();
+      let first = null, lastX = null;
+      for (let k = 0; k < s.xs.length; k++) {
+        const x = s.xs[k], y = s.ys[k];
+        if (!Number.isFinite(x) || !Number.isFinite(y)) continue;
+        if (first === null) { first = X(x); ctx.moveTo(first, bottom); }
+        ctx.lineTo(X(x), Y(y));
+        lastX = X(x);
+      }
+      if (first !== null) { ctx.lineTo(lastX, bottom); ctx.closePath(); ctx.fill(); }
+    }
     for (const s of p.series) {
       ctx.strokeStyle = s.color;
       ctx.lineWidth = 1.7;
@@ -713,9 +889,11 @@ export function panelChart(canvas, panels, options = {}) {
   }
   ctx.textAlign = "center";
   ctx.fillText(options.xlabel || "", m.l + (W - m.l - m.r) / 2, bottom + 19);
+  return areas;
 }
 
-/** A single-panel line plot: series = [{label, color, xs, ys}], options {title, ylabel, xlabel, hline, cursor}. */
+/** A single-panel line plot: series = [{label, color, xs, ys}], options {title, ylabel, xlabel, hline, cursor, flip, ymin}. */
 export function lineChart(canvas, series, options = {}) {
-  panelChart(canvas, [{ title: options.title || "", ylabel: options.ylabel, series, hline: options.hline }], options);
+  const { title = "", ylabel, hline, flip, ymin } = options;
+  return panelChart(canvas, [{ title, ylabel, series, hline, flip, ymin }], options);
 }
