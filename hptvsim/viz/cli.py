@@ -52,8 +52,10 @@ def check_scenario_arg(scenario: str, **_: Any) -> None:
         raise click.BadParameter(str(exc), param_hint="--scenario") from None
 
 
-def _check_policy_args(agents: Any, scenario: str, policy: tuple[str, ...], *, allow_paths: bool) -> None:
-    """Each ``--policy AGENT=SPEC`` names an agent of the scenario and a policy for its role."""
+def _check_policy_args(
+    agents: Any, scenario: str, policy: tuple[str, ...], *, allow_paths: bool, game: str = "planar"
+) -> None:
+    """Each ``--policy AGENT=SPEC`` names an agent of the scenario and a policy for its role and game."""
     from hptvsim.zoo import check_policy_spec
 
     roles = {a.name: a.role for a in agents}
@@ -67,7 +69,7 @@ def _check_policy_args(agents: Any, scenario: str, policy: tuple[str, ...], *, a
                 param_hint="--policy",
             )
         try:
-            check_policy_spec(spec, roles[agent], allow_paths=allow_paths, agent=agent)
+            check_policy_spec(spec, roles[agent], allow_paths=allow_paths, agent=agent, game=game)
         except ValueError as exc:
             raise click.BadParameter(str(exc), param_hint="--policy") from None
 
@@ -90,7 +92,7 @@ def check_episode_args(
 
     Raises:
         click.BadParameter: An unknown or invalid scenario, an agent the scenario does not have,
-            a policy unknown or made for another role (the same rule as the service's), a
+            a policy unknown or made for another role or game (the same rule as the service's), a
             negative seed, a step limit below 1, or an output folder that cannot be made.
     """
     from hptvsim.viz.episode import resolve_scenario
@@ -100,7 +102,7 @@ def check_episode_args(
         sc = resolve_scenario(scenario, allow_paths=True)
     except ScenarioError as exc:
         raise click.BadParameter(str(exc), param_hint="--scenario") from None
-    _check_policy_args(sc.agents, scenario, policy, allow_paths=True)
+    _check_policy_args(sc.agents, scenario, policy, allow_paths=True, game=sc.simulation.game)
     _check_seed(seed)
     if max_steps is not None and max_steps < 1:
         raise click.BadParameter(f"{max_steps} is invalid; valid: an integer >= 1", param_hint="--max-steps")
@@ -119,7 +121,7 @@ def check_view_args(
 
     Raises:
         click.BadParameter: Not a shipped scenario, an unknown agent or policy, a policy for
-            another role, a seed out of range, a port out of range, or a speed that is not positive.
+            another role or game, a seed out of range, a port out of range, or a speed that is not positive.
     """
     from hptvsim.catalog import CatalogError, check_scenario, check_seed, shipped_scenario
 
@@ -127,7 +129,7 @@ def check_view_args(
         sc = shipped_scenario(check_scenario(scenario))
     except CatalogError as exc:
         raise click.BadParameter(str(exc), param_hint="--scenario") from None
-    _check_policy_args(sc.agents, scenario, policy, allow_paths=False)
+    _check_policy_args(sc.agents, scenario, policy, allow_paths=False, game=sc.simulation.game)
     try:
         check_seed(seed)
     except CatalogError as exc:

@@ -52,6 +52,7 @@ from hptvsim.viz.frames import (
     Trajectories,
     agent_color,
     append_state,
+    beam_directions,
     empty_columns,
     obstacle_summary,
     terrain_mesh,
@@ -736,8 +737,8 @@ class EpisodeStepper:
                 self._outcome = _outcome(captured, collision, out_of_site, reached, trunc_all)
         if sonar and self.options.hits:
             if isinstance(core, Game3DCore):
-                lay = core.layout
-                hits = _hit_points_3d(core.poses[0], ranges, lay.azimuth, lay.elevation, lay.max_range)
+                body = beam_directions(self.static.agents[0])  # one beam layout for every agent
+                hits = _hit_points_3d(core.poses[0], ranges, body, core.layout.max_range)
             else:
                 hits = _hit_points(
                     core.state.positions[0],
@@ -823,19 +824,15 @@ def _hit_points(
     return out
 
 
-def _hit_points_3d(
-    poses: F64, ranges: F64, azimuth: F64, elevation: F64, max_range: float
-) -> list[tuple[Point, ...] | None]:
+def _hit_points_3d(poses: F64, ranges: F64, body: F64, max_range: float) -> list[tuple[Point, ...] | None]:
     """Points where each agent's 3-D beams returned an echo, ``(x, y, z)`` [m].
 
     The beams are those of :class:`~hptvsim.sensors.sonar3d.Sonar3d`: fixed in the body frame
-    (azimuth from the bow, elevation positive down), turned into NED by the vehicle's roll,
-    pitch and yaw.
+    (``body``, :func:`~hptvsim.viz.frames.beam_directions`), turned into NED by the vehicle's
+    roll, pitch and yaw.
     """
     from hptvsim.sensors.sonar3d import rotation_zyx
 
-    ce = np.cos(elevation)
-    body = np.stack([ce * np.cos(azimuth), ce * np.sin(azimuth), np.sin(elevation)], axis=-1)  # (K, 3)
     rot = rotation_zyx(poses[:, 3], poses[:, 4], poses[:, 5])  # (N, 3, 3)
     out: list[tuple[Point, ...] | None] = []
     for i in range(poses.shape[0]):

@@ -72,10 +72,12 @@ __all__ = [
     "Trajectories",
     "agent_color",
     "append_state",
+    "beam_directions",
     "empty_columns",
     "from_dict",
     "json_schema",
     "obstacle_summary",
+    "quaternion_zyx",
     "terrain_mesh",
     "to_dict",
     "trajectory_of",
@@ -651,6 +653,42 @@ def trajectory_of(name: str, cols: dict[str, list[Any]]) -> AgentTrajectory:
         if any(v is None for v in values[k]):
             values[k] = None
     return AgentTrajectory(name=name, **values, ranges=tuple(tuple(r) for r in cols["ranges"]))
+
+
+# --- geometry of the conventions --------------------------------------------------------------
+
+
+def beam_directions(info: AgentInfo) -> F64:
+    """Unit vectors ``(K, 3)`` of an agent's sonar beams in its body frame (``x`` bow, ``z`` down).
+
+    Planar game: ``(cos a, sin a, 0)``; 3-D game: ``(cos e cos a, cos e sin a, sin e)`` with
+    azimuth ``a`` (``beam_angles``) and elevation ``e`` (``beam_elevations``, positive down).
+    """
+    az = np.asarray(info.beam_angles, dtype=np.float64)
+    el = np.zeros_like(az) if info.beam_elevations is None else np.asarray(info.beam_elevations, np.float64)
+    out: F64 = np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)], axis=1)
+    return out
+
+
+def quaternion_zyx(phi: npt.ArrayLike, theta: npt.ArrayLike, psi: npt.ArrayLike) -> F64:
+    """Quaternions ``(..., 4)`` ``(x, y, z, w)`` of the body-to-NED rotations ``Rz(psi) Ry(theta) Rx(phi)``.
+
+    Fossen's zyx convention (2021, Eq. 2.18; :func:`hptvsim.sensors.sonar3d.rotation_zyx`): yaw
+    ``psi`` about ``z`` (down: clockwise from above), pitch ``theta`` (positive nose up) and roll
+    ``phi`` [rad]. With ``phi = theta = 0`` this is exactly the rotation by ``psi`` about ``z``.
+    """
+    f, t, p = (0.5 * np.asarray(v, dtype=np.float64) for v in (phi, theta, psi))
+    cf, sf, ct, st, cp, sp = np.cos(f), np.sin(f), np.cos(t), np.sin(t), np.cos(p), np.sin(p)
+    q: F64 = np.stack(
+        [
+            sf * ct * cp - cf * st * sp,
+            cf * st * cp + sf * ct * sp,
+            cf * ct * sp - sf * st * cp,
+            cf * ct * cp + sf * st * sp,
+        ],
+        axis=-1,
+    )
+    return q
 
 
 # --- building the static part -----------------------------------------------------------------

@@ -2,21 +2,29 @@
 
 Every episode writes one recording through its own :class:`rerun.RecordingStream` (no global
 state, so a service writes many at once). Entities (world frame NED, ``RIGHT_HAND_Z_DOWN``:
-``x`` north, ``y`` east, ``z`` down; vehicles in the plane ``z = operating_depth``):
+``x`` north, ``y`` east, ``z`` down; in the planar game the vehicles move in the plane
+``z = operating_depth``, in the 3-D game each at its own depth, see :attr:`EpisodeStatic.game`):
 
 =====================================  ===========================================================
 ``world/terrain``                      the seabed mesh, coloured by depth (static)
-``world/site``                         the site's edge (static)
-``world/goals``                        goal points (goto task; static)
-``world/agents/{agent}``               the vehicle's pose (``Transform3D``: translation, yaw)
+``world/site``                         the site's edge (static; at the operating depth, in the
+                                       3-D game at the surface ``z = 0``)
+``world/goals``                        goal points (goto task; static; 3-D game: at their depth)
+``world/agents/{agent}``               the vehicle's pose (``Transform3D``: translation and the
+                                       attitude ``Rz(psi) Ry(theta) Rx(phi)``; planar: yaw only)
 ``world/agents/{agent}/body``          its hull, a sphere of its radius (static, body frame)
 ``world/agents/{agent}/sonar``         sonar rays to the measured ranges, one fan-shaped strip
-                                       (body frame; decimated)
+                                       (body frame; decimated; 3-D game: each beam along
+                                       ``(cos e cos a, cos e sin a, sin e)``, azimuth ``a``,
+                                       elevation ``e`` positive down)
 ``world/hits/{agent}``                 sonar hit points (decimated)
 ``world/trails/{agent}``               the last ``trail_steps`` positions (decimated)
 ``world/paths/{agent}``                the whole path, at the end (static)
 ``plots/{quantity}/{agent}``           scalars: ``distance``, ``reward``, ``return``, ``v_cmd``,
-                                       ``omega_cmd``, ``surge``, ``min_range``
+                                       ``omega_cmd``, ``surge``, ``min_range``; in the 3-D game
+                                       also ``depth`` (``z`` [m], positive down), ``altitude``
+                                       (above the seabed [m]) and ``w_cmd`` (commanded vertical
+                                       speed [m/s], positive down)
 ``meta/static``, ``meta/summary``      the episode's :class:`~hptvsim.viz.frames.EpisodeStatic`
                                        and :class:`~hptvsim.viz.frames.EpisodeSummary` as JSON
 =====================================  ===========================================================
@@ -30,7 +38,8 @@ data is buffered and sent in columns every ``flush_every`` steps, so a crash los
 many steps, and a recording costs little time per step.
 
 :func:`read_recording` reads a recording back (``rerun.chunk.RrdReader``): the static part, the
-summary and every agent's ``x, y, psi`` per step (float32, as rerun stores poses).
+summary, every agent's ``x, y, z, phi, theta, psi`` per step (float32, as rerun stores poses)
+and the plotted scalars (the 3-D game's ``depth`` and ``altitude`` among them).
 """
 
 from __future__ import annotations
@@ -47,10 +56,26 @@ import numpy as np
 import numpy.typing as npt
 
 from hptvsim.palette import SONAR_HIT_COLOR
-from hptvsim.viz.frames import EpisodeStatic, EpisodeSummary, Frame, FrameSchemaError, SchemaObject
+from hptvsim.viz.frames import (
+    AgentState,
+    EpisodeStatic,
+    EpisodeSummary,
+    Frame,
+    FrameSchemaError,
+    SchemaObject,
+    beam_directions,
+    quaternion_zyx,
+)
 from hptvsim.viz.style import depth_colors, hex_rgb
 
-__all__ = ["RecordedEpisode", "RecordingOptions", "RecordingWriter", "blueprint", "read_recording"]
+__all__ = [
+    "RecordedEpisode",
+    "RecordingOptions",
+    "RecordingWriter",
+    "blueprint",
+    "read_recording",
+    "recording_static",
+]
 
 F64 = npt.NDArray[np.float64]
 
@@ -65,6 +90,18 @@ _PLOTS: tuple[tuple[str, str], ...] = (
     ("surge", "surge speed u [m/s]"),
     ("min_range", "smallest sonar range [m]"),
 )
+
+_PLOTS_3D: tuple[tuple[str, str], ...] = (
+    ("depth", "depth z [m]"),
+    ("altitude", "altitude above the seabed [m]"),
+    ("w_cmd", "commanded vertical speed [m/s]"),
+)
+"""The 3-D game's extra plots (:attr:`EpisodeStatic.game` ``== "3d"``)."""
+
+
+def _plots(game: str) -> tuple[tuple[str, str], ...]:
+    """The ``plots/`` quantities of a game: ``(key, title)``."""
+    return _PLOTS + _PLOTS_3D if game == "3d" else _PLOTS
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -94,15 +131,20 @@ class RecordingOptions(SchemaObject):
                 raise ValueError(f"{name} = {value!r} is invalid; valid: an integer >= {low}")
 
 
-def blueprint() -> Any:
-    """The default layout: the 3D scene beside the plots."""
+def blueprint(game: str = "planar") -> Any:
+    """The default layout: the 3D scene beside the plots.
+
+    Args:
+        game: The episode's game (:attr:`EpisodeStatic.game`): the 3-D game adds a depth plot.
+    """
     import rerun.blueprint as rrb
 
+    shown = _PLOTS[:4] + (_PLOTS_3D[:1] if game == "3d" else ())
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Spatial3DView(origin="world", name="scene"),
             rrb.Vertical(
-                *(rrb.TimeSeriesView(origin=f"plots/{key}", name=title) for key, title in _PLOTS[:4]),
+                *(rrb.TimeSeriesView(origin=f"plots/{key}", name=title) for key, title in shown),
             ),
             column_shares=[3, 2],
         ),
@@ -110,12 +152,13 @@ def blueprint() -> Any:
     )
 
 
-def _quat_z(psi: F64) -> F64:
-    """Quaternions ``(x, y, z, w)`` of rotations by ``psi`` about ``z`` (down: clockwise from above)."""
-    q = np.zeros((psi.shape[0], 4))
-    q[:, 2] = np.sin(0.5 * psi)
-    q[:, 3] = np.cos(0.5 * psi)
-    return q
+def _euler_zyx(q: tuple[float, float, float, float]) -> tuple[float, float, float]:
+    """Roll, pitch and yaw ``(phi, theta, psi)`` [rad] of a quaternion ``(x, y, z, w)`` (zyx)."""
+    qx, qy, qz, qw = q
+    phi = math.atan2(2.0 * (qw * qx + qy * qz), 1.0 - 2.0 * (qx * qx + qy * qy))
+    theta = math.asin(max(-1.0, min(1.0, 2.0 * (qw * qy - qz * qx))))
+    psi = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+    return phi, theta, psi
 
 
 @dataclass
@@ -124,6 +167,8 @@ class _Buffer:
     times: list[float] = field(default_factory=list)
     # per agent, per step
     xyz: list[list[tuple[float, float, float]]] = field(default_factory=list)
+    phi: list[list[float]] = field(default_factory=list)
+    theta: list[list[float]] = field(default_factory=list)
     psi: list[list[float]] = field(default_factory=list)
     scalars: dict[str, list[list[float]]] = field(default_factory=dict)
     # decimated sonar: steps, per agent a list of rays / hits per logged step
@@ -163,10 +208,13 @@ class RecordingWriter:
         self.static = static
         self.options = options if options is not None else RecordingOptions()
         self.names = static.agent_names
-        self.depth = static.site.operating_depth  # m
+        self.depth = static.site.operating_depth  # m, the planar game's plane
+        self.game = static.game
+        self.plots = _plots(static.game)
+        self._beams = [beam_directions(a) for a in static.agents]  # body frame, (K, 3) each
         self._rr = rr
         self.rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id or str(uuid.uuid4()))
-        self.rec.save(str(self.path), default_blueprint=blueprint())
+        self.rec.save(str(self.path), default_blueprint=blueprint(static.game))
         self._buf = self._new_buffer()
         self._history: list[list[tuple[float, float, float]]] = [[] for _ in self.names]
         self._history_steps: list[int] = []
@@ -177,8 +225,10 @@ class RecordingWriter:
         n = len(self.names)
         return _Buffer(
             xyz=[[] for _ in range(n)],
+            phi=[[] for _ in range(n)],
+            theta=[[] for _ in range(n)],
             psi=[[] for _ in range(n)],
-            scalars={k: [[] for _ in range(n)] for k, _ in _PLOTS},
+            scalars={k: [[] for _ in range(n)] for k, _ in self.plots},
             rays=[[] for _ in range(n)],
             hits=[[] for _ in range(n)],
             trails=[[] for _ in range(n)],
@@ -199,7 +249,7 @@ class RecordingWriter:
         )
         x0, y0 = st.site.origin
         lx, ly = st.site.size
-        z = self.depth
+        z = self.depth if st.game == "planar" else 0.0  # m: the vehicles' plane, or the surface
         rec.log(
             "world/site",
             rr.LineStrips3D(
@@ -214,7 +264,7 @@ class RecordingWriter:
             rec.log(
                 "world/goals",
                 rr.Points3D(
-                    [(g[0], g[1], z) for g, _, _ in goals],
+                    [(g[0], g[1], g[2] if len(g) == 3 else self.depth) for g, _, _ in goals],
                     radii=[float(r or 1.0) for _, r, _ in goals],
                     colors=[hex_rgb(c) for _, _, c in goals],
                 ),
@@ -245,7 +295,7 @@ class RecordingWriter:
                 rr.Points3D.from_fields(colors=[hex_rgb(SONAR_HIT_COLOR)]),
                 static=True,
             )
-            for key, _ in _PLOTS:
+            for key, _ in self.plots:
                 rec.log(f"plots/{key}/{a.name}", rr.SeriesLines(colors=[rgb], names=[a.name]), static=True)
         rec.log("meta/static", rr.TextDocument(st.to_json(), media_type="application/json"), static=True)
 
@@ -258,9 +308,11 @@ class RecordingWriter:
         opts, b = self.options, self._buf
         b.steps.append(frame.step)
         b.times.append(frame.time)
-        z = self.depth
         for i, a in enumerate(frame.agents):
+            z = a.z if a.z is not None else self.depth  # m, positive down
             b.xyz[i].append((a.x, a.y, z))
+            b.phi[i].append(a.phi or 0.0)
+            b.theta[i].append(a.theta or 0.0)
             b.psi[i].append(a.psi)
             s = b.scalars
             s["distance"][i].append(a.distance)
@@ -270,22 +322,24 @@ class RecordingWriter:
             s["omega_cmd"][i].append(a.action[1])
             s["surge"][i].append(a.u)
             s["min_range"][i].append(a.min_range)
+            if self.game == "3d":
+                s["depth"][i].append(z)
+                s["altitude"][i].append(math.nan if a.altitude is None else a.altitude)
+                s["w_cmd"][i].append(a.action[2] if len(a.action) > 2 else 0.0)
             self._history[i].append((a.x, a.y, z))
         self._history_steps.append(frame.step)
         if opts.sonar_every and frame.step % opts.sonar_every == 0 and frame.agents[0].ranges is not None:
             b.sonar_steps.append(frame.step)
             b.sonar_times.append(frame.time)
-            for i, (a, info) in enumerate(zip(frame.agents, self.static.agents, strict=True)):
+            for i, a in enumerate(frame.agents):
                 rng = np.asarray(a.ranges, dtype=np.float64)
-                ang = np.asarray(info.beam_angles)
-                ends = np.stack([rng * np.cos(ang), rng * np.sin(ang), np.zeros_like(rng)], axis=1)
+                ends = rng[:, None] * self._beams[i]  # body frame [m]; the pose turns it into NED
                 # one zig-zag strip per agent (vehicle, end 1, vehicle, end 2, ...): a fan of rays
                 # that rerun converts as one strip instead of one per beam
                 fan = np.zeros((2 * rng.size, 3))
                 fan[1::2] = ends
                 b.rays[i].append(fan)
-                h = np.asarray(a.hits if a.hits else np.zeros((0, 2)), dtype=np.float64).reshape(-1, 2)
-                b.hits[i].append(np.column_stack([h, np.full(h.shape[0], z)]))
+                b.hits[i].append(self._hit_points(a))
         if frame.step % opts.trail_every == 0:
             b.trail_steps.append(frame.step)
             b.trail_times.append(frame.time)
@@ -303,6 +357,15 @@ class RecordingWriter:
         if len(b.steps) >= opts.flush_every:
             self.flush()
 
+    def _hit_points(self, a: AgentState) -> F64:
+        """An agent's sonar hits as ``(n, 3)`` NED points [m] (planar ones at the operating depth)."""
+        if not a.hits:
+            return np.zeros((0, 3))
+        if len(a.hits[0]) == 3:
+            return np.asarray(a.hits, dtype=np.float64).reshape(-1, 3)
+        h = np.asarray(a.hits, dtype=np.float64).reshape(-1, 2)
+        return np.column_stack([h, np.full(h.shape[0], self.depth)])
+
     def flush(self) -> None:
         """Send the buffered frames to the file."""
         rr, rec, b = self._rr, self.rec, self._buf
@@ -317,10 +380,14 @@ class RecordingWriter:
                 indexes=idx,
                 columns=rr.Transform3D.columns(
                     translation=np.asarray(b.xyz[i], dtype=np.float64),
-                    quaternion=_quat_z(np.asarray(b.psi[i], dtype=np.float64)),
+                    quaternion=quaternion_zyx(
+                        np.asarray(b.phi[i], dtype=np.float64),
+                        np.asarray(b.theta[i], dtype=np.float64),
+                        np.asarray(b.psi[i], dtype=np.float64),
+                    ),
                 ),
             )
-            for key, _ in _PLOTS:
+            for key, _ in self.plots:
                 rec.send_columns(
                     f"plots/{key}/{name}",
                     indexes=idx,
@@ -363,21 +430,24 @@ class RecordingWriter:
 
         Args:
             summary: The episode's summary (logged as ``meta/summary``).
-            paths: ``{agent: (T, 2)}`` whole paths to log (default: none).
+            paths: ``{agent: (T, 2) or (T, 3)}`` whole paths ``[x, y]`` (at the operating depth)
+                or ``[x, y, z]`` [m] to log (default: none).
         """
         if self._closed:
             return
         rr, rec = self._rr, self.rec
         try:
             self.flush()
-            z = self.depth
             for a in self.static.agents:
                 if paths and a.name in paths:
-                    p = np.asarray(paths[a.name], dtype=np.float64).reshape(-1, 2)
+                    p = np.asarray(paths[a.name], dtype=np.float64)
+                    if p.ndim != 2 or p.shape[1] != 3:
+                        p2 = p.reshape(-1, 2)
+                        p = np.column_stack([p2, np.full(len(p2), self.depth)])
                     rec.log(
                         f"world/paths/{a.name}",
                         rr.LineStrips3D(
-                            [np.column_stack([p, np.full(len(p), z)])],
+                            [p],
                             colors=[hex_rgb(a.color)],
                             radii=[0.25],
                         ),
@@ -405,9 +475,12 @@ class RecordedEpisode:
     Attributes:
         static: The static part (None if the file lacks it).
         summary: The summary (None if the episode did not finish writing it).
-        poses: ``{agent: {"step", "time", "x", "y", "psi"}}`` arrays sorted by step (float32
-            values as rerun stores them, widened to float64; ``time`` [s], ``psi`` [rad]).
-        scalars: ``{quantity: {agent: (steps, values)}}`` of the ``plots/`` entities.
+        poses: ``{agent: {"step", "time", "x", "y", "z", "phi", "theta", "psi"}}`` arrays sorted
+            by step (float32 values as rerun stores them, widened to float64; ``time`` [s],
+            positions [m] NED, angles [rad]; in the planar game ``z`` is the operating depth and
+            ``phi = theta = 0``).
+        scalars: ``{quantity: {agent: (steps, values)}}`` of the ``plots/`` entities (the 3-D
+            game's ``depth`` [m] and ``altitude`` [m] among them).
         entities: Every entity path in the file.
     """
 
@@ -442,7 +515,7 @@ def read_recording(path: str | Path) -> RecordedEpisode:
     except Exception as exc:  # rerun raises its own error types for damaged files
         raise ValueError(f"{p} is not a readable rerun recording: {exc}") from exc
     texts: dict[str, str] = {}
-    pose_rows: dict[str, list[tuple[int, float, float, float, float]]] = {}
+    pose_rows: dict[str, list[tuple[int, float, float, float, float, float, float, float]]] = {}
     scalar_rows: dict[str, dict[str, list[tuple[int, float]]]] = {}
     entities: set[str] = set()
     for chunk in chunks:
@@ -465,10 +538,9 @@ def read_recording(path: str | Path) -> RecordedEpisode:
             for k, t, tr, q in zip(steps, times, trans, quats, strict=True):
                 if not tr:
                     continue
-                x, y, _ = tr[-1]
-                qx, qy, qz, qw = q[-1] if q else (0.0, 0.0, 0.0, 1.0)
-                psi = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
-                rows.append((int(k), t.total_seconds(), float(x), float(y), psi))
+                x, y, z = tr[-1]
+                phi, theta, psi = _euler_zyx(tuple(q[-1]) if q else (0.0, 0.0, 0.0, 1.0))
+                rows.append((int(k), t.total_seconds(), float(x), float(y), float(z), phi, theta, psi))
         elif len(parts) == 3 and parts[0] == "plots" and "Scalars:scalars" in names:
             steps = _cells(batch.column("step"))
             vals = _cells(batch.column("Scalars:scalars"))
@@ -477,14 +549,9 @@ def read_recording(path: str | Path) -> RecordedEpisode:
     poses: dict[str, dict[str, F64]] = {}
     for agent, rows in pose_rows.items():
         rows.sort()
-        arr = np.asarray(rows, dtype=np.float64).reshape(-1, 5)
-        poses[agent] = {
-            "step": arr[:, 0],
-            "time": arr[:, 1],
-            "x": arr[:, 2],
-            "y": arr[:, 3],
-            "psi": arr[:, 4],
-        }
+        arr = np.asarray(rows, dtype=np.float64).reshape(-1, 8)
+        keys = ("step", "time", "x", "y", "z", "phi", "theta", "psi")
+        poses[agent] = {key: arr[:, j] for j, key in enumerate(keys)}
     scalars = {
         q: {
             a: (np.asarray([r[0] for r in sorted(v)], np.int64), np.asarray([r[1] for r in sorted(v)]))
@@ -500,6 +567,37 @@ def read_recording(path: str | Path) -> RecordedEpisode:
     return RecordedEpisode(
         static=static, summary=summary, poses=poses, scalars=scalars, entities=tuple(sorted(entities))
     )
+
+
+def recording_static(path: str | Path) -> EpisodeStatic | None:
+    """Only the static part of a recording (None if it lacks one), without reading the rest.
+
+    Raises:
+        FileNotFoundError: No such file.
+        ValueError: Not a readable recording, or its static part does not follow the frame schema.
+    """
+    from rerun.chunk import RrdReader
+
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"no recording at {p}")
+    try:
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message="RRD file has no footer")
+            chunks = RrdReader(str(p)).stream().filter(content="/meta/static").to_chunks()
+    except Exception as exc:  # rerun raises its own error types for damaged files
+        raise ValueError(f"{p} is not a readable rerun recording: {exc}") from exc
+    text: str | None = None
+    for chunk in chunks:
+        batch = chunk.to_record_batch()
+        if "TextDocument:text" in batch.schema.names:
+            for cell in _cells(batch.column("TextDocument:text")):
+                if cell:
+                    text = cell[-1]
+    try:
+        return None if text is None else EpisodeStatic.from_json(text)
+    except FrameSchemaError as exc:
+        raise ValueError(f"{p}: its static part does not follow the frame schema: {exc}") from exc
 
 
 def summary_json(path: str | Path) -> dict[str, Any] | None:

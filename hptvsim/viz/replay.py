@@ -74,9 +74,10 @@ def serve_recording(
     import rerun as rr
     from rerun.chunk import RrdReader
 
-    from hptvsim.viz.recording import blueprint
+    from hptvsim.viz.recording import blueprint, recording_static
 
     p = _check(path)
+    static = recording_static(p)  # its game chooses the layout (a depth plot in the 3-D game)
     reader = RrdReader(str(p))
     try:
         entries = reader.recordings()
@@ -86,7 +87,8 @@ def serve_recording(
         raise ValueError(f"{p} holds no recording")
     entry = entries[0]
     rec = rr.RecordingStream(entry.application_id, recording_id=entry.recording_id)
-    grpc_url = rec.serve_grpc(grpc_port=grpc_port, default_blueprint=blueprint())
+    layout = blueprint(static.game if static is not None else "planar")
+    grpc_url = rec.serve_grpc(grpc_port=grpc_port, default_blueprint=layout)
     rec.send_chunks(reader.stream())
     rec.flush(timeout_sec=30.0)
     rr.serve_web_viewer(web_port=web_port, open_browser=open_browser, connect_to=grpc_url)

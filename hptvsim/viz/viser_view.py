@@ -15,8 +15,14 @@ episode's frames in it with :meth:`LiveView.follow` and :meth:`LiveView.push` (w
 view's own simulation until :meth:`LiveView.unfollow`).
 
 **Frames.** The scene is NED as everywhere in hptvsim (``x`` north, ``y`` east, ``z`` down);
-viser's up direction is set to ``-z``. Vehicles move in the plane ``z = operating_depth``; the
-camera's far plane is raised so a 400 m site is not clipped.
+viser's up direction is set to ``-z``. In the planar game the vehicles move in the plane
+``z = operating_depth`` and turn about ``z`` only; in the 3-D game (:attr:`EpisodeStatic.game`)
+each sits at its depth ``z`` with its full attitude ``Rz(psi) Ry(theta) Rx(phi)`` (Fossen's zyx
+convention, :func:`hptvsim.sensors.sonar3d.rotation_zyx`), its sonar beams fixed in its body
+frame, its hits and its goal at their depths, a line from it down to the seabed (its altitude,
+a depth cue), the site's edge drawn at the surface, and the camera placed lower so that depths
+show. The camera's far plane is raised so a 400 m site is not clipped. The policy pickers offer
+the policies of the chosen scenario's game only (:func:`hptvsim.catalog.policies`).
 """
 
 from __future__ import annotations
@@ -33,9 +39,10 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from hptvsim.catalog import MAX_SEED
+from hptvsim.catalog import MAX_SEED, Role
 from hptvsim.palette import SONAR_HIT_COLOR
-from hptvsim.viz.frames import EpisodeStatic, Frame
+from hptvsim.sensors.sonar3d import rotation_zyx
+from hptvsim.viz.frames import AgentState, EpisodeStatic, Frame, beam_directions, quaternion_zyx
 from hptvsim.viz.style import depth_colors, hex_rgb
 
 __all__ = ["Launcher", "LiveView", "SceneRenderer", "distance_plot", "plotted_agents", "start_live_view"]
@@ -51,9 +58,23 @@ TIME_LABEL = "time [s]"  # the x axis of the view's plots: simulated seconds
 GUIDE_COLOR = "#9aa5b1"  # reference lines of plots (the capture distance)
 
 
-def _quat_wxyz(psi: float) -> tuple[float, float, float, float]:
-    """Rotation by ``psi`` about ``z`` (down), as viser's ``wxyz``."""
-    return (math.cos(0.5 * psi), 0.0, 0.0, math.sin(0.5 * psi))
+def _quat_wxyz(psi: float, phi: float = 0.0, theta: float = 0.0) -> tuple[float, float, float, float]:
+    """The body-to-NED rotation ``Rz(psi) Ry(theta) Rx(phi)`` as viser's ``wxyz``.
+
+    Args:
+        psi: Yaw [rad] about ``z`` (down: clockwise from above).
+        phi: Roll [rad].
+        theta: Pitch [rad], positive nose up.
+
+    :func:`~hptvsim.viz.frames.quaternion_zyx` (the recording's) in viser's order.
+    """
+    x, y, z, w = quaternion_zyx(phi, theta, psi).tolist()
+    return (w, x, y, z)
+
+
+def _depth(a: AgentState, static: EpisodeStatic) -> float:
+    """An agent's depth [m]: its own in the 3-D game, the operating depth in the planar game."""
+    return a.z if a.z is not None else static.site.operating_depth
 
 
 class SceneRenderer:
@@ -72,10 +93,13 @@ class SceneRenderer:
         self.show_trails = True
         self._handles: list[Any] = []
         self._agents: dict[str, dict[str, Any]] = {}
-        self._trails: dict[str, deque[tuple[float, float]]] = {}
+        self._trails: dict[str, deque[tuple[float, float, float]]] = {}
         self._sonar: Any = None
         self._hits: Any = None
         self._colors: dict[str, tuple[int, int, int]] = {}
+        self._beams: dict[str, F64] = {}  # per agent, (K, 3) unit beam vectors, body frame
+        self._drops: Any = None  # 3-D game: a line from each vehicle down to the seabed
+        self._shown_step: int | None = None  # the step last drawn (drawn again: trails stay)
 
     def clear(self) -> None:
         """Remove everything drawn."""
@@ -86,6 +110,8 @@ class SceneRenderer:
         self._trails = {}
         self._sonar = None
         self._hits = None
+        self._drops = None
+        self._shown_step = None
 
     def set_static(self, static: EpisodeStatic) -> None:
         """Draw a new episode's static part (terrain, site, goals, vehicles) and aim the camera."""
@@ -119,13 +145,15 @@ class SceneRenderer:
         lx, ly = static.site.size
         corners = np.array([(x0, y0), (x0 + lx, y0), (x0 + lx, y0 + ly), (x0, y0 + ly)], dtype=np.float64)
         seg = np.stack([corners, np.roll(corners, -1, axis=0)], axis=1)
-        seg3 = np.concatenate([seg, np.full((4, 2, 1), z)], axis=2)
+        edge_z = z if static.game == "planar" else 0.0  # m: the vehicles' plane, or the surface
+        seg3 = np.concatenate([seg, np.full((4, 2, 1), edge_z)], axis=2)
         self._handles.append(
             scene.add_line_segments("/site", seg3.astype(np.float32), (230, 230, 230), thickness=0.6)
         )
         for a in static.agents:
             rgb = hex_rgb(a.color)
             self._colors[a.name] = rgb
+            self._beams[a.name] = beam_directions(a)
             frame = scene.add_frame(f"/agents/{a.name}", show_axes=False, position=(0.0, 0.0, z))
             r = max(a.radius, MIN_DISPLAY_RADIUS)
             scene.add_icosphere(f"/agents/{a.name}/body", radius=r, color=rgb, subdivisions=2)
@@ -149,7 +177,7 @@ class SceneRenderer:
                         radius=float(a.goal_radius or 1.0),
                         color=rgb,
                         opacity=0.35,
-                        position=(a.goal[0], a.goal[1], z),
+                        position=(a.goal[0], a.goal[1], a.goal[2] if len(a.goal) == 3 else z),
                     )
                 )
         self._sonar = scene.add_line_segments(
@@ -161,15 +189,28 @@ class SceneRenderer:
             hex_rgb(SONAR_HIT_COLOR),
             point_size=1.5,
             point_shape="circle",
+            precision="float32",  # float16 would place hits 200-400 m out up to 0.25 m off
         )
         self._handles += [self._sonar, self._hits]
+        if static.game == "3d":  # depth cues: each vehicle's altitude as a line to the seabed
+            n = len(static.agents)
+            colors = np.array([self._colors[a.name] for a in static.agents], dtype=np.uint8)
+            self._drops = scene.add_line_segments(
+                "/depth_lines",
+                np.zeros((n, 2, 3), dtype=np.float32),
+                np.repeat(colors[:, None, :], 2, axis=1),
+                thickness=2.0,
+                thickness_units="screen",  # px: visible from afar, unlike a line 0.4 m thick
+            )
+            self._handles.append(self._drops)
         cx, cy = x0 + 0.5 * lx, y0 + 0.5 * ly
         span = max(lx, ly)
         cam = self.server.initial_camera
         cam.far = CAMERA_FAR
         cam.near = 0.5
         cam.look_at = (cx, cy, z)
-        cam.position = (cx - 0.75 * span, cy - 0.15 * span, z - 0.8 * span)
+        height = 0.8 if static.game == "planar" else 0.4  # x span above; lower: depths show
+        cam.position = (cx - 0.75 * span, cy - 0.15 * span, z - height * span)
         cam.up = (0.0, 0.0, -1.0)
         for client in self.server.get_clients().values():
             self.aim(client)
@@ -189,43 +230,50 @@ class SceneRenderer:
         st = self.static
         if st is None:
             raise RuntimeError("set_static() first: the renderer has no episode")
-        z = st.site.operating_depth
         rays: list[F64] = []
         ray_cols: list[F64] = []
         hits: list[F64] = []
+        drops = np.zeros((len(frame.agents), 2, 3), dtype=np.float32)  # m, vehicle to seabed
         if frame.step == 0:
             for t in self._trails.values():
                 t.clear()
+        fresh = frame.step != self._shown_step  # not the same step drawn again (a redraw)
+        self._shown_step = frame.step
         with self.server.atomic():
-            for a, info in zip(frame.agents, st.agents, strict=True):
+            for i, (a, info) in enumerate(zip(frame.agents, st.agents, strict=True)):
                 h = self._agents[a.name]
+                z = _depth(a, st)  # m, positive down
+                phi, theta = a.phi or 0.0, a.theta or 0.0  # rad; level in the planar game
                 h["frame"].position = (a.x, a.y, z)
-                h["frame"].wxyz = _quat_wxyz(a.psi)
+                h["frame"].wxyz = _quat_wxyz(a.psi, phi, theta)
+                if a.altitude is not None:
+                    drops[i] = ((a.x, a.y, z), (a.x, a.y, z + a.altitude))
                 trail = self._trails[a.name]
-                trail.append((a.x, a.y))
+                if fresh or not trail:
+                    trail.append((a.x, a.y, z))
                 if self.show_trails and len(trail) >= 2:
                     p = np.asarray(trail, dtype=np.float32)
-                    seg = np.stack([p[:-1], p[1:]], axis=1)
-                    h["trail"].points = np.concatenate(
-                        [seg, np.full((len(seg), 2, 1), z, np.float32)], axis=2
-                    )
+                    h["trail"].points = np.stack([p[:-1], p[1:]], axis=1)
                     h["trail"].visible = True
                 else:
                     h["trail"].visible = False
                 if a.ranges is not None:
-                    ang = a.psi + np.asarray(info.beam_angles)
-                    rng = np.asarray(a.ranges)
-                    ends = np.stack(
-                        [a.x + rng * np.cos(ang), a.y + rng * np.sin(ang), np.full_like(rng, z)], 1
-                    )
-                    start = np.broadcast_to(np.array([a.x, a.y, z]), ends.shape)
-                    rays.append(np.stack([start, ends], axis=1))
+                    rng = np.asarray(a.ranges, dtype=np.float64)
+                    rot = rotation_zyx(phi, theta, a.psi)  # body -> NED
+                    start = np.array([a.x, a.y, z])
+                    ends = start + rng[:, None] * (self._beams[info.name] @ rot.T)
+                    rays.append(np.stack([np.broadcast_to(start, ends.shape), ends], axis=1))
                     ray_cols.append(
                         np.broadcast_to(np.array(self._colors[a.name], dtype=np.float64), (len(rng), 2, 3))
                     )
                 if a.hits:
-                    hp = np.asarray(a.hits, dtype=np.float64).reshape(-1, 2)
-                    hits.append(np.column_stack([hp, np.full(len(hp), z)]))
+                    if len(a.hits[0]) == 3:
+                        hits.append(np.asarray(a.hits, dtype=np.float64).reshape(-1, 3))
+                    else:
+                        hp = np.asarray(a.hits, dtype=np.float64).reshape(-1, 2)
+                        hits.append(np.column_stack([hp, np.full(len(hp), z)]))
+            if self._drops is not None:
+                self._drops.points = drops
             if self._sonar is not None and rays:
                 self._sonar.points = np.concatenate(rays).astype(np.float32)
                 self._sonar.colors = np.concatenate(ray_cols).astype(np.uint8)
@@ -642,6 +690,11 @@ class LiveView:
                 if isinstance(frame, Mapping):
                     frame = Frame.from_dict(frame)
                 self._show(frame)
+        elif req.kind == "redraw":  # the display switches changed: draw the shown frame again
+            frame, r = self.last_frame, self.renderer
+            names = tuple(a.name for a in frame.agents) if frame is not None else ()
+            if frame is not None and r.static is not None and names == r.static.agent_names:
+                r.show(frame)
         elif req.kind == "unfollow_later":
             self._unfollow_at = time.monotonic() + self.unfollow_delay
         elif req.kind == "unfollow" and self.following is not None:
@@ -727,9 +780,30 @@ class LiveView:
 
     # -- GUI -------------------------------------------------------------------------------------
 
-    def _build_gui(self) -> None:
-        from hptvsim.catalog import MAX_SEED, policies, scenario_names
+    def _policy_choices(self, scenario: str, role: Role) -> tuple[list[str], str]:
+        """The policies a picker offers for ``role`` in a shipped ``scenario``, and its default.
+
+        Only policies of the scenario's game (:func:`hptvsim.catalog.policies`); the default is
+        the view's policy for the role's first agent if it plays that game, else
+        :func:`hptvsim.zoo.default_policy` (of a pursuit when the scenario has no agent of
+        ``role``, as in goto).
+        """
+        from hptvsim.catalog import policies, shipped_scenario
         from hptvsim.zoo import default_policy
+
+        sc = shipped_scenario(scenario)
+        game = sc.simulation.game
+        names = [p.name for p in policies(role, game)]
+        first = next((a.name for a in sc.agents if a.role == role), None)
+        wanted = self.policies.get(first or f"{role}_0") if scenario == self.scenario else None
+        task = sc.task.kind if first is not None else "pursuit"
+        initial = wanted if wanted is not None and wanted in names else default_policy(role, task, game)
+        if initial not in names:  # a default the catalog does not list (cannot happen today)
+            names.append(initial)
+        return names, initial
+
+    def _build_gui(self) -> None:
+        from hptvsim.catalog import MAX_SEED, scenario_names
 
         gui = self.server.gui
         g = self._gui
@@ -749,18 +823,10 @@ class LiveView:
                 g["reset"] = gui.add_button("Reset")
         with gui.add_folder("Setup"):
             g["scenario"] = gui.add_dropdown("Scenario", scenario_names(), initial_value=self.scenario)
-            pursuer = [p.name for p in policies("pursuer")]
-            evader = [p.name for p in policies("evader")]
-            g["pursuer_policy"] = gui.add_dropdown(
-                "Pursuers' policy",
-                pursuer,
-                initial_value=self.policies.get("pursuer_0", default_policy("pursuer", "pursuit")),
-            )
-            g["evader_policy"] = gui.add_dropdown(
-                "Evaders' policy",
-                evader,
-                initial_value=self.policies.get("evader_0", default_policy("evader", "pursuit")),
-            )
+            pursuer, pursuer_initial = self._policy_choices(self.scenario, "pursuer")
+            evader, evader_initial = self._policy_choices(self.scenario, "evader")
+            g["pursuer_policy"] = gui.add_dropdown("Pursuers' policy", pursuer, initial_value=pursuer_initial)
+            g["evader_policy"] = gui.add_dropdown("Evaders' policy", evader, initial_value=evader_initial)
             g["seed"] = gui.add_number("Seed", initial_value=self.seed, min=0, max=MAX_SEED, step=1)
             g["apply"] = gui.add_button("Start episode")
         with gui.add_folder("Display"):
@@ -778,6 +844,7 @@ class LiveView:
             g["reset"].on_click(lambda _: self.reset())
             g["loop"].on_update(lambda _: setattr(self, "loop", bool(g["loop"].value)))
         g["apply"].on_click(self._on_apply)
+        g["scenario"].on_update(self._on_scenario)
         g["sonar"].on_update(lambda _: self._display(sonar=bool(g["sonar"].value)))
         g["trails"].on_update(lambda _: self._display(trails=bool(g["trails"].value)))
         g["follow"].on_update(self._on_follow)
@@ -822,6 +889,29 @@ class LiveView:
             slider.value = clamped
         self.set_speed(clamped)
 
+    def _on_scenario(self, _: Any) -> None:
+        """Offer the policies of the chosen scenario's game (a name not in the catalog: no change).
+
+        The pickers change only when the offer does (another game): viser runs callbacks on a
+        thread pool, so this one may run after a later change of a picker, which it must not undo.
+        """
+        from hptvsim.catalog import CatalogError, check_scenario
+
+        try:
+            scenario = check_scenario(self._gui["scenario"].value)
+        except CatalogError:
+            return  # "Start episode" refuses it and says why
+        roles: tuple[Role, ...] = ("pursuer", "evader")
+        for role in roles:
+            names, initial = self._policy_choices(scenario, role)
+            picker = self._gui[f"{role}_policy"]
+            if list(picker.options) == names:
+                continue
+            keep = picker.value if picker.value in names else initial
+            if picker.value != keep:
+                picker.value = keep  # first: the new options are then the last thing sent
+            picker.options = names
+
     def _on_apply(self, _: Any) -> None:
         """Start an episode from the controls: values checked against the catalog, never paths."""
         from hptvsim.catalog import CatalogError, check_policy, check_scenario, check_seed, shipped_scenario
@@ -829,14 +919,15 @@ class LiveView:
         g = self._gui
         try:
             scenario = check_scenario(g["scenario"].value)
-            pursuer = check_policy(g["pursuer_policy"].value, "pursuer")
-            evader = check_policy(g["evader_policy"].value, "evader")
+            sc = shipped_scenario(scenario)
+            game = sc.simulation.game
+            pursuer = check_policy(g["pursuer_policy"].value, "pursuer", game)
+            evader = check_policy(g["evader_policy"].value, "evader", game)
             seed = check_seed(g["seed"].value)
         except CatalogError as exc:
             self._refuse(str(exc))
             return
-        agents = shipped_scenario(scenario).agents
-        self.launch(scenario, {a.name: pursuer if a.role == "pursuer" else evader for a in agents}, seed)
+        self.launch(scenario, {a.name: pursuer if a.role == "pursuer" else evader for a in sc.agents}, seed)
 
     def _on_follow(self, _: Any) -> None:
         self.follow_service = bool(self._gui["follow"].value)
@@ -846,11 +937,13 @@ class LiveView:
                 self.unfollow()
 
     def _display(self, *, sonar: bool | None = None, trails: bool | None = None) -> None:
+        """Switch sonar or trails on or off, and redraw (a paused view shows the switch at once)."""
         if self.renderer is not None:
             if sonar is not None:
                 self.renderer.show_sonar = sonar
             if trails is not None:
                 self.renderer.show_trails = trails
+            self._post("redraw")
 
     def _status(self, text: str) -> None:
         if "status" in self._gui:
