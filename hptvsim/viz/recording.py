@@ -495,12 +495,12 @@ def _cells(column: Any) -> list[Any]:
     return list(column.to_pylist())
 
 
-def read_recording(path: str | Path) -> RecordedEpisode:
-    """Read a recording written by :class:`RecordingWriter` (``rerun.chunk.RrdReader``).
+def _chunks(path: str | Path, content: str | None = None) -> tuple[Path, list[Any]]:
+    """The chunks of a recording (only those under ``content``, if given).
 
     Raises:
         FileNotFoundError: No such file.
-        ValueError: Not a readable recording, or its JSON does not follow the frame schema.
+        ValueError: Not a readable recording.
     """
     from rerun.chunk import RrdReader
 
@@ -511,9 +511,21 @@ def read_recording(path: str | Path) -> RecordedEpisode:
         with warnings.catch_warnings():
             # a recording whose process died has no footer; rerun then scans the whole file
             warnings.filterwarnings("ignore", message="RRD file has no footer")
-            chunks = RrdReader(str(p)).stream().to_chunks()
+            stream = RrdReader(str(p)).stream()
+            chunks = (stream.filter(content=content) if content is not None else stream).to_chunks()
     except Exception as exc:  # rerun raises its own error types for damaged files
         raise ValueError(f"{p} is not a readable rerun recording: {exc}") from exc
+    return p, list(chunks)
+
+
+def read_recording(path: str | Path) -> RecordedEpisode:
+    """Read a recording written by :class:`RecordingWriter` (``rerun.chunk.RrdReader``).
+
+    Raises:
+        FileNotFoundError: No such file.
+        ValueError: Not a readable recording, or its JSON does not follow the frame schema.
+    """
+    p, chunks = _chunks(path)
     texts: dict[str, str] = {}
     pose_rows: dict[str, list[tuple[int, float, float, float, float, float, float, float]]] = {}
     scalar_rows: dict[str, dict[str, list[tuple[int, float]]]] = {}
@@ -576,17 +588,7 @@ def recording_static(path: str | Path) -> EpisodeStatic | None:
         FileNotFoundError: No such file.
         ValueError: Not a readable recording, or its static part does not follow the frame schema.
     """
-    from rerun.chunk import RrdReader
-
-    p = Path(path)
-    if not p.is_file():
-        raise FileNotFoundError(f"no recording at {p}")
-    try:
-        with warnings.catch_warnings():
-            warnings.filterwarnings("ignore", message="RRD file has no footer")
-            chunks = RrdReader(str(p)).stream().filter(content="/meta/static").to_chunks()
-    except Exception as exc:  # rerun raises its own error types for damaged files
-        raise ValueError(f"{p} is not a readable rerun recording: {exc}") from exc
+    p, chunks = _chunks(path, content="/meta/static")
     text: str | None = None
     for chunk in chunks:
         batch = chunk.to_record_batch()
