@@ -58,8 +58,9 @@ vehicle's depth uniform in its group's ``depth = [min, max]`` (default: the site
 depth), re-drawn where the altitude or the depth would be below its radius plus
 :data:`SPAWN_MARGIN`; at rest, level.
 
-**Goals** (goto): the scenario gives ``(x, y)``; the depth is the site's operating depth, or
-``goal_depth``.
+**Goals** (goto): the scenario gives ``(x, y)``; the depth is ``goal_depth`` if given, else
+drawn uniformly at every reset from the goal's ``depth = [min, max]``, else the site's operating
+depth.
 
 **Vehicles**: built-in types only (``work_class``, ``spherical``); a group's ``parameters`` may
 override ``v_min``, ``v_max`` and ``omega_max`` (passed to the 6-DOF vehicle); other planar
@@ -315,7 +316,8 @@ class Game3DCore:
         reward: Overrides of ``[task.reward]`` (as :class:`~hptvsim.envs.core.GameCore`).
         azimuth_beams: Sonar beams per row ``A`` (default 12, over a full circle).
         elevation_beams: Sonar rows ``E`` (default 5, over the default 135 degrees).
-        goal_depth: Depth [m] of every goal in goto (default: the site's operating depth).
+        goal_depth: Depth [m] of every goal in goto (default: each goal's depth range, drawn at
+            every reset, else the site's operating depth).
 
     Raises:
         ValueError: An invalid argument, a vehicle file, a planar-only parameter override, a
@@ -438,24 +440,40 @@ class Game3DCore:
             if not self.goto and self.pursuer_index.size and self.evader_index.size
             else []
         )
-        # goals (goto): (x, y) from the scenario, the depth from goal_depth or the operating depth
+        # goals (goto): (x, y) from the scenario; the depth from goal_depth, else the goal's depth
+        # range (drawn at every reset), else the operating depth
         self.goals: F64 | None = None
+        self.goal_depth_ranges: list[tuple[float, float]] = []
         if self.goto:
             missing = [a.name for a in agents if a.goal is None]
             if missing:
                 raise ValueError(
                     f"{sc.source}: the goto task needs a goal for every agent; none for {missing}"
                 )
-            gz = float(sc.site.operating_depth if goal_depth is None else goal_depth)
-            xy = np.array([a.goal.position for a in agents if a.goal is not None], dtype=np.float64)
+            goals = [a.goal for a in agents if a.goal is not None]
+            xy = np.array([g.position for g in goals], dtype=np.float64)
             floor = hm.depth_at(xy)
-            if not (math.isfinite(gz) and gz > 0.0 and bool((gz < floor).all())):
-                raise ValueError(
-                    f"goal_depth = {goal_depth!r} is invalid; valid: a depth in "
-                    f"(0, {float(floor.min()):g}) m, between the surface and the seabed under every goal"
-                )
-            self.goals = np.broadcast_to(np.concatenate([xy, np.full((n, 1), gz)], axis=1), (b, n, 3)).copy()
-            self.goal_radius = np.array([a.goal.radius for a in agents if a.goal is not None])
+            if goal_depth is not None:
+                gz = float(goal_depth)
+                if not (math.isfinite(gz) and gz > 0.0 and bool((gz < floor).all())):
+                    raise ValueError(
+                        f"goal_depth = {goal_depth!r} is invalid; valid: a depth in "
+                        f"(0, {float(floor.min()):g}) m, between the surface and the seabed under every goal"
+                    )
+                self.goal_depth_ranges = [(gz, gz)] * n
+            else:
+                z0 = float(sc.site.operating_depth)
+                self.goal_depth_ranges = [g.depth or (z0, z0) for g in goals]
+                for i, (lo, hi) in enumerate(self.goal_depth_ranges):
+                    if not (lo > 0.0 and hi < floor[i]):
+                        raise ValueError(
+                            f"{sc.source}: the goal of {agents[i].name} at depth [{lo:g}, {hi:g}] m is out "
+                            f"of the water: valid depths lie in (0, {float(floor[i]):g}) m, between the "
+                            "surface and the seabed under it; change its goal's depth or site.operating_depth"
+                        )
+            gz0 = np.array([lo for lo, _ in self.goal_depth_ranges])
+            self.goals = np.broadcast_to(np.concatenate([xy, gz0[:, None]], axis=1), (b, n, 3)).copy()
+            self.goal_radius = np.array([g.radius for g in goals])
         else:
             self.goal_radius = np.full(n, sc.task.target_distance)
         self.depth_ranges = [
@@ -702,6 +720,10 @@ class Game3DCore:
         envs = np.arange(b) if env_ids is None else np.arange(b)[np.asarray(env_ids)]
         if envs.size:
             self.system.reset(envs, poses=np.stack([self._spawn() for _ in envs]))
+            if self.goals is not None and any(lo < hi for lo, hi in self.goal_depth_ranges):
+                for e in envs:  # goal depths drawn after the spawns (scenarios without ranges draw none)
+                    for i, (lo, hi) in enumerate(self.goal_depth_ranges):
+                        self.goals[e, i, 2] = self.rng.uniform(lo, hi)
         held_obs = self.obs.copy()
         self._read_system()
         self.steps[envs] = 0

@@ -515,6 +515,10 @@ class EpisodeStepper:
             self._load_policies(seed)
         self._close_recorder(None)
         self.core.reset(seed=self.seed)
+        core = self.core
+        if isinstance(core, Game3DCore) and any(lo < hi for lo, hi in core.goal_depth_ranges):
+            # goal depths are drawn at every reset: the static part names this episode's
+            self.static = build_static(core, self.policy_specs, options=self.options, seed=self.seed)
         self._started = time.perf_counter()
         self._outcome = "running"
         self._cancelled = False

@@ -359,9 +359,23 @@ class Goal:
     radius: float = spec(
         10.0, doc="distance within which the point counts as reached", unit="m", gt=0.0, le=10000.0
     )
+    depth: tuple[float, float] | None = spec(
+        None,
+        doc="3-D game: the goal's depth range (min, max), drawn uniformly at every reset (default: "
+        "site.operating_depth); the planar game ignores it",
+        unit="m",
+        ge=0.0,
+        le=MAX_DEPTH,
+    )
 
     def __post_init__(self) -> None:
         check_bounds(self)
+        if self.depth is not None and not self.depth[0] <= self.depth[1]:
+            raise FieldValueError(
+                "depth",
+                f"({self.depth[0]:g}, {self.depth[1]:g}) is empty: the first value must not exceed "
+                "the second",
+            )
 
 
 @dataclass(frozen=True, kw_only=True)

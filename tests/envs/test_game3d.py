@@ -360,3 +360,47 @@ def test_sb3_trains_on_the_batched_3d_vector_env() -> None:
     assert model.num_timesteps == 240
     assert model.replay_buffer is not None and model.replay_buffer.size() == 240 // 4  # B = 4 per slot
     env.close()
+
+
+def test_goal_depth_ranges_are_drawn_at_every_reset() -> None:
+    sc = load_scenario("dive_goto")
+    data = sc.to_dict()
+    data["task"]["goal"]["depth"] = [20.0, 40.0]
+    ranged = Scenario.from_dict(data)
+    core = Game3DCore(ranged, num_envs=16, seed=4)
+    core.reset()
+    assert core.goals is not None
+    z = core.goals[:, 0, 2].copy()
+    assert ((z >= 20.0) & (z <= 40.0)).all() and np.ptp(z) > 5.0  # different depths per environment
+    core.reset(np.array([3]))
+    assert core.goals[3, 0, 2] != z[3] and np.array_equal(np.delete(core.goals[:, 0, 2], 3), np.delete(z, 3))
+    # the 3-D distance and the observation use the drawn depth
+    d = np.linalg.norm(core.goals[:, 0] - core.poses[:, 0, 0:3], axis=-1)
+    np.testing.assert_allclose(core.distance[:, 0], d, rtol=0, atol=1e-12)
+    core.close()
+    # a range reaching the seabed (60 m) is refused, naming the agent and the valid depths
+    data["task"]["goal"]["depth"] = [20.0, 65.0]
+    out_of_water = r"goal of evader_0 at depth \[20, 65\] m is out of the water.*\(0, 60\)"
+    with pytest.raises(ValueError, match=out_of_water):
+        Game3DCore(Scenario.from_dict(data))
+    # a scenario without ranges keeps its goals at the operating depth and draws nothing more
+    plain = Game3DCore("dive_goto", num_envs=2, seed=4)
+    plain.reset()
+    assert plain.goals is not None and (plain.goals[..., 2] == 30.0).all()
+    plain.close()
+
+
+def test_the_episode_runner_shows_each_episodes_goal_depth() -> None:
+    from hptvsim.viz.episode import EpisodeStepper
+
+    data = load_scenario("dive_goto").to_dict()
+    data["task"]["goal"]["depth"] = [20.0, 40.0]
+    with EpisodeStepper(data, seed=1, max_steps=5) as st:
+        core = st.core
+        assert isinstance(core, Game3DCore) and core.goals is not None
+        first = st.static.agents[0].goal
+        assert first is not None and len(first) == 3 and first[2] == core.goals[0, 0, 2]
+        st.reset(seed=2)
+        second = st.static.agents[0].goal
+        assert second is not None and len(second) == 3
+        assert second[2] == core.goals[0, 0, 2] != first[2]
