@@ -312,10 +312,10 @@ class Service:
 
     # -- interactive stepping ----------------------------------------------------------------------
 
-    def _interactive(self, episode_id: str) -> _Live:
+    async def _interactive(self, episode_id: str) -> _Live:
         live = self.live.get(episode_id)
         if live is None or live.mode != "interactive" or live.host is None:
-            row = self.store.get(episode_id)
+            row = await asyncio.to_thread(self.store.get, episode_id)  # off the event loop
             if row is None:
                 raise ApiError(404, f"no episode {episode_id}")
             if row.mode != "interactive":
@@ -327,7 +327,7 @@ class Service:
 
     async def observe(self, episode_id: str) -> dict[str, Any]:
         """Agents, spaces and current observations of an interactive episode."""
-        live = self._interactive(episode_id)
+        live = await self._interactive(episode_id)
         assert live.host is not None
         assert live.lock is not None
         live.last_activity = time.monotonic()
@@ -337,7 +337,7 @@ class Service:
 
     async def step(self, episode_id: str, actions: dict[str, Any]) -> dict[str, Any]:
         """Step an interactive episode with the controlled agents' actions."""
-        live = self._interactive(episode_id)
+        live = await self._interactive(episode_id)
         assert live.host is not None
         assert live.lock is not None
         live.last_activity = time.monotonic()

@@ -126,7 +126,15 @@ def test_unknown_things_are_404_and_wrong_states_409(server: Server, api: httpx.
     assert api.get("/episodes", params={"status": "sleeping"}).status_code == 422
     ep = api.post("/episodes", json={"scenario": "goto_tiny", "max_steps": 5}).json()
     r = api.post(f"/episodes/{ep['id']}/step", json={"actions": {}})
-    assert r.status_code == 409 and "interactive" in r.json()["detail"]
+    assert r.status_code == 409 and "is a run, not interactive" in r.json()["detail"]
+    r = api.get("/episodes/0123456789abcdef/observation")
+    assert r.status_code == 404 and "0123456789abcdef" in r.json()["detail"]
+    body = {"scenario": "goto_tiny", "mode": "interactive", "control": ["evader_0"], "max_steps": 5}
+    inter = api.post("/episodes", json=body).json()
+    assert api.post(f"/episodes/{inter['id']}/cancel").status_code == 200
+    wait_final(api, inter["id"])
+    r = api.post(f"/episodes/{inter['id']}/step", json={"actions": {"evader_0": [1.0, 0.0]}})
+    assert r.status_code == 409 and "create a new one" in r.json()["detail"]
 
 
 def test_api_key_job_limits_timeouts_and_idle_episodes(tmp_path: Path) -> None:
