@@ -51,6 +51,20 @@ __all__ = [
 _PATH = re.compile(r"(?<![\w.])(?:~|\.{1,2})?/(?:[^\s/:'\"]+/)*([^\s/:'\"]+)")
 
 
+class JobFailedError(RuntimeError):
+    """A run-mode episode failed after it started; the files of what ran are written.
+
+    Attributes:
+        message: What the client is told (:func:`client_message` of the cause).
+        result: What ``result.json`` holds for the partial episode (:func:`write_outputs`).
+    """
+
+    def __init__(self, message: str, result: dict[str, Any]) -> None:
+        super().__init__(message)
+        self.message = message
+        self.result = result
+
+
 def client_message(exc: BaseException) -> str:
     """A short message about ``exc`` that is safe to show a client (no traceback, no server paths).
 
@@ -268,7 +282,7 @@ def run_job(spec: JobSpec, emit: Emit, should_stop: Callable[[], str | None]) ->
     Returns:
         What ``result.json`` holds (summary, steps, seed, file paths, error).
     """
-    from hptvsim.viz.episode import run_episode
+    from hptvsim.viz.episode import SimulationError, run_episode
 
     started = time.perf_counter()
     deadline = started + spec.timeout_s
@@ -297,18 +311,25 @@ def run_job(spec: JobSpec, emit: Emit, should_stop: Callable[[], str | None]) ->
         state["reason"] = reason
         return reason is not None
 
-    result = run_episode(
-        spec.scenario,
-        spec.policies,
-        seed=spec.seed,
-        max_steps=spec.max_steps,
-        sensor_fidelity=spec.sensor_fidelity,  # type: ignore[arg-type]  # validated by the API
-        backend=spec.backend,  # type: ignore[arg-type]  # validated by the API
-        on_static=on_static,
-        on_frame=on_frame,
-        cancel=cancel,
-        recording_path=spec.recording_path,
-    )
+    try:
+        result = run_episode(
+            spec.scenario,
+            spec.policies,
+            seed=spec.seed,
+            max_steps=spec.max_steps,
+            sensor_fidelity=spec.sensor_fidelity,  # type: ignore[arg-type]  # validated by the API
+            backend=spec.backend,  # type: ignore[arg-type]  # validated by the API
+            on_static=on_static,
+            on_frame=on_frame,
+            cancel=cancel,
+            recording_path=spec.recording_path,
+        )
+    except SimulationError as exc:
+        if exc.partial is None:
+            raise
+        message = client_message(exc)  # nothing is lost: the steps before the failure are kept
+        files = write_outputs(Path(spec.out_dir), exc.partial, error=message, static=state.get("static"))
+        raise JobFailedError(message, files) from exc
     frame = result.final_frame
     emit("progress", _progress(frame.step, state["max_steps"], frame.time, started))
     emit("frame", frame.to_dict())

@@ -59,7 +59,7 @@ def _task(spec_dict: dict[str, Any], control: Any) -> dict[str, Any]:
     """The remote task: run the job in a scratch folder, return its result and files."""
     import ray
 
-    from hptvsim.service.engine import run_job
+    from hptvsim.service.engine import JobFailedError, run_job
 
     scratch = Path(tempfile.mkdtemp(prefix="hptvsim-ray-"))
     spec = JobSpec(**{**spec_dict, "out_dir": str(scratch)})
@@ -89,10 +89,14 @@ def _task(spec_dict: dict[str, Any], control: Any) -> dict[str, Any]:
 
     push(force=True)
     try:
-        result = run_job(spec, emit, should_stop)
+        failed = None
+        try:
+            result = run_job(spec, emit, should_stop)
+        except JobFailedError as exc:  # failed after it started: its files are written
+            result, failed = exc.result, exc.message
         push(force=True)
         files = {p.name: p.read_bytes() for p in scratch.iterdir() if p.is_file() and p.name != RESULT_FILE}
-        return {"result": result, "files": files}
+        return {"result": result, "files": files, "failed": failed}
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
 
@@ -233,7 +237,10 @@ class RayExecutor:
             if result.get(key):
                 result[key] = str((folder / Path(result[key]).name).resolve())
         write_json_atomic(folder / RESULT_FILE, result)
-        self.on_event(("done", job_id, result))
+        if out.get("failed"):  # it failed after it started: the files of what ran are kept
+            self.on_event(("failed", job_id, str(out["failed"]), "", result))
+        else:
+            self.on_event(("done", job_id, result))
 
     def _run(self) -> None:
         import ray

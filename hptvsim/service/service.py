@@ -543,7 +543,12 @@ class Service:
             self.live.pop(episode_id, None)
             if len(msg) > 3 and msg[3]:
                 log.error("episode %s failed:\n%s", episode_id, msg[3])
-            self.store.finish(episode_id, status="failed", error=str(msg[2]))
+            if len(msg) > 4 and msg[4]:  # the files of what ran before the failure
+                self.store.finish(
+                    episode_id, status="failed", error=str(msg[2]), **self._result_columns(msg[4])
+                )
+            else:
+                self.store.finish(episode_id, status="failed", error=str(msg[2]))
             self._publish_status(episode_id, "failed", error=str(msg[2]))
 
     # -- files -----------------------------------------------------------------------------------------

@@ -81,7 +81,7 @@ def _child_setup(preload: bool = True) -> None:
 def _worker_main(conn: multiprocessing.connection.Connection) -> None:
     """A pool worker: run the jobs it is sent, one at a time, until told to stop."""
     _child_setup()
-    from hptvsim.service.engine import client_message, run_job
+    from hptvsim.service.engine import JobFailedError, client_message, run_job
 
     conn.send(("ready", os.getpid()))
     stopping = False
@@ -114,6 +114,8 @@ def _worker_main(conn: multiprocessing.connection.Connection) -> None:
         conn.send(("started", spec.id, os.getpid()))
         try:
             result = run_job(spec, emit, should_stop)
+        except JobFailedError as exc:  # failed after it started: its files are written
+            conn.send(("failed", spec.id, exc.message, traceback.format_exc(), exc.result))
         except Exception as exc:
             conn.send(("failed", spec.id, client_message(exc), traceback.format_exc()))
         else:

@@ -78,8 +78,12 @@ F32 = npt.NDArray[np.float32]
 class SimulationError(RuntimeError):
     """The simulation failed (a vehicle's state became non-finite, an FMU failed): it cannot go on.
 
-    The message names the step and the agent; it is safe to show to a client.
+    The message names the step and the agent; it is safe to show to a client. Raised by
+    :func:`run_episode`, :attr:`partial` holds what ran before the failure (summary status
+    ``cancelled``, trajectories up to the last good step), so its files can still be written.
     """
+
+    partial: EpisodeResult | None = None
 
 
 EXTERNAL: Final = "external"
@@ -917,7 +921,11 @@ def run_episode(
             if _cancelled(cancel):
                 stepper.cancel()
                 break
-            frame = stepper.step()
+            try:
+                frame = stepper.step()
+            except SimulationError as exc:
+                exc.partial = stepper.result()  # what ran, for the caller to keep
+                raise
             if bar is not None:
                 bar.update(1)
             if on_frame is not None:

@@ -224,6 +224,27 @@ def test_a_simulation_that_fails_is_closed_as_failed_with_a_short_message(
     assert "Traceback" in hardened.output()  # the log has it, the client never did
 
 
+def test_a_run_whose_simulation_fails_keeps_what_ran(api: httpx.Client, hardened: Server) -> None:
+    """A run-mode episode that blows up part-way is failed with a short message, and its
+    trajectory and recording up to the failure are kept (nothing that ran is lost)."""
+    tables = _tables(api)
+    vehicles = [dict(v) for v in tables["vehicles"]]
+    evader = next(i for i, v in enumerate(vehicles) if v["role"] == "evader")
+    vehicles[evader]["parameters"] = {"K_p_u": 1e6, "tau_X_max": 1e9}
+    ep = api.post("/episodes", json={"scenario": {**tables, "vehicles": vehicles}, "max_steps": 50})
+    assert ep.status_code == 201, ep.text
+    done = wait_final(api, ep.json()["id"])
+    assert done["status"] == "failed" and "non-finite" in done["error"], done
+    _no_leak_of_internals(done["error"], hardened)
+    assert done["summary"] is not None and done["summary"]["status"] == "cancelled"
+    steps = done["summary"]["steps"]
+    traj = api.get(f"/episodes/{done['id']}/trajectory")
+    assert traj.status_code == 200, traj.text
+    assert traj.json()["step"] == list(range(steps + 1))  # every step before the failure
+    assert done["has_recording"] and api.get(f"/episodes/{done['id']}/recording").status_code == 200
+    assert "Traceback" in hardened.output()  # the log has the cause
+
+
 def test_unwritable_episode_files_give_a_short_error_and_no_leak(tmp_path: Path) -> None:
     """Finding 4: the episodes folder becomes unwritable while the service runs (a full or
     read-only disk): creating answers a short error naming the cause, never a path or a trace,

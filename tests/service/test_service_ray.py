@@ -34,6 +34,15 @@ def test_episodes_run_as_ray_tasks(tmp_path: Path) -> None:
                 "policies": {f"pursuer_{k}": "scripted:stationary" for k in range(3)},
             }
             long_id = api.post("/episodes", json=slow).json()["id"]
+            # a run whose simulation blows up part-way: failed, with what ran brought back
+            tables = api.get("/scenarios/goto_tiny").json()
+            vehicles = [dict(v) for v in tables["vehicles"]]
+            vehicles[-1]["parameters"] = {"K_p_u": 1e6, "tau_X_max": 1e9}
+            bad = api.post("/episodes", json={"scenario": {**tables, "vehicles": vehicles}, "max_steps": 50})
+            failed = wait_final(api, bad.json()["id"], timeout=300)
+            assert failed["status"] == "failed" and "non-finite" in failed["error"], failed
+            traj = api.get(f"/episodes/{failed['id']}/trajectory").json()
+            assert traj["step"] == list(range(failed["summary"]["steps"] + 1))
             for i in ids:
                 ep = wait_final(api, i, timeout=300)
                 assert ep["status"] == "finished", ep
