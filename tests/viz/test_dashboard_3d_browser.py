@@ -37,7 +37,7 @@ from hptvsim.sensors.sonar3d import rotation_zyx
 __all__ = ["browser", "pytestmark", "service"]  # the browser and the service fixtures, re-exported
 
 TEXT_JS = """
-// Every text drawn on a canvas with an id since its last full clear: {text, x, y}.
+// Every text drawn on a canvas with an id since its last full clear: {text, x, y, w (width)}.
 window._texts = {};
 (() => {
   const P = CanvasRenderingContext2D.prototype;
@@ -45,7 +45,8 @@ window._texts = {};
   const clearRect = P.clearRect;
   P.fillText = function (text, x, y, ...rest) {
     const id = this.canvas && this.canvas.id;
-    if (id) (window._texts[id] ||= []).push({ text: String(text), x, y });
+    const t = String(text);
+    if (id) (window._texts[id] ||= []).push({ text: t, x, y, w: this.measureText(t).width });
     return fillText.call(this, text, x, y, ...rest);
   };
   P.clearRect = function (x, y, w, h) {
@@ -73,10 +74,11 @@ window._hitProbe = (m, points) => {
     return Math.hypot(x - ax - t * dx, y - ay - t * dy);
   };
   const clear = (xy) => marks.every((s) => Math.hypot(xy[0] - s[0], xy[1] - s[1]) > 10 && toSeg(xy, s) > 4);
-  // clear of the depth labels too (boxes of about 7 px per character, whatever their alignment)
+  // clear of the depth labels too: each a box from x - 2 to x + width + 2, y - 7.5 to y + 6.5 around
+  // its text (draw.js depthLabel: left-aligned, middle baseline), with 2 px to spare
   const labels = (window._texts[m.canvas.id] || []).filter((t) => t.text.startsWith("z "));
-  const unlabelled = (xy) =>
-    labels.every((t) => Math.abs(xy[0] - t.x) > 7 * t.text.length + 6 || Math.abs(xy[1] - t.y) > 14);
+  const unlabelled = ([x, y]) =>
+    labels.every((t) => x < t.x - 4 || x > t.x + t.w + 4 || y < t.y - 9.5 || y > t.y + 8.5);
   const all = points.map((p) => ({ ...p, end: m.px(p.x, p.y) }));
   // 60 beams hit the seabed close together: a hit another hit of another range colour paints over
   // is not a test of this one's colour
@@ -245,9 +247,12 @@ def test_the_form_offers_each_game_its_own_policies(browser: Any, service: str) 
 def test_dashboard_shows_a_3d_episode_live(browser: Any, service: str) -> None:
     page, errors = _open(browser, service + "/")
     _start_dive_flat(page, seed=5, max_steps=6000)
+    # a frame with sonar hits to check: early on the vehicles may be out of the sonar's reach of
+    # the seabed and of each other (how early depends on how fast this machine runs the episode)
     page.wait_for_function(
         "document.querySelector('#live-status').textContent === 'running'"
-        " && window.hptvsim.framesSeen > 20 && (window.hptvsim.depthPlot?.points?.[0] || 0) > 20",
+        " && window.hptvsim.framesSeen > 20 && (window.hptvsim.depthPlot?.points?.[0] || 0) > 20"
+        " && window.hptvsim.map.current().reduce((n, a) => n + (a.hits || []).length, 0) >= 12",
         timeout=120_000,
     )
     assert page.is_disabled("#scrub")  # still live: the plots grow from the stream
