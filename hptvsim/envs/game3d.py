@@ -99,6 +99,7 @@ __all__ = [
     "UPEG3DParallelEnv",
     "UPEG3DSingleAgentEnv",
     "UPEG3DVectorEnv",
+    "check_agents_3d",
     "make_sb3_vec_env_3d",
     "parallel_env_3d",
 ]
@@ -282,8 +283,12 @@ class Step3D:
     done: Bool
 
 
-def _check_agents(sc: Scenario) -> list[dict[str, float]]:
-    """Each agent's 6-DOF overrides; refuses vehicle files and planar-only overrides."""
+def check_agents_3d(sc: Scenario) -> list[dict[str, float]]:
+    """Each agent's 6-DOF overrides; refuses vehicle files and planar-only overrides.
+
+    Raises:
+        ValueError: A vehicle file, or a group parameter the 6-DOF vehicles have not (named).
+    """
     out: list[dict[str, float]] = []
     for a in sc.agents:
         if not a.vehicle.builtin:
@@ -353,7 +358,7 @@ class Game3DCore:
         for name, value in (("azimuth_beams", azimuth_beams), ("elevation_beams", elevation_beams)):
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"{name} = {value!r} is invalid; valid: an integer >= 1")
-        group_overrides = _check_agents(sc)
+        group_overrides = check_agents_3d(sc)
         agents = sc.agents
         self.scenario = sc
         self.num_envs = b = int(num_envs)

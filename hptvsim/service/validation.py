@@ -253,6 +253,13 @@ def resolve_request(req: EpisodeCreate, settings: Settings) -> tuple[Resolved, A
         ref = scenario.to_dict()
         label = f"{scenario.name} (inline)"
     _check_costs(scenario, settings)
+    if scenario.simulation.game == "3d":  # what the 3-D game cannot run, at once instead of in a worker
+        from hptvsim.envs.game3d import check_agents_3d
+
+        try:
+            check_agents_3d(scenario)
+        except ValueError as exc:
+            raise ApiError(422, f"scenario: {str(exc).split(': ', 1)[-1]}", "scenario") from None
     agents = tuple(a.name for a in scenario.agents)
     roles = {a.name: a.role for a in scenario.agents}
     # step limit

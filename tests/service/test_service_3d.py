@@ -111,3 +111,14 @@ def test_remote_env_of_a_3d_scenario_matches_the_local_episode(server: Server) -
             env.step(np.zeros(2))
     finally:
         env.close()
+
+
+def test_an_inline_3d_scenario_the_3d_game_cannot_run_is_refused_at_once(api: httpx.Client) -> None:
+    tables = api.get("/scenarios/dive_flat").json()
+    vehicles = [dict(v) for v in tables["vehicles"]]
+    vehicles[0]["parameters"] = {**vehicles[0].get("parameters", {}), "K_p_u": 5.0}
+    r = api.post("/episodes", json={"scenario": {**tables, "vehicles": vehicles}, "max_steps": 10})
+    assert r.status_code == 422, r.text
+    detail = r.json()["detail"]
+    assert detail.startswith("scenario: ") and "K_p_u" in detail and "v_max" in detail, detail
+    assert "<request>" not in detail
