@@ -407,8 +407,8 @@ function watch(ep) {
     if (d.final) {
       es.close();
       showFinished(ep.id);
-      refreshList();
     }
+    refreshList(); // the table agrees with the live view at once, not at the next poll
   });
   es.addEventListener("static", (e) => {
     if (!mine()) return;
