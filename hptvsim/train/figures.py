@@ -9,7 +9,9 @@
   from the ``position`` (north, east) the agents report in ``infos``.
 
 Runs are grouped by a label: the sweep setting recorded in ``run.json`` (``"label"``) when there
-is one, else the algorithm.
+is one, else the algorithm. Only the stages a run has finished count in the means, bands and
+bars; a stage still training is drawn dotted, one line per run, outside the statistics (so a
+figure made mid-sweep never passes a half-trained run off as a seed).
 """
 
 from __future__ import annotations
@@ -26,7 +28,10 @@ import numpy as np
 __all__ = [
     "episode_returns",
     "final_reward_bars",
+    "final_reward_figure",
+    "finished_stages",
     "make_figures",
+    "reward_curve_figures",
     "reward_curves",
     "run_label",
     "trajectories",
@@ -58,6 +63,12 @@ def episode_returns(run_dir: Path) -> dict[tuple[int, str], dict[str, list[float
                 roles[role].append(float(np.mean(values)))
         out[key] = dict(roles)
     return out
+
+
+def finished_stages(run_dir: Path) -> set[str]:
+    """The stages a run has finished: those with the ``stages/<name>/stage.json`` written at their end."""
+    root = run_dir / "stages"
+    return {p.parent.name for p in root.glob("*/stage.json")} if root.is_dir() else set()
 
 
 def agent_returns(run_dir: Path) -> dict[tuple[int, str], dict[str, list[float]]]:
@@ -146,48 +157,91 @@ def reward_curves(
     stages: Sequence[str] | None = None,
     caption: str = "",
 ) -> list[Path]:
+    """:func:`reward_curve_figures` as ``reward_<role>.png`` files in ``out``; returns them."""
+    figures = reward_curve_figures(run_dirs, smooth=smooth, labels=labels, stages=stages, caption=caption)
+    import matplotlib.pyplot as plt  # after the figures chose the Agg backend
+
+    out.mkdir(parents=True, exist_ok=True)
+    written = []
+    for role, fig in figures.items():
+        path = out / f"reward_{role}.png"
+        fig.savefig(path, dpi=120)
+        plt.close(fig)
+        written.append(path)
+    return written
+
+
+def reward_curve_figures(
+    run_dirs: Sequence[Path],
+    *,
+    smooth: int = 5,
+    labels: Sequence[str] | None = None,
+    stages: Sequence[str] | None = None,
+    caption: str = "",
+) -> dict[str, Any]:
     """Average total reward per episode through the stages, one figure per role (Figs. 7-10).
 
-    Each group of runs (same label) is drawn as its mean over seeds with a 95 % t band.
+    Each group of runs (same label) is drawn as its mean over the seeds that finished each stage,
+    with a 95 % t band; a stage still training is drawn dotted per run, outside the band.
 
     Args:
         run_dirs: Training runs.
-        out: Folder of the PNGs.
         smooth: Moving-average window (episodes).
         labels: The group of each run (default: :func:`run_label`).
         stages: Only these stages (default: all).
         caption: A line under the figure naming the runs.
 
     Returns:
-        The written PNG files (``reward_<role>.png``).
+        Role -> its matplotlib figure.
     """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    groups: dict[str, list[dict[tuple[int, str], dict[str, list[float]]]]] = defaultdict(list)
+    groups: dict[str, list[tuple[dict[tuple[int, str], dict[str, list[float]]], set[str]]]] = defaultdict(
+        list
+    )
     for run, label in zip(run_dirs, _labels(run_dirs, labels), strict=True):
-        groups[label].append(episode_returns(run))
-    all_stages = stage_segments([r for runs in groups.values() for r in runs])
+        groups[label].append((episode_returns(run), finished_stages(run)))
+    all_stages = stage_segments([r for runs in groups.values() for r, _ in runs])
     if stages is not None:
         all_stages = [name for name in all_stages if name in stages]
 
     def of(r: dict[tuple[int, str], dict[str, list[float]]], name: str) -> dict[str, list[float]]:
         return next((v for (_, n), v in r.items() if n == name), {})
 
-    roles = sorted({role for runs in groups.values() for r in runs for k in all_stages for role in of(r, k)})
+    roles = sorted(
+        {role for runs in groups.values() for r, _ in runs for k in all_stages for role in of(r, k)}
+    )
     names = {"pursuer": "UUVs (pursuers)", "evader": "spherical robot (evader)"}
-    out.mkdir(parents=True, exist_ok=True)
-    written = []
+    figures: dict[str, Any] = {}
     for role in roles:
         fig, ax = plt.subplots(figsize=(8, 4.4))
         offset = 0
+        # seeds per stage in each group's legend entry: the finished runs the band is over
+        counts = {
+            label: [sum(1 for r, done in runs if k in done and role in of(r, k)) for k in all_stages]
+            for label, runs in groups.items()
+        }
         labelled: set[str] = set()
         for s_idx, stage in enumerate(all_stages):
             n_max = 0
             for g_idx, (label, runs) in enumerate(groups.items()):
-                series = [of(r, stage)[role] for r in runs if role in of(r, stage)]
+                color = f"C{g_idx}"
+                series = [of(r, stage)[role] for r, done in runs if stage in done and role in of(r, stage)]
+                partial = [
+                    of(r, stage)[role] for r, done in runs if stage not in done and role in of(r, stage)
+                ]
+                for part in partial:  # a stage still training: each run dotted, outside the band
+                    y = _smooth(np.asarray(part, dtype=np.float64), smooth)
+                    n_max = max(n_max, len(y))
+                    ax.plot(offset + np.arange(1, len(y) + 1), y, color=color, linestyle=":", linewidth=1.0)
+                if partial and f"{label}:partial" not in labelled:
+                    labelled.add(f"{label}:partial")
+                    ax.plot(
+                        [], [], color=color, linestyle=":", label=f"{label}, still training (not counted)"
+                    )
                 if not series:
                     continue
                 arr = _stack(series, smooth)
@@ -195,14 +249,11 @@ def reward_curves(
                 n_max = max(n_max, n)
                 x = offset + np.arange(1, n + 1)
                 mean, half = arr.mean(0), _t_half(arr)
-                color = f"C{g_idx}"
                 ax.plot(
                     x,
                     mean,
                     color=color,
-                    label=None
-                    if label in labelled
-                    else f"{label} ({len(series)} seed{'s' * (len(series) > 1)})",
+                    label=None if label in labelled else _seeds_text(label, counts[label]),
                 )
                 labelled.add(label)
                 if len(series) > 1:
@@ -230,11 +281,17 @@ def reward_curves(
         fig.tight_layout(rect=(0, 0.03, 1, 1))
         if caption:
             _caption(fig, caption)
-        path = out / f"reward_{role}.png"
-        fig.savefig(path, dpi=120)
-        plt.close(fig)
-        written.append(path)
-    return written
+        figures[role] = fig
+    return figures
+
+
+def _seeds_text(label: str, counts: Sequence[int]) -> str:
+    """``label (3 seeds)``, or the finished seeds per stage where they differ."""
+    shown = [c for c in counts if c]
+    if len(set(shown)) <= 1:
+        n = shown[0] if shown else 0
+        return f"{label} ({n} seed{'s' * (n != 1)})"
+    return f"{label} (seeds per stage: {', '.join(str(c) for c in counts)})"
 
 
 def reward_agents_figure(
@@ -257,20 +314,33 @@ def reward_agents_figure(
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    groups: dict[str, list[dict[tuple[int, str], dict[str, list[float]]]]] = defaultdict(list)
+    groups: dict[str, list[tuple[dict[tuple[int, str], dict[str, list[float]]], set[str]]]] = defaultdict(
+        list
+    )
     for run, label in zip(run_dirs, _labels(run_dirs, labels), strict=True):
-        groups[label].append(agent_returns(run))
+        groups[label].append((agent_returns(run), finished_stages(run)))
     shown = list(groups)[:max_groups]
     fig, axes = plt.subplots(1, len(shown), figsize=(5.2 * len(shown), 4.2), squeeze=False, sharey=True)
     for ax, label in zip(axes[0], shown, strict=True):
         runs = groups[label]
-        keys = sorted({k for r in runs for k in r if stages is None or k[1] in stages})
-        agents = sorted({a for r in runs for k in keys for a in r.get(k, {})})
+        keys = sorted({k for r, _ in runs for k in r if stages is None or k[1] in stages})
+        agents = sorted({a for r, _ in runs for k in keys for a in r.get(k, {})})
         offset = 0
+        partial_shown = False
+        legend: set[str] = set()
         for s_idx, key in enumerate(keys):
             n_max = 0
             for agent in agents:
-                series = [r[key][agent] for r in runs if agent in r.get(key, {})]
+                color = agent_color(agent, agents)
+                for r, done in runs:  # a stage still training: each run dotted, outside the band
+                    if key[1] not in done and agent in r.get(key, {}):
+                        y = _smooth(np.asarray(r[key][agent], dtype=np.float64), smooth)
+                        n_max = max(n_max, len(y))
+                        ax.plot(
+                            offset + np.arange(1, len(y) + 1), y, color=color, linestyle=":", linewidth=0.9
+                        )
+                        partial_shown = True
+                series = [r[key][agent] for r, done in runs if key[1] in done and agent in r.get(key, {})]
                 if not series:
                     continue
                 arr = _stack(series, smooth)
@@ -278,7 +348,10 @@ def reward_agents_figure(
                 n_max = max(n_max, n)
                 x = offset + np.arange(1, n + 1)
                 color = agent_color(agent, agents)
-                ax.plot(x, arr.mean(0), color=color, linewidth=1.2, label=agent if s_idx == 0 else None)
+                ax.plot(
+                    x, arr.mean(0), color=color, linewidth=1.2, label=agent if agent not in legend else None
+                )
+                legend.add(agent)
                 if len(series) > 1:
                     half = _t_half(arr)
                     ax.fill_between(
@@ -295,8 +368,10 @@ def reward_agents_figure(
                 fontsize=8,
             )
             offset += n_max
-        n_seeds = len(runs)
-        ax.set_title(f"{label} ({n_seeds} seed{'s' * (n_seeds > 1)})", fontsize=9, pad=14)
+        if partial_shown:
+            ax.plot([], [], color="grey", linestyle=":", label="still training (not counted)")
+        counts = [sum(1 for _, done in runs if k[1] in done) for k in keys]
+        ax.set_title(_seeds_text(label, counts), fontsize=9, pad=14)
         ax.set_xlabel("training episode (all stages in order)")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7, loc="best")
@@ -327,11 +402,31 @@ def final_reward_bars(
     stage: str | None = None,
     caption: str = "",
 ) -> Path:
+    """:func:`final_reward_figure` as ``final_reward_mean_variance.png`` in ``out``."""
+    fig = final_reward_figure(run_dirs, last=last, labels=labels, stage=stage, caption=caption)
+    import matplotlib.pyplot as plt  # after the figure chose the Agg backend
+
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / "final_reward_mean_variance.png"
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def final_reward_figure(
+    run_dirs: Sequence[Path],
+    *,
+    last: int = 20,
+    labels: Sequence[str] | None = None,
+    stage: str | None = None,
+    caption: str = "",
+) -> Any:
     """Mean and variance of the final rewards per group and role, with 95 % intervals (Fig. 11).
 
     Per run: the mean and the variance of the per-episode total reward over the last ``last``
-    episodes of ``stage`` (default: each run's last stage); bars are the means of those over
-    seeds, error bars their 95 % t intervals. One row per role, so each has its own scale.
+    episodes of ``stage`` (default: each run's last finished stage); bars are the means of those
+    over seeds, error bars their 95 % t intervals. One row per role, so each has its own scale.
+    Runs that have not finished ``stage`` are left out.
     """
     import matplotlib
 
@@ -340,8 +435,8 @@ def final_reward_bars(
 
     per: dict[str, dict[str, list[tuple[float, float]]]] = defaultdict(lambda: defaultdict(list))
     for run, label in zip(run_dirs, _labels(run_dirs, labels), strict=True):
-        returns = episode_returns(run)
-        keys = [k for k in returns if stage is None or k[1] == stage]
+        returns, done = episode_returns(run), finished_stages(run)
+        keys = [k for k in returns if (stage is None or k[1] == stage) and k[1] in done]
         if not keys:
             continue
         for role, series in returns[max(keys)].items():
@@ -354,6 +449,10 @@ def final_reward_bars(
     fig, axes = plt.subplots(
         max(len(roles), 1), 2, figsize=(9, 2.9 * max(len(roles), 1) + 0.4), squeeze=False
     )
+    if not groups:
+        axes[0, 0].text(
+            0.5, 0.5, "no run has finished " + (stage or "a stage") + " yet", ha="center", va="center"
+        )
     x = np.arange(len(groups))
     colors = [f"C{i}" for i in range(len(groups))]
     seeds = {g: min((len(per[g][r]) for r in roles if per[g][r]), default=0) for g in groups}
@@ -377,11 +476,7 @@ def final_reward_bars(
     if any(n < 2 for n in seeds.values()):
         bars += " (none where n = 1: one seed has no interval)"
     _caption(fig, (caption + "; " if caption else "") + bars)
-    out.mkdir(parents=True, exist_ok=True)
-    path = out / "final_reward_mean_variance.png"
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return fig
 
 
 def trajectories(run_dir: Path, out: Path, *, seed: int = 0) -> list[Path]:
@@ -476,7 +571,10 @@ def _expand(paths: Sequence[Path]) -> tuple[list[Path], list[str], list[str] | N
                 f"{p} is neither a training run (episodes.csv), a sweep (sweep.json) nor a DT run (dt.pt)"
             )
     seeds = len(runs)
-    caption = f"{', '.join(names)}: {seeds} run{'s' * (seeds != 1)}"
+    training = sum(1 for r in runs if not (r / "summary.json").is_file())  # written when a run ends
+    caption = f"{', '.join(names)}: {seeds} run{'s' * (seeds != 1)}" + (
+        f" ({training} still training)" if training else ""
+    )
     return runs, labels, stages, caption
 
 

@@ -686,13 +686,14 @@ def evaluate_stage(models: Path, stage: Any, spec: EvalSpec) -> dict[str, Any]:
 
 def _training_metrics(run_dir: Path, last: int) -> dict[str, dict[str, float]]:
     """Stage -> metric -> value from ``episodes.csv`` (finished stages only)."""
-    from hptvsim.train.figures import episode_returns
+    from hptvsim.train.figures import episode_returns, finished_stages
 
     out: dict[str, dict[str, float]] = {}
     if not (run_dir / "episodes.csv").is_file():
         return out
+    done = finished_stages(run_dir)
     for (_, stage), roles in episode_returns(run_dir).items():
-        if not (run_dir / "stages" / stage).is_dir():
+        if stage not in done:
             continue
         m: dict[str, float] = {}
         for role, values in roles.items():
@@ -1020,8 +1021,9 @@ def _experiment_section(
             w(f"Figures: `hptvsim figures {_rel(folder)} --out {_rel(fig_dir)}`.")
             if running:
                 w(
-                    f"They include the episodes so far of runs still training ({', '.join(running)}); "
-                    "the tables do not."
+                    f"Runs still training ({', '.join(running)}) count with the stages they have "
+                    "finished; a stage still training is drawn dotted, outside the bands, the bars "
+                    "and the tables."
                 )
             w("")
             for p in written:

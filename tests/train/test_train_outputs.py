@@ -188,6 +188,49 @@ def test_every_figure_of_a_tiny_sweep_with_one_colour_per_agent_and_series(tmp_p
         plt.close(fig)
 
 
+def test_a_stage_still_training_is_drawn_apart_and_not_counted_as_a_seed(tmp_path: Path) -> None:
+    """Figures made mid-sweep: a run that has not finished a stage is no seed of that stage."""
+    import matplotlib.pyplot as plt
+
+    from hptvsim.train.figures import (
+        _expand,
+        final_reward_figure,
+        finished_stages,
+        reward_agents_figure,
+        reward_curve_figures,
+    )
+
+    spec = load_sweep(_sweep_file(tmp_path))
+    run_sweep(spec, tmp_path / "out", serial=True, progress=False)
+    runs = sorted((tmp_path / "out").glob("*-seed*"))
+    training = next(r for r in runs if "auto_0.1" in r.name and r.name.endswith("seed1"))
+    assert finished_stages(training) == {"source", "target"}
+    (training / "stages" / "target" / "stage.json").unlink()  # as if killed while training in target
+    (training / "summary.json").unlink()
+    assert finished_stages(training) == {"source"}
+    assert _expand([tmp_path / "out"])[3].endswith(": 4 runs (1 still training)")
+    figs = reward_curve_figures(runs)
+    agents = reward_agents_figure(runs)
+    bars = final_reward_figure(runs, stage="target")
+    try:
+        for fig in figs.values():
+            ax = fig.axes[0]
+            legend = [t.get_text() for t in ax.get_legend().get_texts()]
+            assert legend == [
+                "ent_coef=auto_0.1 (seeds per stage: 2, 1)",
+                "ent_coef=auto_0.4 (2 seeds)",
+                "ent_coef=auto_0.1, still training (not counted)",
+            ], legend
+            assert sum(1 for line in ax.lines if line.get_linestyle() == ":") == 2  # its line and legend key
+        titles = [ax.get_title() for ax in agents.axes]
+        assert titles == ["ent_coef=auto_0.1 (seeds per stage: 2, 1)", "ent_coef=auto_0.4 (2 seeds)"]
+        ticks = [t.get_text() for t in bars.axes[0].get_xticklabels()]
+        assert ticks == ["ent_coef=auto_0.1\n(n = 1)", "ent_coef=auto_0.4\n(n = 2)"]
+    finally:
+        for fig in [*figs.values(), agents, bars]:
+            plt.close(fig)
+
+
 def test_stages_of_different_curricula_share_a_segment_by_name() -> None:
     """A run trained in the target scenario alone is drawn over the STT runs' target stage."""
     from hptvsim.train.figures import stage_segments
