@@ -648,10 +648,10 @@ class LiveView:
         from hptvsim.viz.episode import EpisodeStepper
 
         assert self.renderer is not None
-        if req.kind == "play":
-            self.playing = True
-        elif req.kind == "pause":
-            self.playing = False
+        if req.kind in ("play", "pause"):
+            self.playing = req.kind == "play"
+            if "play" in self._gui:  # the button names what a click does, whoever asked
+                self._gui["play"].label = "Pause" if self.playing else "Play"
         elif req.kind == "speed":
             self.speed = req.value
         elif req.kind == "reset":
@@ -871,10 +871,8 @@ class LiveView:
     def _on_play(self, _: Any) -> None:
         if self.playing:
             self.pause()
-            self._gui["play"].label = "Play"
         else:
             self.play()
-            self._gui["play"].label = "Pause"
 
     def _on_speed(self, _: Any) -> None:
         """A speed from the slider, kept in the slider's range whatever a client sends."""

@@ -14,7 +14,7 @@ import time
 from typing import Any
 
 import numpy as np
-from test_viz_browser import SHOTS, browser, pytestmark  # noqa: F401  # the fixture and the skip mark
+from test_viz_browser import SHOTS, browser, pytestmark, render_when_drawn  # noqa: F401  # the fixture, the skip mark
 
 
 def _mask(image: np.ndarray, rgb: tuple[int, int, int], tol: int = 50) -> np.ndarray:
@@ -22,15 +22,8 @@ def _mask(image: np.ndarray, rgb: tuple[int, int, int], tol: int = 50) -> np.nda
     return np.asarray(np.abs(image.astype(np.int32) - np.array(rgb)).max(axis=2) < tol)
 
 
-def _render(client: Any, height: int = 360, width: int = 480, timeout: float = 60.0) -> np.ndarray:
-    """The client's view as RGB, once the browser has drawn the scene (software WebGL on a busy
-    machine may answer the first requests with an empty canvas)."""
-    end = time.monotonic() + timeout
-    while True:
-        image = client.get_render(height, width, timeout=60)[..., :3].astype(np.uint8)
-        if len(np.unique(image.reshape(-1, 3) // 16, axis=0)) > 20 or time.monotonic() > end:
-            return np.asarray(image)
-        time.sleep(1.0)
+def _render(client: Any) -> np.ndarray:
+    return render_when_drawn(client, 360, 480)
 
 
 def test_viser_view_of_a_3d_episode_renders_in_chromium(browser: Any) -> None:  # noqa: F811  # the fixture

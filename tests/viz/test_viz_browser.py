@@ -99,6 +99,17 @@ window._agentProbe = (m) => m.current().map((a) => {
 """Page helpers that read a map's pixels where its sonar hits and its vehicles are."""
 
 
+def render_when_drawn(client: Any, height: int, width: int, timeout: float = 60.0) -> np.ndarray:
+    """A viser client's view as RGB, once the browser has drawn the scene (software WebGL on a busy
+    machine may answer the first requests with an empty canvas)."""
+    end = time.monotonic() + timeout
+    while True:
+        image = client.get_render(height, width, timeout=60)[..., :3].astype(np.uint8)
+        if len(np.unique(image.reshape(-1, 3) // 16, axis=0)) > 20 or time.monotonic() > end:
+            return np.asarray(image)
+        time.sleep(1.0)
+
+
 def _rgb(color: str) -> tuple[int, ...]:
     if color.startswith("rgb("):
         return tuple(int(v) for v in color[4:-1].split(","))
@@ -266,6 +277,7 @@ def test_dashboard_cancels_a_running_episode(browser: Any, service: str) -> None
     page.select_option("#f-scenario", "target")
     page.fill("#f-max-steps", "20000")
     page.select_option("#f-backend", "fmu")  # slow enough to be running when we cancel
+    page.select_option("#f-pursuer-policy", "scripted:stationary")  # no capture ends it first
     page.click("#run-button")
     page.wait_for_function("document.querySelector('#live-status').textContent === 'running'", timeout=60_000)
     page.click("#cancel-button")
@@ -294,7 +306,7 @@ def test_viser_view_renders_in_chromium(browser: Any) -> None:
         assert view.wait_for(lambda v: v.last_frame is not None and v.last_frame.step > 20, 60)
         view.pause()
         assert view.wait_for(lambda v: not v.playing, 10)
-        image = clients[0].get_render(240, 320, timeout=60)
+        image = render_when_drawn(clients[0], 240, 320)
         assert image.shape[:2] == (240, 320)
         rgb = image[..., :3].astype(np.int32)
         # the scene is drawn: many distinct colours, and the seabed's blues take a good part of it
@@ -308,8 +320,13 @@ def test_viser_view_renders_in_chromium(browser: Any) -> None:
         page.screenshot(path=str(SHOTS / "viser_page.png"))
         # the GUI is there (play/pause, speed, reset, pickers)
         text = page.evaluate("document.body.innerText")
-        for label in ("Pause", "Reset", "Start episode", "Scenario", "Pursuers' policy", "Speed", "Trails"):
+        for label in ("Reset", "Start episode", "Scenario", "Pursuers' policy", "Speed", "Trails"):
             assert label in text, label
+        # paused from Python, the button offers to play; a click on it plays and it offers to pause
+        page.get_by_role("button", name="Play", exact=True).wait_for(timeout=10_000)
+        page.get_by_role("button", name="Play", exact=True).click()
+        assert view.wait_for(lambda v: v.playing, 10)
+        page.get_by_role("button", name="Pause", exact=True).wait_for(timeout=10_000)
     finally:
         page.close()
         view.stop()
@@ -355,6 +372,7 @@ def test_dashboard_shows_sonar_fans_live(browser: Any, service: str) -> None:
     page.select_option("#f-scenario", "target")
     page.fill("#f-max-steps", "20000")
     page.select_option("#f-backend", "fmu")  # slow enough to watch it run
+    page.select_option("#f-pursuer-policy", "scripted:stationary")  # no capture ends it first
     page.click("#run-button")
     page.wait_for_function(
         "document.querySelector('#live-status').textContent === 'running' && window.hptvsim.framesSeen > 5",
