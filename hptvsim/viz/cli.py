@@ -25,6 +25,23 @@ def _repo_web() -> Path:
     return top / "web"
 
 
+def _report_episode(result: Any, record: Path | None, json_out: Path | None, *, note: str = "") -> None:
+    """Print an episode's outcome and metrics and write its JSON (``note``: what part of it ran)."""
+    s = result.summary
+    click.echo(
+        f"{result.static.scenario}: {s.outcome} after {s.steps} steps ({s.sim_time:.1f} s simulated, "
+        f"{s.wall_time:.2f} s wall)"
+    )
+    click.echo(json.dumps(s.to_dict()["metrics"], indent=2))
+    kept = f" ({note})" if note else ""
+    if record is not None:
+        click.echo(f"recording{kept}: {record.resolve()}  (open it with `hptvsim replay {record}`)")
+    if json_out is not None:
+        json_out.parent.mkdir(parents=True, exist_ok=True)
+        json_out.write_text(json.dumps(result.to_dict()))
+        click.echo(f"episode JSON{kept}: {json_out.resolve()}")
+
+
 def _policy_options(policy: tuple[str, ...]) -> dict[str, str]:
     out: dict[str, str] = {}
     for item in policy:
@@ -236,33 +253,46 @@ def register(main: click.Group, bench: click.Group) -> None:
         record: Path | None,
         json_out: Path | None,
     ) -> None:
-        """Run one episode, print its outcome and metrics, optionally record it."""
-        check_episode_args(scenario, policy, seed, max_steps, record, json_out)
-        from hptvsim.viz.episode import run_episode
+        """Run one episode, print its outcome and metrics, optionally record it.
 
-        result = run_episode(
-            scenario,
-            _policy_options(policy),
-            seed=seed,
-            max_steps=max_steps,
-            sensor_fidelity=sensor_fidelity,  # type: ignore[arg-type]  # click.Choice checked it
-            backend=backend,  # type: ignore[arg-type]  # click.Choice checked it
-            recording_path=record,
-            progress=True,
-            allow_paths=True,
-        )
-        s = result.summary
-        click.echo(
-            f"{result.static.scenario}: {s.outcome} after {s.steps} steps ({s.sim_time:.1f} s simulated, "
-            f"{s.wall_time:.2f} s wall)"
-        )
-        click.echo(json.dumps(s.to_dict()["metrics"], indent=2))
-        if record is not None:
-            click.echo(f"recording: {record.resolve()}  (open it with `hptvsim replay {record}`)")
-        if json_out is not None:
-            json_out.parent.mkdir(parents=True, exist_ok=True)
-            json_out.write_text(json.dumps(result.to_dict()))
-            click.echo(f"episode JSON: {json_out.resolve()}")
+        Ctrl-C stops it at the next step and still writes what ran (a second Ctrl-C quits at
+        once); so does a simulation that fails part-way, which then exits with status 1.
+        """
+        check_episode_args(scenario, policy, seed, max_steps, record, json_out)
+        import signal
+        import threading
+
+        from hptvsim.viz.episode import SimulationError, run_episode
+
+        stop = threading.Event()
+
+        def on_interrupt(signum: int, frame: Any) -> None:
+            stop.set()  # the episode ends as "cancelled" after this step, with its files
+            signal.signal(signal.SIGINT, signal.default_int_handler)
+
+        previous = signal.signal(signal.SIGINT, on_interrupt)
+        try:
+            result = run_episode(
+                scenario,
+                _policy_options(policy),
+                seed=seed,
+                max_steps=max_steps,
+                sensor_fidelity=sensor_fidelity,  # type: ignore[arg-type]  # click.Choice checked it
+                backend=backend,  # type: ignore[arg-type]  # click.Choice checked it
+                cancel=stop,
+                recording_path=record,
+                progress=True,
+                allow_paths=True,
+            )
+        except SimulationError as exc:
+            if exc.partial is not None:
+                _report_episode(exc.partial, record, json_out, note="up to the failure")
+            raise click.ClickException(f"the simulation failed: {exc}") from None
+        finally:
+            signal.signal(signal.SIGINT, previous)
+        _report_episode(result, record, json_out, note="up to Ctrl-C" if stop.is_set() else "")
+        if stop.is_set():
+            sys.exit(130)  # the shell's code for a run stopped by SIGINT
 
     @main.command("replay")
     @click.argument("file", type=click.Path(exists=True, dir_okay=False, path_type=Path))

@@ -607,7 +607,7 @@ class EpisodeStepper:
                 result = core.step(act)
         except (SimulationFailedError, FmuError) as exc:  # it cannot go on: end it, keep what ran
             self._cancelled = True
-            self._close_recorder(None)
+            self._close_recorder(self.summary())  # the recording says how far it got
             reason = str(exc).split("; reset", 1)[0]
             raise SimulationError(
                 f"the simulation failed at step {self.frame.step + 1}: {reason} "
