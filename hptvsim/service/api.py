@@ -162,14 +162,23 @@ def trajectory_json(table: Any) -> dict[str, Any]:
 
 
 def trajectory_csv(table: Any) -> bytes:
-    """A trajectory table as CSV; each row's sonar ranges become one space-separated field."""
+    """A trajectory table as CSV; each row's sonar ranges become one space-separated field.
+
+    The header names each column with its SI unit, ``x [m]`` (the Parquet file's fields carry
+    the same units as metadata, from :attr:`~hptvsim.viz.frames.Trajectories.UNITS`).
+    """
     import pyarrow as pa
     import pyarrow.csv as pacsv
+
+    from hptvsim.viz.frames import Trajectories
 
     if "ranges" in table.column_names:
         text = [" ".join(f"{v:.2f}" for v in r) for r in table.column("ranges").to_pylist()]
         i = table.column_names.index("ranges")
         table = table.set_column(i, "ranges", pa.array(text, pa.string()))
+    table = table.rename_columns(
+        [f"{c} [{Trajectories.UNITS[c]}]" if Trajectories.UNITS.get(c) else c for c in table.column_names]
+    )
     buf = io.BytesIO()
     pacsv.write_csv(table, buf)
     return buf.getvalue()

@@ -225,6 +225,12 @@ def write_outputs(
     cols = result.trajectories.columns()
     kinds = {"agent": pa.string(), "ranges": pa.list_(pa.float32())}  # others: numpy's dtype
     table = pa.table({k: (pa.array(v.tolist(), kinds[k]) if k in kinds else v) for k, v in cols.items()})
+    units = type(result.trajectories).UNITS
+    table = table.cast(  # each field's SI unit in its metadata
+        pa.schema(
+            [f.with_metadata({"unit": units[f.name]}) if units.get(f.name) else f for f in table.schema]
+        )
+    )
     traj = out_dir / TRAJECTORY_FILE
     tmp = out_dir / (TRAJECTORY_FILE + ".tmp")
     pq.write_table(table, tmp)

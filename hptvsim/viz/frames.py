@@ -555,6 +555,35 @@ class Trajectories(SchemaObject):
     time: tuple[float, ...]
     agents: tuple[AgentTrajectory, ...]
 
+    UNITS: ClassVar[dict[str, str]] = {
+        "step": "",
+        "time": "s",
+        "agent": "",
+        "x": "m",
+        "y": "m",
+        "psi": "rad",
+        "u": "m/s",
+        "v": "m/s",
+        "r": "rad/s",
+        "v_cmd": "m/s",
+        "omega_cmd": "rad/s",
+        "reward": "",
+        "distance": "m",
+        "min_range": "m",
+        "r_C": "",
+        "r_E1": "",
+        "r_E2": "",
+        "z": "m",
+        "phi": "rad",
+        "theta": "rad",
+        "w": "m/s",
+        "w_cmd": "m/s",
+        "altitude": "m",
+        "ranges": "m",
+    }
+    """The SI unit of each column of :meth:`columns` ("": a count, a name or dimensionless); the
+    CSV header and the Parquet fields' ``unit`` metadata carry them."""
+
     @classmethod
     def from_frames(cls, frames: Sequence[Frame]) -> Trajectories:
         """Collect the trajectories of a sequence of frames."""

@@ -53,7 +53,7 @@ def test_run_a_3d_episode_with_depth_in_every_format(api: httpx.Client) -> None:
         assert len(a.z) == 121
     csv = api.get(f"/episodes/{ep['id']}/trajectory", params={"format": "csv"}).text
     header = csv.splitlines()[0].replace('"', "").split(",")
-    assert {"z", "phi", "theta", "w", "w_cmd", "altitude"} <= set(header)
+    assert {"z [m]", "phi [rad]", "theta [rad]", "w [m/s]", "w_cmd [m/s]", "altitude [m]"} <= set(header)
     parquet = api.get(f"/episodes/{ep['id']}/trajectory", params={"format": "parquet"})
     table = pq.read_table(io.BytesIO(parquet.content)).to_pydict()
     rows = [i for i, a in enumerate(table["agent"]) if a == "pursuer_1"]

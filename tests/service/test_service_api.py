@@ -107,8 +107,14 @@ def test_run_stream_results_and_recording(server: Server, api: httpx.Client, tmp
     csv = api.get(f"/episodes/{ep['id']}/trajectory", params={"format": "csv"})
     assert csv.headers["content-type"].startswith("text/csv")
     header = csv.text.splitlines()[0].replace('"', "").split(",")
-    assert header[:4] == ["step", "time", "agent", "x"] and len(csv.text.splitlines()) == 1 + (n + 1) * 4
+    assert (
+        header[:4] == ["step", "time [s]", "agent", "x [m]"] and len(csv.text.splitlines()) == 1 + (n + 1) * 4
+    )
+    assert {"psi [rad]", "r [rad/s]", "v_cmd [m/s]", "reward", "ranges [m]"} <= set(header)
     parquet = api.get(f"/episodes/{ep['id']}/trajectory", params={"format": "parquet"})
+    schema = pq.read_schema(io.BytesIO(parquet.content))
+    assert schema.field("x").metadata == {b"unit": b"m"} and schema.field("r").metadata == {b"unit": b"rad/s"}
+    assert not schema.field("reward").metadata  # dimensionless
     table = pq.read_table(io.BytesIO(parquet.content)).to_pydict()
     k = [i for i, a in enumerate(table["agent"]) if a == "evader_0"]
     assert [table["x"][i] for i in k] == list(traj.agent("evader_0").x)
@@ -118,7 +124,7 @@ def test_run_stream_results_and_recording(server: Server, api: httpx.Client, tmp
     assert len(ev.r_C) == n + 1 and all(len(r) == len(static.agents[3].beam_angles) for r in ev.ranges)
     assert [table["r_E1"][i] for i in k] == list(ev.r_E1)
     assert np.allclose([table["ranges"][i] for i in k], ev.ranges, atol=0.006)  # JSON: centimetres
-    assert "ranges" in header and "r_C" in header
+    assert "ranges [m]" in header and "r_C" in header
     w = shipped_scenario("target").task.reward
     for agent in traj.agents:  # the terms add up to the reward (Eq. 20, the scenario's weights)
         assert agent.r_C is not None and agent.r_E1 is not None and agent.r_E2 is not None

@@ -46,7 +46,9 @@ def test_csv_writes_each_rows_ranges_as_one_field(result: EpisodeResult, tmp_pat
     write_outputs(tmp_path, result)
     lines = trajectory_csv(pq.read_table(tmp_path / TRAJECTORY_FILE)).decode().splitlines()
     header = [h.strip('"') for h in lines[0].split(",")]
-    assert header[:3] == ["step", "time", "agent"] and {"r_C", "r_E1", "r_E2", "ranges"} <= set(header)
-    first = lines[1].split(",")[header.index("ranges")].strip('"').split(" ")
+    assert header[:3] == ["step", "time [s]", "agent"] and {"r_C", "r_E1", "r_E2", "ranges [m]"} <= set(
+        header
+    )
+    first = lines[1].split(",")[header.index("ranges [m]")].strip('"').split(" ")
     assert len(first) == 16 and all(float(v) > 0 for v in first)
     assert len(lines) == 1 + 13 * 4

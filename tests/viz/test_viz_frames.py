@@ -155,6 +155,9 @@ def test_trajectories_columns_are_a_long_table(recorded: Recorded) -> None:
     np.testing.assert_array_equal(cols["step"][rows], traj.step)
     with pytest.raises(KeyError, match="agents: pursuer_0"):
         traj.agent("nobody")
+    # every column has its unit named (CSV header, Parquet metadata), and only those
+    assert set(F.Trajectories.UNITS) == {"step", "time", "agent", *F.AgentTrajectory.COLUMNS, "ranges"}
+    assert set(cols) <= set(F.Trajectories.UNITS)
 
 
 def test_frame_options_validate() -> None:
