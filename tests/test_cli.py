@@ -42,3 +42,33 @@ def test_bench_dynamics_quick_prints_ratios_to_the_floor() -> None:
 def test_version() -> None:
     result = CliRunner().invoke(main, ["--version"])
     assert result.exit_code == 0 and "hptvsim" in result.output
+
+
+def test_the_command_line_starts_without_its_heavy_libraries() -> None:
+    """``hptvsim --help`` (and every command's startup) imports no simulation, learning or web
+    library: each command imports what it needs when it runs (checked by module, not by time)."""
+    import subprocess
+    import sys
+
+    heavy = [
+        "torch",
+        "scipy",
+        "casadi",
+        "fmpy",
+        "stable_baselines3",
+        "matplotlib",
+        "fastapi",
+        "pyarrow",
+        "rerun",
+        "viser",
+        "hptvsim.envs.core",
+        "hptvsim.cosim.batched",
+        "hptvsim.world.scenario",
+    ]
+    code = f"import sys, hptvsim.cli; print([m for m in {heavy!r} if m in sys.modules])"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]", out
+    helped = subprocess.run(
+        [sys.executable, "-m", "hptvsim.cli", "--help"], capture_output=True, text=True, check=True
+    )
+    assert "Commands:" in helped.stdout

@@ -11,29 +11,41 @@
   batch entry points, for training speed.
 """
 
-from hptvsim.cosim.batched import BatchedSnapshot, BatchedVehicleSystem, NonFiniteStateError
-from hptvsim.cosim.fmi2 import Fmu2Instance, FmuError, FmuModel, FmuVariableError, Variable, load_model
-from hptvsim.cosim.graph import (
-    Component,
-    Connection,
-    ExternalInput,
-    ExternalOutput,
-    Graph,
-    GraphError,
-    Port,
-    load_graph,
-    save_graph,
-)
-from hptvsim.cosim.orchestrator import Orchestrator, SimulationFailedError, SimulationPausedError, Snapshot
-from hptvsim.cosim.system import (
-    FmuSystemSnapshot,
-    FmuVehicleSystem,
-    SystemSpec,
-    VehicleSpec,
-    VehicleSystem,
-    make_system,
-    vehicle_graph,
-)
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from hptvsim._lazy import lazy_getattr
+
+if TYPE_CHECKING:
+    from hptvsim.cosim.batched import BatchedSnapshot, BatchedVehicleSystem, NonFiniteStateError
+    from hptvsim.cosim.fmi2 import Fmu2Instance, FmuError, FmuModel, FmuVariableError, Variable, load_model
+    from hptvsim.cosim.graph import (
+        Component,
+        Connection,
+        ExternalInput,
+        ExternalOutput,
+        Graph,
+        GraphError,
+        Port,
+        load_graph,
+        save_graph,
+    )
+    from hptvsim.cosim.orchestrator import (
+        Orchestrator,
+        SimulationFailedError,
+        SimulationPausedError,
+        Snapshot,
+    )
+    from hptvsim.cosim.system import (
+        FmuSystemSnapshot,
+        FmuVehicleSystem,
+        SystemSpec,
+        VehicleSpec,
+        VehicleSystem,
+        make_system,
+        vehicle_graph,
+    )
 
 __all__ = [
     "BatchedSnapshot",
@@ -66,3 +78,37 @@ __all__ = [
     "save_graph",
     "vehicle_graph",
 ]
+
+_WHERE = {
+    "BatchedSnapshot": "hptvsim.cosim.batched",
+    "BatchedVehicleSystem": "hptvsim.cosim.batched",
+    "Component": "hptvsim.cosim.graph",
+    "Connection": "hptvsim.cosim.graph",
+    "ExternalInput": "hptvsim.cosim.graph",
+    "ExternalOutput": "hptvsim.cosim.graph",
+    "Fmu2Instance": "hptvsim.cosim.fmi2",
+    "FmuError": "hptvsim.cosim.fmi2",
+    "FmuModel": "hptvsim.cosim.fmi2",
+    "FmuSystemSnapshot": "hptvsim.cosim.system",
+    "FmuVariableError": "hptvsim.cosim.fmi2",
+    "FmuVehicleSystem": "hptvsim.cosim.system",
+    "Graph": "hptvsim.cosim.graph",
+    "GraphError": "hptvsim.cosim.graph",
+    "NonFiniteStateError": "hptvsim.cosim.batched",
+    "Orchestrator": "hptvsim.cosim.orchestrator",
+    "Port": "hptvsim.cosim.graph",
+    "SimulationFailedError": "hptvsim.cosim.orchestrator",
+    "SimulationPausedError": "hptvsim.cosim.orchestrator",
+    "Snapshot": "hptvsim.cosim.orchestrator",
+    "SystemSpec": "hptvsim.cosim.system",
+    "Variable": "hptvsim.cosim.fmi2",
+    "VehicleSpec": "hptvsim.cosim.system",
+    "VehicleSystem": "hptvsim.cosim.system",
+    "load_graph": "hptvsim.cosim.graph",
+    "load_model": "hptvsim.cosim.fmi2",
+    "make_system": "hptvsim.cosim.system",
+    "save_graph": "hptvsim.cosim.graph",
+    "vehicle_graph": "hptvsim.cosim.system",
+}
+
+__getattr__ = lazy_getattr(__name__, _WHERE)

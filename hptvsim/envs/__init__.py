@@ -17,14 +17,18 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 import gymnasium
 
-from hptvsim.envs.batch import UPEGBatchEnv
-from hptvsim.envs.core import GameCore
-from hptvsim.envs.parallel import UPEGParallelEnv, parallel_env
-from hptvsim.envs.single import UPEGSingleAgentEnv, UPEGVectorEnv, make_sb3_vec_env
+from hptvsim._lazy import lazy_getattr
+from hptvsim.envs.ids import ENV_IDS, ENV_IDS_3D
+
+if TYPE_CHECKING:
+    from hptvsim.envs.batch import UPEGBatchEnv
+    from hptvsim.envs.core import GameCore
+    from hptvsim.envs.parallel import UPEGParallelEnv, parallel_env
+    from hptvsim.envs.single import UPEGSingleAgentEnv, UPEGVectorEnv, make_sb3_vec_env
 
 __all__ = [
     "ENV_IDS",
@@ -37,12 +41,18 @@ __all__ = [
     "parallel_env",
 ]
 
-ENV_IDS: dict[str, dict[str, Any]] = {
-    "hptvsim/UPEG-Pursuer-v0": {"scenario": "source", "agent": "pursuer_0", "task": "pursuit"},
-    "hptvsim/UPEG-Evader-v0": {"scenario": "source", "agent": "evader_0", "task": "pursuit"},
-    "hptvsim/Goto-v0": {"scenario": "goto_tiny", "task": "goto"},
-}
-"""Registered Gymnasium ids and their default arguments."""
+__getattr__ = lazy_getattr(
+    __name__,
+    {
+        "UPEGBatchEnv": "hptvsim.envs.batch",
+        "GameCore": "hptvsim.envs.core",
+        "UPEGParallelEnv": "hptvsim.envs.parallel",
+        "parallel_env": "hptvsim.envs.parallel",
+        "UPEGSingleAgentEnv": "hptvsim.envs.single",
+        "UPEGVectorEnv": "hptvsim.envs.single",
+        "make_sb3_vec_env": "hptvsim.envs.single",
+    },
+)
 
 
 def _register() -> None:
@@ -55,8 +65,6 @@ def _register() -> None:
                 kwargs=dict(kwargs),
                 disable_env_checker=False,
             )
-    from hptvsim.envs.game3d import ENV_IDS_3D
-
     for env_id, kwargs in ENV_IDS_3D.items():
         if env_id not in gymnasium.registry:
             gymnasium.register(

@@ -85,6 +85,7 @@ from pettingzoo import ParallelEnv
 
 from hptvsim.cosim.system import SIXDOF_LAYOUT, SystemSpec, VehicleSpec, VehicleSystem, make_system
 from hptvsim.envs.core import common_overrides, scenario_argument
+from hptvsim.envs.ids import ENV_IDS_3D
 from hptvsim.envs.parallel import AgentSpaces
 from hptvsim.envs.task import EndFlags, RewardTerms, bookkeeping, reward_terms, wrap
 from hptvsim.world.scenario import Scenario, Task, World
@@ -115,13 +116,6 @@ SPAWN_MARGIN: Final = 1.0
 
 OVERRIDABLE: Final = ("v_min", "v_max", "omega_max")
 """Group parameters the 3-D game passes to the 6-DOF vehicles (they exist in both parameter sets)."""
-
-ENV_IDS_3D: dict[str, dict[str, Any]] = {
-    "hptvsim/UPEG3D-Pursuer-v0": {"scenario": "dive_flat", "agent": "pursuer_0", "task": "pursuit"},
-    "hptvsim/UPEG3D-Evader-v0": {"scenario": "dive_flat", "agent": "evader_0", "task": "pursuit"},
-    "hptvsim/UPEG3D-Goto-v0": {"scenario": "dive_goto", "task": "goto"},
-}
-"""Registered Gymnasium ids of the 3-D game and their default arguments."""
 
 
 # --- the observation -------------------------------------------------------------------------------

@@ -16,9 +16,9 @@ The classes other than the settings are imported on first use, so that importing
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
+from hptvsim._lazy import lazy_getattr
 from hptvsim.sensors.config import AcousticLinkConfig, GaussMarkovConfig, SonarConfig
 
 if TYPE_CHECKING:
@@ -59,9 +59,4 @@ _LAZY = {
     "Sonar3dScan": "hptvsim.sensors.sonar3d",
 }
 
-
-def __getattr__(name: str) -> Any:
-    module = _LAZY.get(name)
-    if module is None:
-        raise AttributeError(f"module 'hptvsim.sensors' has no attribute {name!r}")
-    return getattr(importlib.import_module(module), name)
+__getattr__ = lazy_getattr(__name__, _LAZY)

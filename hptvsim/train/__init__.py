@@ -15,8 +15,7 @@ Names are imported lazily so that ``import hptvsim.train`` (and the CLI) stays f
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from hptvsim._lazy import lazy_getattr
 
 __all__ = [
     "IPPO",
@@ -42,8 +41,4 @@ _WHERE = {
     "train": "hptvsim.train.trainer",
 }
 
-
-def __getattr__(name: str) -> Any:
-    if name in _WHERE:
-        return getattr(importlib.import_module(_WHERE[name]), name)
-    raise AttributeError(f"module 'hptvsim.train' has no attribute {name!r}")
+__getattr__ = lazy_getattr(__name__, _WHERE)
