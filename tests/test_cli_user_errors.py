@@ -160,6 +160,10 @@ CASES: dict[str, tuple[list[str], tuple[str, ...]]] = {
         ("stage 'target'", "max_stepz", "max_steps"),
     ),
     "train-resume": (["train", "--resume", "--out", "empty"], ("empty", "config.toml")),
+    "train-3d-scenario": (
+        ["train", "quick", "--set", "stage.0.env.scenario=dive_goto", "--out", "run3d"],
+        ("dive_goto", "3d game", "planar game only", "make_sb3_vec_env_3d"),
+    ),
     "evaluate-run": (["evaluate", "empty"], ("empty", "config.toml")),
     "evaluate-policy": (
         ["evaluate", "--env", "toy:source/goto", "--policy", "nosuch", "--episodes", "1"],

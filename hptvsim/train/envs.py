@@ -31,6 +31,7 @@ from typing import Any
 __all__ = [
     "EnvFactory",
     "EnvSpec",
+    "check_game",
     "env_kinds",
     "env_options",
     "make_env_factory",
@@ -179,7 +180,33 @@ def _hptvsim_class(spec: EnvSpec) -> Callable[..., Any]:
     return UPEGParallelEnv
 
 
+def check_game(spec: EnvSpec) -> None:
+    """Refuse a 3-D scenario for kind ``hptvsim``, which trains the planar game.
+
+    Not silently played flat. A scenario that does not load is left to the env build to report.
+
+    Raises:
+        ValueError: A 3-D scenario for kind ``hptvsim`` (the message says what to do instead).
+    """
+    if spec.kind != "hptvsim":
+        return
+    from hptvsim.world.scenario import ScenarioError, load_scenario
+
+    try:
+        game = load_scenario(spec.scenario).simulation.game
+    except (ScenarioError, OSError, ValueError):
+        return
+    if game != "planar":
+        raise ValueError(
+            f"scenario {spec.scenario!r} is made for the {game} game ([simulation] game = {game!r}); "
+            "env.kind 'hptvsim' trains the planar game only so far: pick a planar scenario, or train "
+            "the 3-D game with hptvsim.envs.game3d (make_sb3_vec_env_3d, the hptvsim/UPEG3D-* "
+            "Gymnasium ids) in your own SB3 script"
+        )
+
+
 def _build_hptvsim(spec: EnvSpec) -> Any:
+    check_game(spec)
     try:
         envs = importlib.import_module("hptvsim.envs")
     except ImportError as exc:

@@ -93,3 +93,11 @@ def test_registry_builds_specs_and_names_unknown_kinds() -> None:
     assert len(env.possible_agents) == 4
     with pytest.raises(KeyError, match="registered kinds"):
         make_parallel_env(EnvSpec(kind="nope"))
+
+
+def test_kind_hptvsim_refuses_a_3d_scenario_instead_of_playing_it_flat() -> None:
+    with pytest.raises(ValueError, match=r"'dive_goto' is made for the 3d game.*make_sb3_vec_env_3d"):
+        make_parallel_env(EnvSpec(kind="hptvsim", scenario="dive_goto", task="goto"))
+    env = make_parallel_env(EnvSpec(kind="hptvsim", scenario="goto_tiny", task="goto"))  # planar: built
+    assert env.possible_agents == ["evader_0"]
+    env.close()
