@@ -177,6 +177,14 @@ CASES: dict[str, tuple[list[str], tuple[str, ...]]] = {
         ("nosuch", "section5"),
     ),
     "collect": (["collect", "--scenario", "nosuch", "--out", "ds"], ("nosuch", "target")),
+    "collect-3d-scenario": (
+        ["collect", "--scenario", "dive_flat", "--out", "ds3d"],
+        ("dive_flat", "3d game", "hptvsim collect plays the planar game only"),
+    ),
+    "dt-pipeline-3d-scenario": (
+        ["dt", "pipeline", "--scenario", "ridge_3d", "--out", "dtp3d"],
+        ("ridge_3d", "3d game", "planar game only"),
+    ),
     "dt-train": (["dt", "train", "--dataset", "nosuch", "--out", "dt"], ("nosuch", "hptvsim collect")),
     "dt-evaluate": (["dt", "evaluate", "garbage.pt"], ("garbage.pt", "not a readable DT policy")),
     "dt-figures": (["dt", "figures", "empty"], ("empty", "dt.pt")),

@@ -552,6 +552,33 @@ def scenario_argument(scenario: Scenario | str) -> Scenario:
     return sc
 
 
+def planar_scenario(scenario: Scenario | str, who: str) -> Scenario:
+    """``scenario`` as a Scenario, refused if it is made for the 3-D game.
+
+    The environments take any scenario (a 3-D one is played flat at its operating depth), but a
+    command that plays the planar game on a user's choice of scenario asks here, so that a 3-D
+    scenario is never trained, collected or evaluated flat by mistake.
+
+    Args:
+        scenario: A Scenario, a shipped scenario's name or a path.
+        who: What plays only the planar game, for the message (``"hptvsim collect"``).
+
+    Raises:
+        ValueError: A scenario whose ``[simulation] game`` is not ``planar``.
+        ScenarioError: No such scenario, or an invalid one.
+    """
+    sc = scenario_argument(scenario)
+    game = sc.simulation.game
+    if game != "planar":
+        raise ValueError(
+            f"scenario {sc.name!r} is made for the {game} game ([simulation] game = {game!r}); {who} "
+            "plays the planar game only so far: pick a planar scenario, or play the 3-D game with "
+            "hptvsim.envs.game3d (make_sb3_vec_env_3d, the hptvsim/UPEG3D-* Gymnasium ids) or "
+            "`hptvsim episode`"
+        )
+    return sc
+
+
 def common_overrides(
     sc: Scenario,
     *,

@@ -48,7 +48,7 @@ from typing import Any, Literal
 import numpy as np
 import numpy.typing as npt
 
-from hptvsim.envs.core import GameCore
+from hptvsim.envs.core import GameCore, planar_scenario
 from hptvsim.offline.rollout import Episode, play
 
 __all__ = [
@@ -336,7 +336,8 @@ def collect(
         raise ValueError(f"roles = {list(roles)} is invalid; valid: one or both of 'pursuer', 'evader'")
     if num_envs < 1 or episodes < 1:
         raise ValueError(f"episodes = {episodes}, num_envs = {num_envs}: both must be integers >= 1")
-    core = GameCore(scenario, num_envs=min(num_envs, episodes), max_steps=max_steps, seed=seed)
+    sc = planar_scenario(scenario, "hptvsim collect")
+    core = GameCore(sc, num_envs=min(num_envs, episodes), max_steps=max_steps, seed=seed)
     try:
         specs = resolve_policy_specs(core, pursuers=pursuers, evader=evader, overrides=overrides)
         groups: dict[str, list[str]] = {}

@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from hptvsim.envs.core import GameCore
+from hptvsim.envs.core import GameCore, planar_scenario
 from hptvsim.offline.dataset import RANDOM_SPEC, build_policies, versions
 from hptvsim.offline.policy import DEFAULT_TARGET, load_policy_file, policies_from_file, resolve_target
 from hptvsim.offline.rollout import Episode, episode_metrics, play
@@ -185,7 +185,7 @@ def evaluate_dt(
     metas = payload.get("provenance", {}).get("datasets", [])
     sc = scenario or (metas[0].get("scenario") if metas else None) or "target"
     b = num_envs or min(episodes, 100)
-    core = GameCore(sc, num_envs=b, max_steps=max_steps, seed=seed)
+    core = GameCore(planar_scenario(sc, "hptvsim dt evaluate"), num_envs=b, max_steps=max_steps, seed=seed)
     notes: list[str] = []
     try:
         pursuers = [a for a, p in zip(core.agents, core.pursuer, strict=True) if p]

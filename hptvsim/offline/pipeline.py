@@ -58,7 +58,7 @@ def figures_for_run(
     The episode: the DT pursuers (conditioned on ``target``) against the evader, one environment
     reset with ``seed``.
     """
-    from hptvsim.envs.core import GameCore
+    from hptvsim.envs.core import GameCore, planar_scenario
     from hptvsim.offline.evaluate import expert_specs
     from hptvsim.offline.figures import distance_figures, loss_curves, trajectory_figure
     from hptvsim.offline.policy import load_policy_file, policies_from_file
@@ -72,7 +72,7 @@ def figures_for_run(
     metas = payload.get("provenance", {}).get("datasets", [])
     specs = expert_specs(payload)
     sc = scenario or (metas[0].get("scenario") if metas else None) or "target"
-    core = GameCore(sc, num_envs=1, max_steps=max_steps, seed=seed)
+    core = GameCore(planar_scenario(sc, "hptvsim dt figures"), num_envs=1, max_steps=max_steps, seed=seed)
     try:
         pursuers = [a for a, p in zip(core.agents, core.pursuer, strict=True) if p]
         dts = policies_from_file(policy_file, core, pursuers, target_return=target)

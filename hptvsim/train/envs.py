@@ -190,19 +190,14 @@ def check_game(spec: EnvSpec) -> None:
     """
     if spec.kind != "hptvsim":
         return
+    from hptvsim.envs.core import planar_scenario
     from hptvsim.world.scenario import ScenarioError, load_scenario
 
     try:
-        game = load_scenario(spec.scenario).simulation.game
+        sc = load_scenario(spec.scenario)
     except (ScenarioError, OSError, ValueError):
         return
-    if game != "planar":
-        raise ValueError(
-            f"scenario {spec.scenario!r} is made for the {game} game ([simulation] game = {game!r}); "
-            "env.kind 'hptvsim' trains the planar game only so far: pick a planar scenario, or train "
-            "the 3-D game with hptvsim.envs.game3d (make_sb3_vec_env_3d, the hptvsim/UPEG3D-* "
-            "Gymnasium ids) in your own SB3 script"
-        )
+    planar_scenario(sc, "env.kind 'hptvsim'")
 
 
 def _build_hptvsim(spec: EnvSpec) -> Any:
