@@ -37,7 +37,9 @@ from hptvsim.envs.policies import POLICY_NAMES, POLICY_ROLES, Limits, Policy, ma
 from hptvsim.envs.policies3d import POLICY_NAMES_3D, make_policy_3d
 
 __all__ = [
+    "CHECKPOINT_GAMES",
     "GAMES",
+    "Commands3D",
     "PolicyInfo",
     "PolicyLoader",
     "UnknownPolicyError",
@@ -52,8 +54,12 @@ __all__ = [
 GAMES: Final = ("planar", "3d")
 """The games a policy may play (:attr:`hptvsim.world.scenario.Simulation.game`)."""
 
-PolicyLoader = Callable[[Path, GameCore, str], Policy]
+PolicyLoader = Callable[[Path, "GameCore | Game3DCore", str], Policy]
 """Builds a policy for agent ``agent`` of ``core`` from a checkpoint file."""
+
+CHECKPOINT_GAMES: Final[dict[str, tuple[str, ...]]] = {"sb3": GAMES, "dt": ("planar",)}
+"""The games each checkpoint kind can play: an SB3 model observes either game's layout; the
+Decision Transformer is trained on the planar game's datasets only."""
 
 _LOADERS: dict[str, PolicyLoader] = {}
 _LOADER_MODULES: dict[str, str] = {
@@ -195,7 +201,8 @@ def check_policy_spec(
         UnknownPolicyError: Not a name of the zoo, nor (with ``allow_paths``) a checkpoint spec;
             the message lists the policies that drive ``role``.
         ValueError: A policy for another role or game, a path while paths are not allowed, or a
-            checkpoint file that does not exist (or any checkpoint in the 3-D game).
+            checkpoint file that does not exist (or a kind of checkpoint the game cannot play:
+            :data:`CHECKPOINT_GAMES`).
     """
     infos = list_policies()
     valid = [p.name for p in infos if role in p.roles and game in p.games]
@@ -217,10 +224,12 @@ def check_policy_spec(
         return
     kind, sep, path = spec.partition(":")
     if sep and kind in _LOADER_MODULES:
-        if game != "planar":
+        if game not in CHECKPOINT_GAMES.get(kind, ("planar",)):
+            kinds = [k for k, games in CHECKPOINT_GAMES.items() if game in games]
             raise ValueError(
-                f"policy {spec!r}: checkpoint files play the planar game only so far; "
-                f"valid in the {game} game: {', '.join(valid)}"
+                f"policy {spec!r}: {kind} checkpoint files play the "
+                f"{' and '.join(CHECKPOINT_GAMES.get(kind, ('planar',)))} game only; valid in the "
+                f"{game} game: {', '.join(valid)}, or a checkpoint of kind {', '.join(kinds)}"
             )
         if not allow_paths:
             raise ValueError(
@@ -234,8 +243,12 @@ def check_policy_spec(
     raise UnknownPolicyError(f"unknown policy {spec!r}; valid for {who}: {', '.join(valid)}{files}")
 
 
-class _Commands3D:
-    """A 3-D scripted policy with SI actions ``[v, omega, w_z]`` (the zoo's convention)."""
+class Commands3D:
+    """A 3-D policy of normalised actions with SI actions ``[v, omega, w_z]`` (the zoo's convention).
+
+    The policy is scripted, or a model trained on the 3-D envs; :meth:`Game3DCore.commands_of`
+    maps its actions.
+    """
 
     def __init__(self, policy: Policy, core: Game3DCore, index: int) -> None:
         self.policy = policy
@@ -258,7 +271,8 @@ def load_policy(
             scripted policy), or, with ``allow_paths``, ``<kind>:<path>`` for a checkpoint file.
         core: The game the policy will play (observation layout, limits, beams): planar, or
             the 3-D game (scripted policies of :data:`~hptvsim.envs.policies3d.POLICY_NAMES_3D`
-            only; their actions ``[v, omega, w_z]`` in SI units).
+            and SB3 models trained on the 3-D envs; their actions ``[v, omega, w_z]`` in SI
+            units).
         agent: The agent it drives.
         seed: Seed of stochastic policies (``random``).
         allow_paths: Also load a checkpoint file the spec names. A checkpoint is code (SB3 zips
@@ -275,9 +289,9 @@ def load_policy(
     game = "3d" if isinstance(core, Game3DCore) else "planar"
     check_policy_spec(spec, _role(core, agent), allow_paths=allow_paths, agent=agent, game=game)
     name = spec.removeprefix("scripted:")
-    if isinstance(core, Game3DCore):
-        return _Commands3D(make_policy_3d(name, core.layout), core, core.agents.index(agent))
-    if name in POLICY_NAMES:
+    if isinstance(core, Game3DCore) and name in POLICY_NAMES_3D:
+        return Commands3D(make_policy_3d(name, core.layout), core, core.agents.index(agent))
+    if name in POLICY_NAMES and isinstance(core, GameCore):
         i = core.agents.index(agent)
         v_min, v_max, om = core.robots.limits[i]
         return make_policy(

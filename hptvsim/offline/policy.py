@@ -37,6 +37,7 @@ import numpy.typing as npt
 import torch
 
 from hptvsim.envs.core import GameCore
+from hptvsim.envs.game3d import Game3DCore
 from hptvsim.envs.task import reward_terms
 from hptvsim.offline.model import DecisionTransformer, DTConfig
 
@@ -351,8 +352,15 @@ def _check_fits(payload: Mapping[str, Any], m: int, core: GameCore, agent: str, 
         )
 
 
-def load_dt(path: Path, core: GameCore, agent: str) -> DTPolicy:
-    """The zoo loader of kind ``dt``: the file's model for ``agent``, targeting :data:`DEFAULT_TARGET`."""
+def load_dt(path: Path, core: GameCore | Game3DCore, agent: str) -> DTPolicy:
+    """The zoo loader of kind ``dt``: the file's model for ``agent``, targeting :data:`DEFAULT_TARGET`.
+
+    Raises:
+        ValueError: ``core`` is the 3-D game (the DT is trained on planar datasets only; the zoo
+            refuses the spec before it gets here).
+    """
+    if not isinstance(core, GameCore):
+        raise ValueError(f"{path}: a Decision Transformer plays the planar game only")
     return policies_from_file(path, core, [agent])[agent]
 
 

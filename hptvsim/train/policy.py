@@ -14,8 +14,9 @@ import numpy as np
 import numpy.typing as npt
 
 from hptvsim.envs.core import GameCore
+from hptvsim.envs.game3d import Game3DCore
 from hptvsim.envs.task import EXTENDED_SIZE, fill_extended
-from hptvsim.zoo import register_loader
+from hptvsim.zoo import Commands3D, register_loader
 
 __all__ = ["ExtendedObservation", "SB3Policy", "load_sb3_model"]
 
@@ -117,8 +118,16 @@ class SB3Policy:
         return result
 
 
-def _load(path: Path, core: GameCore, agent: str) -> SB3Policy:
+def _load(path: Path, core: GameCore | Game3DCore, agent: str) -> SB3Policy | Commands3D:
     model = load_sb3_model(path)
+    if isinstance(core, Game3DCore):
+        # a model of the 3-D envs (make_sb3_vec_env_3d, the UPEG3D ids): normalised actions
+        if model.action_space.shape != (3,):
+            raise ValueError(
+                f"{path}: the model acts in {model.action_space.shape}, the 3-D game takes 3 normalised "
+                "values [v, omega, w_z]; it was trained on another game"
+            )
+        return Commands3D(SB3Policy(model, obs_size=core.layout.size), core, core.agents.index(agent))
     size = core.layout.size
     wants = model.observation_space.shape[0]
     extend = None

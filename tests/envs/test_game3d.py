@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import tempfile
 import warnings
+from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
@@ -219,6 +221,18 @@ def test_sac_learns_to_reach_a_3d_goal() -> None:
     # 10.0 and 9.9 m), from 0 of 10 untrained (64.0 and 62.8 m)
     assert before[0] == 0.0 and before[1] > 50.0, before
     assert after[0] >= 0.8 and after[1] < 12.0, after
+    # the trained model as a zoo policy (sb3:<zip>) in the episode runner reaches the goal too
+    from hptvsim.viz.episode import run_episode
+
+    with tempfile.TemporaryDirectory() as tmp:
+        model.save(Path(tmp) / "diver.zip")
+        spec = f"sb3:{Path(tmp) / 'diver.zip'}"
+        runs = [
+            run_episode("dive_goto", {"evader_0": spec}, seed=100 + k, max_steps=300, allow_paths=True)
+            for k in range(5)
+        ]
+    outcomes = [r.outcome for r in runs]
+    assert outcomes.count("reached") >= 4, outcomes
 
 
 def test_currents_follow_the_seventh_power_profile_with_depth() -> None:

@@ -53,3 +53,38 @@ def test_a_model_of_another_layout_is_refused_with_the_reason(tmp_path: Path) ->
     file = _save_untrained_sac(tmp_path / "odd", 7, np.array([0.0, -1.0]), np.array([1.0, 1.0]))
     with pytest.raises(ValueError, match="trained on another layout"):
         load_policy(f"sb3:{file}", core, "pursuer_0", allow_paths=True)
+
+
+def test_a_model_of_the_3d_envs_drives_a_3d_episode_in_si_units(tmp_path: Path) -> None:
+    """An SB3 model trained on the 3-D envs (normalised [a_v, a_omega, a_w]) loads from
+    ``sb3:<zip>`` in the 3-D game: the zoo's SI actions are the model's mapped by the game's
+    limits, and the episode runner plays it."""
+    from hptvsim.envs.game3d import Game3DCore
+    from hptvsim.viz.episode import run_episode
+    from hptvsim.zoo import check_policy_spec
+
+    core = Game3DCore("dive_goto", seed=3)
+    file = _save_untrained_sac(tmp_path / "diver", core.layout.size, -np.ones(3), np.ones(3))
+    policy = load_policy(f"sb3:{file}", core, "evader_0", allow_paths=True)
+    from stable_baselines3 import SAC
+
+    model = SAC.load(file, device="cpu")
+    obs = core.reset(seed=3)
+    for _ in range(5):
+        raw = model.predict(obs[:, 0], deterministic=True)[0]
+        si = policy.act(obs[:, 0])
+        np.testing.assert_allclose(si, core.commands_of(raw, 0), rtol=0, atol=1e-12)
+        v_min, v_max, omega_max, w_z_max = core.limits[0]
+        assert v_min <= si[0, 0] <= v_max and abs(si[0, 1]) <= omega_max and abs(si[0, 2]) <= w_z_max
+        obs = core.step(raw[None]).obs.copy()
+    result = run_episode("dive_goto", {"evader_0": f"sb3:{file}"}, seed=3, max_steps=30, allow_paths=True)
+    assert result.summary.steps == 30 and result.static.game == "3d"
+    assert result.static.agents[0].policy == f"sb3:{file}"
+    # a planar model is refused in the 3-D game with the reason, and a DT checkpoint by its kind
+    planar = _save_untrained_sac(tmp_path / "flat", 20, np.array([0.0, -1.0]), np.array([1.0, 1.0]))
+    with pytest.raises(ValueError, match=r"acts in \(2,\).*3 normalised"):
+        load_policy(f"sb3:{planar}", core, "evader_0", allow_paths=True)
+    dt = tmp_path / "dt.pt"
+    dt.write_bytes(b"")
+    with pytest.raises(ValueError, match="dt checkpoint files play the planar game only"):
+        check_policy_spec(f"dt:{dt}", "pursuer", allow_paths=True, game="3d")
