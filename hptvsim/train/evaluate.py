@@ -271,6 +271,18 @@ class _ActAdapter:
         return np.asarray(action, dtype=np.float32).reshape(-1)
 
 
+def _in_env_units(policy: Any) -> Any:
+    """A zoo policy acting as the environment takes actions.
+
+    The zoo's policies act in SI units (``[v, omega]``, ``[v, omega, w_z]``), as the planar envs
+    take them; the 3-D envs take normalised actions, which the zoo's 3-D policies wrap
+    (:class:`~hptvsim.zoo.Commands3D`): the wrapped policy is the one the env takes.
+    """
+    from hptvsim.zoo import Commands3D
+
+    return policy.policy if isinstance(policy, Commands3D) else policy
+
+
 def reset_policies(policies: Mapping[str, Any]) -> None:
     """Tell stateful policies (those with ``reset()``) that an episode starts."""
     for p in policies.values():
@@ -317,7 +329,7 @@ def policy_from_spec(spec: str, env: Any, agent: str) -> Policy:
         elif hasattr(env, "core"):  # the underwater game: the zoo's scripted policies (roles checked)
             from hptvsim.zoo import load_policy
 
-            scripted = load_policy(f"scripted:{rest}", env.core, agent)
+            scripted = _in_env_units(load_policy(f"scripted:{rest}", env.core, agent))
         else:
             raise ValueError(f"scripted policies need the underwater game (hptvsim.envs); {env!r} is not")
         return _ActAdapter(scripted) if hasattr(scripted, "act") else scripted
@@ -325,7 +337,7 @@ def policy_from_spec(spec: str, env: Any, agent: str) -> Policy:
         from hptvsim.zoo import UnknownPolicyError, load_policy
 
         try:
-            return _ActAdapter(load_policy(spec, env.core, agent, allow_paths=True))
+            return _ActAdapter(_in_env_units(load_policy(spec, env.core, agent, allow_paths=True)))
         except UnknownPolicyError as exc:
             raise ValueError(f"{exc}; also valid: run:RUN_DIR[@STAGE], zip:PATH, random") from None
     raise ValueError(

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 from train_helpers import toy_config
@@ -244,3 +245,26 @@ def test_stages_of_different_curricula_share_a_segment_by_name() -> None:
     assert stage_segments([stt, target_only]) == ["source", "transition", "target"]
     assert stage_segments([target_only, stt]) == ["source", "transition", "target"]
     assert stage_segments([target_only]) == ["target"]
+
+
+def test_zoo_policies_act_in_the_3d_envs_units() -> None:
+    """The 3-D envs take normalised actions, the zoo acts in SI: evaluating a zoo spec on a 3-D
+    env feeds the env the policy's normalised actions (not SI values clipped to [-1, 1])."""
+    from hptvsim.envs.game3d import parallel_env_3d
+    from hptvsim.zoo import load_policy
+
+    env = parallel_env_3d("dive_flat", max_steps=2500)
+    obs, _ = env.reset(seed=1)
+    zoo = load_policy("scripted:pure_pursuit", env.core, "pursuer_0")
+    for spec in ("scripted:pure_pursuit", "pure_pursuit"):  # the scripted kind and the zoo's name
+        action = policy_from_spec(spec, env, "pursuer_0")(obs["pursuer_0"])
+        assert np.all(np.abs(action) <= 1.0)
+        si = zoo.act(obs["pursuer_0"][None])[0]
+        np.testing.assert_allclose(env.core.commands_of(action, 0), si, rtol=0, atol=1e-5)
+    env.close()
+    result = evaluate(
+        lambda: parallel_env_3d("dive_flat", max_steps=2500),
+        policies_from_specs("scripted:pure_pursuit", {"evader": "scripted:stationary"}),
+        episodes=3,
+    )
+    assert result.summary["capture_rate"]["mean"] == 1.0, result.summary
