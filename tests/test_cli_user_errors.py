@@ -160,9 +160,18 @@ CASES: dict[str, tuple[list[str], tuple[str, ...]]] = {
         ("stage 'target'", "max_stepz", "max_steps"),
     ),
     "train-resume": (["train", "--resume", "--out", "empty"], ("empty", "config.toml")),
-    "train-3d-scenario": (
-        ["train", "quick", "--set", "stage.0.env.scenario=dive_goto", "--out", "run3d"],
-        ("dive_goto", "3d game", "planar game only", "make_sb3_vec_env_3d"),
+    "train-3d-option": (
+        [
+            "train",
+            "quick",
+            "--set",
+            "stage.0.env.scenario=dive_goto",
+            "--set",
+            "stage.0.env.options.azimuth_beamz=8",
+            "--out",
+            "run3d",
+        ],
+        ("azimuth_beamz", "azimuth_beams", "elevation_beams"),  # the 3-D env's options
     ),
     "evaluate-run": (["evaluate", "empty"], ("empty", "config.toml")),
     "evaluate-policy": (

@@ -573,8 +573,8 @@ def planar_scenario(scenario: Scenario | str, who: str) -> Scenario:
         raise ValueError(
             f"scenario {sc.name!r} is made for the {game} game ([simulation] game = {game!r}); {who} "
             "plays the planar game only so far: pick a planar scenario, or play the 3-D game with "
-            "hptvsim.envs.game3d (make_sb3_vec_env_3d, the hptvsim/UPEG3D-* Gymnasium ids) or "
-            "`hptvsim episode`"
+            "`hptvsim train`, `hptvsim episode` or hptvsim.envs.game3d (make_sb3_vec_env_3d, the "
+            "hptvsim/UPEG3D-* Gymnasium ids)"
         )
     return sc
 

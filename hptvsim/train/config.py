@@ -41,7 +41,7 @@ from types import MappingProxyType
 from typing import Any, Literal, TypeVar, get_args, get_origin
 
 from hptvsim._paths import shipped_dir
-from hptvsim.train.envs import EnvSpec, check_game, env_kinds, env_options
+from hptvsim.train.envs import EnvSpec, env_kinds, env_options
 
 __all__ = [
     "Carry",
@@ -418,10 +418,6 @@ def check_env_spec(spec: EnvSpec, where: str) -> None:
         raise ConfigError(
             f"{where}: env.kind {spec.kind!r} is unknown; valid: {', '.join(env_kinds())}"
         ) from None
-    try:
-        check_game(spec)
-    except ValueError as exc:
-        raise ConfigError(f"{where}: {exc}") from None
     if options is None:
         return
     unknown = [k for k in spec.options if k not in options]

@@ -9,7 +9,9 @@ of *kinds* below:
     :class:`hptvsim.train.toy.PointMassGame`, a tiny unicycle goto / pursuit game whose good
     policy is obvious (tests, benchmarks, smoke runs).
 ``hptvsim``
-    The underwater pursuit-evasion game of :mod:`hptvsim.envs` (imported when first built).
+    The underwater pursuit-evasion game of :mod:`hptvsim.envs` (imported when first built): the
+    planar game, or the 3-D game (:mod:`hptvsim.envs.game3d`) for a scenario made for it
+    (``[simulation] game = "3d"``).
 ``entry_point``
     Any callable named ``"package.module:attribute"`` in ``options["entry_point"]``; the other
     options are passed to it as keyword arguments.
@@ -31,12 +33,12 @@ from typing import Any
 __all__ = [
     "EnvFactory",
     "EnvSpec",
-    "check_game",
     "env_kinds",
     "env_options",
     "make_env_factory",
     "make_parallel_env",
     "register_env_kind",
+    "scenario_game",
 ]
 
 EnvFactory = Callable[[], Any]
@@ -174,34 +176,30 @@ def _build_toy(spec: EnvSpec) -> Any:
     return _toy_class(spec)(task=spec.task, scenario=spec.scenario, **dict(spec.options))
 
 
+def scenario_game(spec: EnvSpec) -> str:
+    """The game kind ``hptvsim`` plays for ``spec``: its scenario's ``[simulation] game``.
+
+    A scenario that does not load counts as planar here; building the env then reports why.
+    """
+    from hptvsim.world.scenario import ScenarioError, load_scenario
+
+    try:
+        return load_scenario(spec.scenario).simulation.game
+    except (ScenarioError, OSError, ValueError):
+        return "planar"
+
+
 def _hptvsim_class(spec: EnvSpec) -> Callable[..., Any]:
+    if scenario_game(spec) == "3d":
+        from hptvsim.envs.game3d import UPEG3DParallelEnv
+
+        return UPEG3DParallelEnv
     from hptvsim.envs.parallel import UPEGParallelEnv
 
     return UPEGParallelEnv
 
 
-def check_game(spec: EnvSpec) -> None:
-    """Refuse a 3-D scenario for kind ``hptvsim``, which trains the planar game.
-
-    Not silently played flat. A scenario that does not load is left to the env build to report.
-
-    Raises:
-        ValueError: A 3-D scenario for kind ``hptvsim`` (the message says what to do instead).
-    """
-    if spec.kind != "hptvsim":
-        return
-    from hptvsim.envs.core import planar_scenario
-    from hptvsim.world.scenario import ScenarioError, load_scenario
-
-    try:
-        sc = load_scenario(spec.scenario)
-    except (ScenarioError, OSError, ValueError):
-        return
-    planar_scenario(sc, "env.kind 'hptvsim'")
-
-
 def _build_hptvsim(spec: EnvSpec) -> Any:
-    check_game(spec)
     try:
         envs = importlib.import_module("hptvsim.envs")
     except ImportError as exc:
@@ -209,6 +207,10 @@ def _build_hptvsim(spec: EnvSpec) -> Any:
             "environment kind 'hptvsim' needs the hptvsim.envs package, which could not be imported "
             f"({exc}); use kind = 'toy' for the training stack's own test game"
         ) from exc
+    if scenario_game(spec) == "3d":  # the game the scenario is made for: the 3-D game of diving vehicles
+        from hptvsim.envs.game3d import parallel_env_3d
+
+        return parallel_env_3d(scenario=spec.scenario, task=spec.task, **dict(spec.options))
     make = getattr(envs, "parallel_env", None)
     if make is None:
         raise RuntimeError("hptvsim.envs has no parallel_env(scenario=..., task=..., **options) factory")

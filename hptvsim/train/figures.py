@@ -479,6 +479,15 @@ def final_reward_figure(
     return fig
 
 
+def _north_east(info: Mapping[str, Any]) -> tuple[float, float] | None:
+    """An agent's (north, east) position [m] from its info: ``position`` (planar game) or ``x, y`` (3-D)."""
+    if "position" in info:
+        return float(info["position"][0]), float(info["position"][1])
+    if "x" in info and "y" in info:
+        return float(info["x"]), float(info["y"])
+    return None
+
+
 def trajectories(run_dir: Path, out: Path, *, seed: int = 0) -> list[Path]:
     """One deterministic episode per finished stage with that stage's models; tracks from ``infos``."""
     import matplotlib
@@ -506,13 +515,13 @@ def trajectories(run_dir: Path, out: Path, *, seed: int = 0) -> list[Path]:
             for a, i in infos.items():
                 if "goal" in i:
                     goals[a] = (float(i["goal"][0]), float(i["goal"][1]))
-                if "position" in i:
-                    tracks[a].append((float(i["position"][0]), float(i["position"][1])))
+                if (xy := _north_east(i)) is not None:
+                    tracks[a].append(xy)
             while env.agents:
                 obs, _, _, _, infos = env.step({a: policies[a](obs[a]) for a in env.agents})
                 for a, i in infos.items():
-                    if "position" in i:
-                        tracks[a].append((float(i["position"][0]), float(i["position"][1])))
+                    if (xy := _north_east(i)) is not None:
+                        tracks[a].append(xy)
         finally:
             env.close()
         if not tracks:

@@ -95,9 +95,15 @@ def test_registry_builds_specs_and_names_unknown_kinds() -> None:
         make_parallel_env(EnvSpec(kind="nope"))
 
 
-def test_kind_hptvsim_refuses_a_3d_scenario_instead_of_playing_it_flat() -> None:
-    with pytest.raises(ValueError, match=r"'dive_goto' is made for the 3d game.*make_sb3_vec_env_3d"):
-        make_parallel_env(EnvSpec(kind="hptvsim", scenario="dive_goto", task="goto"))
-    env = make_parallel_env(EnvSpec(kind="hptvsim", scenario="goto_tiny", task="goto"))  # planar: built
-    assert env.possible_agents == ["evader_0"]
+def test_kind_hptvsim_plays_the_game_its_scenario_is_made_for() -> None:
+    from hptvsim.envs.game3d import UPEG3DParallelEnv
+    from hptvsim.envs.parallel import UPEGParallelEnv
+
+    env = make_parallel_env(
+        EnvSpec(kind="hptvsim", scenario="dive_goto", task="goto", options={"max_steps": 50})
+    )
+    assert isinstance(env, UPEG3DParallelEnv) and env.action_space("evader_0").shape == (3,)
+    env.close()
+    env = make_parallel_env(EnvSpec(kind="hptvsim", scenario="goto_tiny", task="goto"))  # planar
+    assert isinstance(env, UPEGParallelEnv) and env.action_space("evader_0").shape == (2,)
     env.close()
