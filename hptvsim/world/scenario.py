@@ -470,8 +470,8 @@ class Simulation:
     seed: int = spec(0, doc="seed of spawn positions and sensor noise", ge=0, le=MAX_SEED)
     game: Literal["planar", "3d"] = spec(
         "planar",
-        doc="the game the episode runner, the service and the dashboard play on this scenario: "
-        "'planar' (the paper's game: every vehicle at site.operating_depth, hptvsim.envs) or '3d' "
+        doc="the game the episode runner, hptvsim train, the service and the dashboard play on this "
+        "scenario: 'planar' (the paper's game: every vehicle at site.operating_depth, hptvsim.envs) or '3d' "
         "(6-DOF vehicles that dive, hptvsim.envs.game3d); the Gymnasium and PettingZoo "
         "environments take any scenario",
     )
