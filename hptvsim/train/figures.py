@@ -233,6 +233,21 @@ def reward_curve_figures(
                 partial = [
                     of(r, stage)[role] for r, done in runs if stage not in done and role in of(r, stage)
                 ]
+                if series:
+                    arr = _stack(series, smooth)
+                    n = arr.shape[1]
+                    n_max = max(n_max, n)
+                    x = offset + np.arange(1, n + 1)
+                    mean, half = arr.mean(0), _t_half(arr)
+                    ax.plot(
+                        x,
+                        mean,
+                        color=color,
+                        label=None if label in labelled else _seeds_text(label, counts[label]),
+                    )
+                    labelled.add(label)
+                    if len(series) > 1:
+                        ax.fill_between(x, mean - half, mean + half, color=color, alpha=0.2, linewidth=0)
                 for part in partial:  # a stage still training: each run dotted, outside the band
                     y = _smooth(np.asarray(part, dtype=np.float64), smooth)
                     n_max = max(n_max, len(y))
@@ -242,22 +257,6 @@ def reward_curve_figures(
                     ax.plot(
                         [], [], color=color, linestyle=":", label=f"{label}, still training (not counted)"
                     )
-                if not series:
-                    continue
-                arr = _stack(series, smooth)
-                n = arr.shape[1]
-                n_max = max(n_max, n)
-                x = offset + np.arange(1, n + 1)
-                mean, half = arr.mean(0), _t_half(arr)
-                ax.plot(
-                    x,
-                    mean,
-                    color=color,
-                    label=None if label in labelled else _seeds_text(label, counts[label]),
-                )
-                labelled.add(label)
-                if len(series) > 1:
-                    ax.fill_between(x, mean - half, mean + half, color=color, alpha=0.2, linewidth=0)
             if s_idx > 0:
                 ax.axvline(offset + 0.5, color="grey", linestyle="--", linewidth=0.8)
             ax.text(
