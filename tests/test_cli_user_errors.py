@@ -207,6 +207,10 @@ CASES: dict[str, tuple[list[str], tuple[str, ...]]] = {
     "bench-episode": (["bench", "episode", "--scenario", "nosuch"], ("nosuch", "target")),
     "bench-world": (["bench", "world", "--nosuch"], ("--nosuch", "No such option")),
     "bench-train": (["bench", "train", "--env", "nosuch"], ("nosuch", "hptvsim")),
+    "bench-env-3d": (
+        ["bench", "env", "--quick", "--scenario", "ridge_3d"],
+        ("ridge_3d", "3d game", "planar"),
+    ),
     "bench-dt": (["bench", "dt", "--nosuch"], ("--nosuch", "No such option")),
     "bench-service": (["bench", "service", "--url", "http://127.0.0.1:9"], ("127.0.0.1:9", "no hptvsim")),
 }

@@ -21,7 +21,13 @@ def register(main: click.Group, bench: click.Group) -> None:
         from hptvsim.world.scenario import ScenarioError, load_scenario
 
         try:
-            load_scenario(scenario)
+            sc = load_scenario(scenario)
         except ScenarioError as exc:
             raise click.BadParameter(str(exc), param_hint="--scenario") from None
+        if sc.simulation.game != "planar":  # the 3-D rows always run dive_flat
+            raise click.BadParameter(
+                f"{scenario!r} is made for the {sc.simulation.game} game; --scenario picks the planar "
+                "game's rows, so it takes a planar scenario (the 3-D rows run dive_flat)",
+                param_hint="--scenario",
+            )
         emit(bench_env(quick=quick, scenario=scenario), as_json)
