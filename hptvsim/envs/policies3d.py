@@ -7,7 +7,7 @@ Every policy follows the planar :class:`~hptvsim.envs.policies.Policy` interface
 :mod:`hptvsim.envs.game3d`). The names are the planar ones:
 
 * :class:`PurePursuit3D` (``"pure_pursuit"``): yaw rate towards the target's bearing, vertical
-  speed towards its depth, full speed;
+  speed towards its depth, full speed, climbing over a seabed that rises ahead;
 * :class:`PotentialField3D` (``"potential_field"``): the evader's flight away from the nearest
   pursuer, steering clear of close sonar returns and keeping an altitude above the seabed;
 * :class:`Stationary3D` (``"stationary"``): ``v_min``, no turn, no vertical speed.
@@ -59,6 +59,15 @@ class PurePursuit3D:
     it over. At half speed and 0.3 m/s (the defaults: ``max_vertical = 0.3`` of ``w_z_max = 1``)
     its pitch stays within about 15 degrees. While the altitude is below ``min_altitude`` [m] the
     vehicle does not dive (the seabed comes first), and it does not climb above ``min_depth`` [m].
+
+    **Over, not around** (``climb_over``, on by default). Repulsion alone leaves a pursuer stuck
+    in front of a ridge across its line of sight (the local minimum of every potential field). So
+    the returns of the forward beams (``|azimuth| <= 45`` degrees, level or looking down) closer
+    than ``look_ahead`` [m] horizontally give the seabed's height ahead: a return at range ``r``
+    and elevation ``e`` (positive down) lies ``r sin(e)`` [m] below the sonar. When the least of
+    these is under ``min_altitude``, the vehicle climbs at ``max_vertical`` (slowing as when it
+    dives), and those forward returns push it sideways no more: it goes over the ridge. Above
+    ``min_depth`` it cannot climb, and it turns away as before.
     """
 
     def __init__(
@@ -73,11 +82,18 @@ class PurePursuit3D:
         min_depth: float = 3.0,
         avoid_distance: float = 12.0,
         avoid_weight: float = 8.0,
+        climb_over: bool = True,
+        look_ahead: float = 25.0,
     ) -> None:
         self.layout = layout
         self.avoid_distance = avoid_distance  # m
         self.avoid_weight = avoid_weight
         self.near_level = np.flatnonzero(np.abs(layout.elevation) < math.radians(45.0))
+        self.climb_over = climb_over
+        self.look_ahead = look_ahead  # m, horizontally
+        ahead = (np.abs(layout.azimuth) <= math.radians(45.0) + 1e-9) & (layout.elevation >= -1e-9)
+        self.ahead = np.flatnonzero(ahead)
+        self.ahead_among_near = ahead[self.near_level]  # which repulsive beams look ahead
         self.full_turn_error = full_turn_error  # rad
         self.full_dive_error = full_dive_error  # m
         self.max_vertical = max_vertical  # fraction of w_z_max
@@ -89,22 +105,38 @@ class PurePursuit3D:
         """See :class:`~hptvsim.envs.policies.Policy` (normalised actions ``(..., 3)``)."""
         q = self.layout.decode(obs)
         bearing = q["bearing"]
+        clearance = self._clearance(q)  # m, the seabed ahead under the sonar
+        can_climb = q["depth"] >= self.min_depth
+        climb = (clearance < self.min_altitude) & can_climb
         if self.avoid_weight > 0.0 and self.near_level.size:
             r = np.maximum(q["ranges"][..., self.near_level], 0.5)
             beam = self.layout.azimuth[self.near_level]
             push = np.where(
                 r < self.avoid_distance, self.avoid_weight * (1.0 / r - 1.0 / self.avoid_distance), 0.0
             )
+            push = np.where(climb[..., None] & self.ahead_among_near, 0.0, push)  # over, not round
             dx = np.cos(bearing) - (push * np.cos(beam)).sum(axis=-1)
             dy = np.sin(bearing) - (push * np.sin(beam)).sum(axis=-1)
             bearing = np.arctan2(dy, dx)
         a_omega = np.clip(bearing / self.full_turn_error, -1.0, 1.0)
         a_w = self.max_vertical * np.clip(q["depth_difference"] / self.full_dive_error, -1.0, 1.0)
-        a_w = np.where(q["altitude"] < self.min_altitude, np.minimum(a_w, 0.0), a_w)
+        low = np.minimum(q["altitude"], clearance) < 2.0 * self.min_altitude  # no dive into the slope ahead
+        a_w = np.where(low, np.minimum(a_w, 0.0), a_w)
+        a_w = np.where(climb, -self.max_vertical, a_w)
         a_w = np.where(q["depth"] < self.min_depth, np.maximum(a_w, 0.0), a_w)
         fraction = 1.0 - self.dive_slowdown * np.abs(a_w) / self.max_vertical  # of the speed range
         result: F64 = np.stack([2.0 * fraction - 1.0, a_omega, a_w], axis=-1)
         return result
+
+    def _clearance(self, q: Mapping[str, F64]) -> F64:
+        """Least depth [m] of the forward returns within ``look_ahead`` below the sonar (inf: none)."""
+        if not self.climb_over or not self.ahead.size:
+            return np.full(np.shape(q["depth"]), np.inf)
+        r = q["ranges"][..., self.ahead]  # m
+        e = self.layout.elevation[self.ahead]  # rad, positive down
+        below = np.where(r * np.cos(e) <= self.look_ahead, r * np.sin(e), np.inf)  # m under the sonar
+        clearance: F64 = below.min(axis=-1)
+        return clearance
 
 
 class PotentialField3D:

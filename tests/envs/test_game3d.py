@@ -159,6 +159,44 @@ def test_the_ridge_is_a_wall_at_the_operating_depth_and_passable_above() -> None
     assert around > 1.25 * over, (over, around)
 
 
+def _capture_times(
+    core: Game3DCore, pursuit: PurePursuit3D, steps: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per environment: capture time [s] (inf: none in ``steps``), failure, shallowest pursuer [m]."""
+    still, p = Stationary3D(), core.pursuer
+    when = np.full(core.num_envs, np.inf)
+    shallowest = core.poses[:, p, 2].min(axis=1)
+    failed = np.zeros(core.num_envs, dtype=bool)
+    act = np.zeros((core.num_envs, core.num_agents, 3))
+    for k in range(steps):
+        act[:, p] = pursuit.act(core.obs[:, p])
+        act[:, ~p] = still.act(core.obs[:, ~p])
+        r = core.step(act)
+        when = np.where(r.done & r.flags.captured & np.isinf(when), (k + 1) * core.dt, when)
+        failed |= r.done & r.flags.failed
+        shallowest = np.minimum(shallowest, core.poses[:, p, 2].min(axis=1))
+        if core.done.all():
+            break
+    return when, failed, shallowest
+
+
+def test_going_over_the_ridge_pays() -> None:
+    """ridge_3d: pure pursuit that climbs over the ridge captures; held level, it is stuck before it."""
+    times = {}
+    for over in (True, False):
+        core = Game3DCore("ridge_3d", num_envs=10, seed=3)
+        core.reset()
+        assert (core.poses[:, core.pursuer, 2] > 25.0).any()  # some start below the crest's depth
+        pursuit = PurePursuit3D(core.layout, climb_over=over)
+        times[over], failed, shallowest = _capture_times(core, pursuit, 3200)
+        if over:  # no collision, and in every episode a pursuer came up over the crest (25 m deep)
+            assert not failed.any()
+            assert (shallowest < 25.0).all(), shallowest
+        core.close()
+    assert np.isfinite(times[True]).all(), times[True]  # 10 of 10 within 800 s
+    assert np.isfinite(times[False]).sum() <= 2, times[False]  # the ridge stops (or wrecks) the level one
+
+
 def test_clear_errors() -> None:
     with pytest.raises(ValueError, match=r"valid overrides: v_min, v_max, omega_max"):
         Game3DCore(
