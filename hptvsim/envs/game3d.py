@@ -22,9 +22,10 @@ vertical speed ``w_z`` in ``[-w_z_max, w_z_max]`` [m/s] (NED, positive down):
 ``v = v_min + (a_v + 1) (v_max - v_min) / 2``, ``omega = a_omega omega_max``, ``w_z = a_w w_z_max``.
 
 **Observation** per agent (float32, ``K + 16`` values, ``K = A x E`` sonar beams; default
-``12 x 5``): see :class:`Obs3DLayout`. It extends Eq. 14: the sonar ranges and their minimum,
-own state (depth, altitude, speeds, attitude, position) and the target's relative position in
-3-D. The target is, for a pursuer, the nearest evader (its horizontal position as last
+``12 x 5``, set by the scenario's ``[sensors.sonar3d]`` or the ``azimuth_beams`` and
+``elevation_beams`` arguments): see :class:`Obs3DLayout`. It extends Eq. 14: the sonar ranges
+and their minimum, own state (depth, altitude, speeds, attitude, position) and the target's
+relative position in 3-D. The target is, for a pursuer, the nearest evader (its horizontal position as last
 reported over the acoustic link; before the first report the pursuer "sees" it at its own
 position, as in the planar game); for an evader, the nearest pursuer (true position); in goto,
 the agent's goal point.
@@ -313,8 +314,10 @@ class Game3DCore:
         seed: Seed of spawn poses and sensor noise (default: the scenario's).
         threads: Threads of the batched backend and the sonar (``None``: up to 2).
         reward: Overrides of ``[task.reward]`` (as :class:`~hptvsim.envs.core.GameCore`).
-        azimuth_beams: Sonar beams per row ``A`` (default 12, over a full circle).
-        elevation_beams: Sonar rows ``E`` (default 5, over the default 135 degrees).
+        azimuth_beams: Sonar beams per row ``A`` (default: the scenario's
+            ``[sensors.sonar3d]``, whose default is 12 over a full circle).
+        elevation_beams: Sonar rows ``E`` (default: the scenario's, whose default is 5 over
+            135 degrees; the span is always the scenario's).
         goal_depth: Depth [m] of every goal in goto (default: each goal's depth range, drawn at
             every reset, else the site's operating depth).
 
@@ -334,8 +337,8 @@ class Game3DCore:
         seed: int | None = None,
         threads: int | None = None,
         reward: Mapping[str, float] | None = None,
-        azimuth_beams: int = 12,
-        elevation_beams: int = 5,
+        azimuth_beams: int | None = None,
+        elevation_beams: int | None = None,
         goal_depth: float | None = None,
     ) -> None:
         from hptvsim.sensors import AcousticLink
@@ -349,9 +352,12 @@ class Game3DCore:
             raise ValueError(f"num_envs = {num_envs} is invalid; valid: an integer >= 1")
         if backend not in ("batched", "fmu"):
             raise ValueError(f"backend = {backend!r} is invalid; valid: 'batched', 'fmu'")
+        layout3d = sc.sensors.sonar3d
         for name, value in (("azimuth_beams", azimuth_beams), ("elevation_beams", elevation_beams)):
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 1):
                 raise ValueError(f"{name} = {value!r} is invalid; valid: an integer >= 1")
+        azimuth_beams = layout3d.azimuth_beams if azimuth_beams is None else azimuth_beams
+        elevation_beams = layout3d.elevation_beams if elevation_beams is None else elevation_beams
         group_overrides = check_agents_3d(sc)
         agents = sc.agents
         self.scenario = sc
@@ -397,7 +403,12 @@ class Game3DCore:
                 "layout; give every group the same"
             )
         cfg3 = [
-            Sonar3dConfig.from_sonar(c, azimuth_beams=azimuth_beams, elevation_beams=elevation_beams)
+            Sonar3dConfig.from_sonar(
+                c,
+                azimuth_beams=azimuth_beams,
+                elevation_beams=elevation_beams,
+                elevation_span=layout3d.elevation_span,
+            )
             for c in configs
         ]
         self.sonars = [
@@ -902,8 +913,8 @@ class UPEG3DParallelEnv(AgentSpaces, ParallelEnv[str, F32, F32]):  # type: ignor
         max_steps: int | None = None,
         seed: int | None = None,
         reward: Mapping[str, float] | None = None,
-        azimuth_beams: int = 12,
-        elevation_beams: int = 5,
+        azimuth_beams: int | None = None,
+        elevation_beams: int | None = None,
         goal_depth: float | None = None,
         render_mode: str | None = None,
     ) -> None:
@@ -1038,8 +1049,8 @@ class UPEG3DSingleAgentEnv(gymnasium.Env[F32, F32]):
         max_steps: int | None = None,
         seed: int | None = None,
         reward: Mapping[str, float] | None = None,
-        azimuth_beams: int = 12,
-        elevation_beams: int = 5,
+        azimuth_beams: int | None = None,
+        elevation_beams: int | None = None,
         goal_depth: float | None = None,
         render_mode: str | None = None,
     ) -> None:
@@ -1156,8 +1167,8 @@ class UPEG3DVectorEnv(gymnasium.vector.VectorEnv[F32, F32, F32]):
         max_steps: int | None = None,
         seed: int | None = None,
         reward: Mapping[str, float] | None = None,
-        azimuth_beams: int = 12,
-        elevation_beams: int = 5,
+        azimuth_beams: int | None = None,
+        elevation_beams: int | None = None,
         goal_depth: float | None = None,
         threads: int | None = None,
     ) -> None:

@@ -103,7 +103,8 @@ class SB3Policy:
         if expected is not None and shape != (expected,):
             raise ValueError(
                 f"the model observes {shape} but the agent's observation has {obs_size} values; it was "
-                "trained on another layout (another beam count)"
+                "trained on another layout (another beam count; a 3-D model plays on a scenario whose "
+                "[sensors.sonar3d] has its beams)"
             )
 
     def act(self, obs: npt.ArrayLike, episode_start: npt.ArrayLike | None = None) -> npt.NDArray[np.float64]:

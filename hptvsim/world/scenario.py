@@ -29,6 +29,7 @@ paper's Table II values)::
     count = 3
     spawn = { kind = "rectangle", x = [30.0, 90.0], y = [40.0, 260.0] }
     [sensors.sonar]             # hptvsim.sensors.SonarConfig (per group: [vehicles.sonar])
+    [sensors.sonar3d]           # Sonar3dBeams: the 3-D game's beams (azimuth x elevation)
     [sensors.link]              # hptvsim.sensors.AcousticLinkConfig
     [task]                      # Task: kind = "pursuit" | "goto", distances, goal
     [task.reward]               # Reward: delta_C, delta_E1, delta_E2 of Eq. 20
@@ -116,6 +117,7 @@ __all__ = [
     "Sensors",
     "Simulation",
     "Site",
+    "Sonar3dBeams",
     "Task",
     "TerrainFile",
     "VehicleGroup",
@@ -483,10 +485,47 @@ class Simulation:
 
 
 @dataclass(frozen=True, kw_only=True)
+class Sonar3dBeams:
+    """The beam layout of the 3-D game's multibeam sonar (:mod:`hptvsim.envs.game3d`).
+
+    ``elevation_beams`` rows of ``azimuth_beams`` beams, spread evenly over ``elevation_span``
+    centred on the horizontal (positive down). The rest of the 3-D sonar comes from the planar
+    sonar settings (``[sensors.sonar]`` or a group's): its maximum and minimum range, the
+    azimuth field of view ``fov``, whether it sees vehicles, and its Eq. 3 errors. The 3-D game's
+    observation has ``azimuth_beams x elevation_beams`` ranges, so a model trained with one
+    layout plays only on scenarios with the same layout. The planar game ignores this table. At
+    most 64 x 16 = 1024 beams, as many as a planar sonar may have.
+    """
+
+    azimuth_beams: int = spec(12, doc="beams per elevation row (over sensors.sonar.fov)", ge=1, le=64)
+    elevation_beams: int = spec(5, doc="elevation rows", ge=1, le=16)
+    elevation_span: float = spec(
+        0.75 * math.pi,
+        doc="angle from the top row to the bottom row, centred on the horizontal",
+        unit="rad",
+        gt=0.0,
+        le=math.pi,
+    )
+
+    def __post_init__(self) -> None:
+        check_bounds(self)
+
+    @property
+    def beams(self) -> int:
+        """Beams per sonar, ``azimuth_beams x elevation_beams``."""
+        return self.azimuth_beams * self.elevation_beams
+
+
+@dataclass(frozen=True, kw_only=True)
 class Sensors:
     """Sensor settings shared by all vehicles (groups may override the sonar)."""
 
     sonar: SonarConfig = spec(default_factory=SonarConfig, doc="multi-beam sonar (hptvsim.sensors)")
+    sonar3d: Sonar3dBeams = spec(
+        default_factory=Sonar3dBeams,
+        doc="beam layout of the 3-D game's sonar (range, fov and errors from sonar); the planar game "
+        "ignores it",
+    )
     link: AcousticLinkConfig = spec(
         default_factory=AcousticLinkConfig, doc="acoustic link carrying target reports (hptvsim.sensors)"
     )

@@ -456,3 +456,30 @@ def test_the_episode_runner_shows_each_episodes_goal_depth() -> None:
         second = st.static.agents[0].goal
         assert second is not None and len(second) == 3
         assert second[2] == core.goals[0, 0, 2] != first[2]
+
+
+def test_the_scenario_sets_the_3d_sonar_beams_and_models_play_on_their_layout(tmp_path: Path) -> None:
+    from stable_baselines3 import SAC
+
+    from hptvsim.viz.episode import run_episode
+
+    sc = load_scenario("dive_goto").with_overrides(
+        {"sensors": {"sonar3d": {"azimuth_beams": 8, "elevation_beams": 3, "elevation_span": 1.0}}}
+    )
+    core = Game3DCore(sc)
+    assert core.layout.beams == 24 and core.obs.shape[-1] == 24 + 16
+    np.testing.assert_allclose(np.unique(core.layout.elevation), [-0.5, 0.0, 0.5])  # rad, over the span
+    assert len(np.unique(core.layout.azimuth)) == 8
+    core.close()
+    assert Game3DCore(sc, azimuth_beams=4).layout.beams == 12  # an argument overrides the scenario
+    assert Game3DCore("dive_goto").layout.beams == 60  # the default 12 x 5
+    # a model made on the scenario's layout plays in the episode runner on it, and only on it
+    env = gym.make("hptvsim/UPEG3D-Goto-v0", scenario=sc, max_steps=20)
+    assert env.observation_space.shape == (24 + 16,)
+    SAC("MlpPolicy", env, seed=0, device="cpu").save(tmp_path / "m.zip")
+    env.close()
+    spec = {"evader_0": f"sb3:{tmp_path / 'm.zip'}"}
+    result = run_episode(sc, spec, seed=1, max_steps=10, allow_paths=True)
+    assert len(result.static.agents[0].beam_angles) == 24
+    with pytest.raises(ValueError, match=r"\[sensors\.sonar3d\]"):
+        run_episode("dive_goto", spec, seed=1, max_steps=10, allow_paths=True)

@@ -336,7 +336,7 @@ BAD = [
     ("sensors.sonar.beams", 0, "sensors.sonar.beams", "an integer in [1, 1024]"),
     ("sensors.sonar.errors.tau", 0.0, "sensors.sonar.errors.tau", "GaussMarkovConfig.tau"),
     ("sensors.link.packet_loss", 1.5, "sensors.link.packet_loss", "a finite number in [0, 1)"),
-    ("sensors.radar", {}, "sensors.radar", "unknown key; valid keys here: sonar, link"),
+    ("sensors.radar", {}, "sensors.radar", "unknown key; valid keys here: sonar, sonar3d, link"),
     ("task.kind", "hide_and_seek", "task.kind", "valid: 'pursuit', 'goto'"),
     ("task.target_distance", 10.0, "task.target_distance", "must exceed safe_distance = 15 m"),
     ("task.reward.delta_C", -1.0, "task.reward.delta_C", "out of range (valid: in [0, 1e9])"),
