@@ -1,14 +1,16 @@
 """``hptvsim bench train``: env steps/s of MAISAC with 4 learners, plain SB3 against the batched path.
 
-Every row runs the same joint loop (act, env step, store, update) of 3 pursuers and 1 evader,
-each with Table II's SAC (2 x 256 hidden units, batch 256), for the same number of env steps in
-the same process; only the update backend differs. The floor is plain stable-baselines3 (each
-agent's ``SAC.train``); the other rows are the batched path of :mod:`hptvsim.train.fast` with
-float32 (SB3's numbers exactly), bfloat16 matmuls, and the shipped fast preset (precision
-``"auto"``: bfloat16 where the CPU has bf16 units, else float32; an update-to-data ratio of 0.5).
-On a CPU without bf16 units the bfloat16 row is emulated and far slower than the floor; the row's
-name says which. Costs are per env step; the ratio column is cost / floor, so 0.25
-means 4x the env steps per second. Target: the fast preset at >= 3x (ratio <= 0.333).
+Every row runs the same joint loop (act, env step, store, update) of 3 pursuers and 1 evader, each
+with Table II's SAC (2 x 256 hidden units, batch 256), for the same number of env steps in the same
+process; only the update backend differs. ``--env 3d`` runs them on the 3-D game
+(:mod:`hptvsim.envs.game3d`, ``dive_flat``) instead of the planar one. The floor is plain
+stable-baselines3 (each agent's ``SAC.train``); the other rows are the batched path of
+:mod:`hptvsim.train.fast` with float32 (SB3's numbers exactly), bfloat16 matmuls, and the shipped
+fast preset (precision ``"auto"``: bfloat16 where the CPU has bf16 units, else float32; an
+update-to-data ratio of 0.5). On a CPU without bf16 units the bfloat16 row is emulated and far
+slower than the floor; the row's name says which. Costs are per env step; the ratio column is cost
+/ floor, so 0.25 means 4x the env steps per second. Target: the fast preset at >= 3x (ratio <=
+0.333).
 """
 
 from __future__ import annotations
@@ -29,6 +31,9 @@ def _env_factory(env_kind: str) -> tuple[Callable[[], Any], str]:
     from hptvsim.train.envs import EnvSpec, make_parallel_env
     from hptvsim.train.toy import PointMassGame
 
+    if env_kind == "3d":
+        spec3 = EnvSpec(kind="hptvsim", scenario="dive_flat", task="pursuit")  # kind follows the game
+        return (lambda: make_parallel_env(spec3)), "hptvsim 3-D 3v1 pursuit (6-DOF, 12 x 5 beams), dive_flat"
     if env_kind in ("auto", "hptvsim"):
         spec = EnvSpec(kind="hptvsim", scenario="source", task="pursuit")
         try:

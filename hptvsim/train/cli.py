@@ -443,10 +443,11 @@ def register(main: click.Group, bench: click.Group) -> None:
     @click.option(
         "--env",
         "env_kind",
-        type=click.Choice(["auto", "toy", "hptvsim"]),
+        type=click.Choice(["auto", "toy", "hptvsim", "3d"]),
         default="auto",
         show_default=True,
-        help="Game to step: the 3-vs-1 underwater game when available, else the toy game.",
+        help="Game to step: the 3-vs-1 underwater game when available, else the toy game; 3d: the "
+        "3-D game (6-DOF vehicles that dive, dive_flat scenario).",
     )
     def bench_train_cmd(quick: bool, as_json: bool, env_kind: str) -> None:
         """Env steps/s of MAISAC with 4 learners: plain SB3 vs the batched path, in the same run."""

@@ -80,3 +80,13 @@ def test_the_3d_runs_model_plays_in_the_episode_runner(run_3d: Path, tmp_path: P
     assert result.static.game == "3d"
     assert result.summary.steps == 40 or result.outcome != "truncated"
     assert result.static.agents[0].policy == f"sb3:{zip_}"
+
+
+def test_bench_train_runs_maisac_on_the_3d_game_against_plain_sb3() -> None:
+    result = CliRunner().invoke(main, ["bench", "train", "--quick", "--env", "3d", "--json"])
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.output[result.output.index("{") :])  # after any precision warning
+    assert "3-D" in data["title"] and "dive_flat" in data["title"]
+    rows = {r["name"]: r for r in data["rows"]}
+    assert len(rows) == 4 and rows[data["floor"]]["ratio_to_floor"] == 1.0
+    assert all(r["us_per_unit"] > 0.0 for r in rows.values())
