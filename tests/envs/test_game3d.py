@@ -43,22 +43,25 @@ def test_gymnasium_and_sb3_checkers(env_id: str) -> None:
     env.close()
 
 
-def _pursue(core: Game3DCore, steps: int) -> tuple[np.ndarray, np.ndarray]:
-    """Pursuers pure pursuit, evaders stationary, until every environment is done."""
-    pp, still = PurePursuit3D(core.layout), Stationary3D()
-    p = core.pursuer
-    captured = np.zeros(core.num_envs, dtype=bool)
+def _capture_times(
+    core: Game3DCore, pursuit: PurePursuit3D, steps: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per environment: capture time [s] (inf: none in ``steps``), failure, shallowest pursuer [m]."""
+    still, p = Stationary3D(), core.pursuer
+    when = np.full(core.num_envs, np.inf)
+    shallowest = core.poses[:, p, 2].min(axis=1)
     failed = np.zeros(core.num_envs, dtype=bool)
     act = np.zeros((core.num_envs, core.num_agents, 3))
-    for _ in range(steps):
-        act[:, p] = pp.act(core.obs[:, p])
+    for k in range(steps):
+        act[:, p] = pursuit.act(core.obs[:, p])
         act[:, ~p] = still.act(core.obs[:, ~p])
         r = core.step(act)
-        captured |= r.done & r.flags.captured
+        when = np.where(r.done & r.flags.captured & np.isinf(when), (k + 1) * core.dt, when)
         failed |= r.done & r.flags.failed
+        shallowest = np.minimum(shallowest, core.poses[:, p, 2].min(axis=1))
         if core.done.all():
             break
-    return captured, failed
+    return when, failed, shallowest
 
 
 def test_pure_pursuit_captures_a_stationary_evader_in_20_of_20_episodes() -> None:
@@ -66,7 +69,8 @@ def test_pure_pursuit_captures_a_stationary_evader_in_20_of_20_episodes() -> Non
     core.reset()
     starts = core.poses[..., 2].copy()
     assert np.ptp(starts[:, 0]) > 5.0 and np.ptp(starts[:, -1]) > 5.0  # really different depths
-    captured, failed = _pursue(core, 1600)
+    when, failed, _ = _capture_times(core, PurePursuit3D(core.layout), 1600)
+    captured = np.isfinite(when)
     assert captured.sum() == 20 and not failed.any()
     # capture is 3-D: the closest pursuer is within l_max in 3-D
     pos = core.poses[..., 0:3]
@@ -157,27 +161,6 @@ def test_the_ridge_is_a_wall_at_the_operating_depth_and_passable_above() -> None
     over = 255.0 - 45.0
     around = np.hypot(150.0 - 45.0, y_end - 70.0) + np.hypot(255.0 - 150.0, y_end - 70.0)
     assert around > 1.25 * over, (over, around)
-
-
-def _capture_times(
-    core: Game3DCore, pursuit: PurePursuit3D, steps: int
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per environment: capture time [s] (inf: none in ``steps``), failure, shallowest pursuer [m]."""
-    still, p = Stationary3D(), core.pursuer
-    when = np.full(core.num_envs, np.inf)
-    shallowest = core.poses[:, p, 2].min(axis=1)
-    failed = np.zeros(core.num_envs, dtype=bool)
-    act = np.zeros((core.num_envs, core.num_agents, 3))
-    for k in range(steps):
-        act[:, p] = pursuit.act(core.obs[:, p])
-        act[:, ~p] = still.act(core.obs[:, ~p])
-        r = core.step(act)
-        when = np.where(r.done & r.flags.captured & np.isinf(when), (k + 1) * core.dt, when)
-        failed |= r.done & r.flags.failed
-        shallowest = np.minimum(shallowest, core.poses[:, p, 2].min(axis=1))
-        if core.done.all():
-            break
-    return when, failed, shallowest
 
 
 def test_going_over_the_ridge_pays() -> None:
