@@ -122,3 +122,15 @@ def test_an_inline_3d_scenario_the_3d_game_cannot_run_is_refused_at_once(api: ht
     detail = r.json()["detail"]
     assert detail.startswith("scenario: ") and "K_p_u" in detail and "v_max" in detail, detail
     assert "<request>" not in detail
+
+
+def test_an_inline_3d_scenario_sets_its_sonar_beams_within_the_schema(api: httpx.Client) -> None:
+    tables = api.get("/scenarios/dive_flat").json()
+    sensors = {**tables.get("sensors", {}), "sonar3d": {"azimuth_beams": 8, "elevation_beams": 3}}
+    ep = api.post("/episodes", json={"scenario": {**tables, "sensors": sensors}, "max_steps": 10}).json()
+    assert wait_final(api, ep["id"])["status"] == "finished"
+    static = EpisodeStatic.from_dict(api.get(f"/episodes/{ep['id']}/static").json())
+    assert len(static.agents[0].beam_angles) == 24 and static.agents[0].beam_elevations is not None
+    too_many = {**sensors, "sonar3d": {"azimuth_beams": 65}}
+    r = api.post("/episodes", json={"scenario": {**tables, "sensors": too_many}, "max_steps": 10})
+    assert r.status_code == 422 and "azimuth_beams" in r.json()["detail"], r.text
