@@ -7,7 +7,8 @@ types only) and move in depth as well. The layers are the planar game's:
 * **simulation layer**: a :class:`~hptvsim.cosim.system.VehicleSystem` of 6-DOF vehicles on the
   batched or the FMU backend (the same generated C; both give the same numbers);
 * **robot layer**: command limits (Eq. 15 plus the vertical speed), currents at each vehicle
-  (horizontal; the vertical component is 0), a 3-D sonar per vehicle
+  (horizontal, and a uniform current's ``vertical`` speed; both scaled by the site's
+  ``current_profile``), a 3-D sonar per vehicle
   (:class:`~hptvsim.sensors.sonar3d.Sonar3d`, Eq. 3 errors per beam) and, for pursuers, the
   acoustic link reporting the evader's horizontal position (as in the planar game; its depth
   is known, e.g. from the evader's pressure sensor sent with the report);
@@ -521,14 +522,18 @@ class Game3DCore:
     # -- helpers ---------------------------------------------------------------------------------
 
     def _sample_currents(self, envs: Any) -> None:
-        """The horizontal current at each vehicle of ``envs``, with the site's depth profile."""
+        """The current ``[V_x, V_y, V_z]`` at each vehicle of ``envs``, with the site's depth profile."""
         xy = self.poses[envs, :, 0:2]
         v = self.world.current.sample(self._time[envs][:, None], xy)
+        w = np.full(v.shape[:-1], self.world.current.vertical)  # m/s, positive down
         site = self.scenario.site
         if site.current_profile != "uniform":
             water = self.world.heightmap.depth_at(xy)  # m
-            v = v * site.current_factor(water - self.poses[envs, :, 2], water)[..., None]
+            factor = site.current_factor(water - self.poses[envs, :, 2], water)
+            v = v * factor[..., None]
+            w = w * factor
         self.system.currents[envs, :, 0:2] = v
+        self.system.currents[envs, :, 2] = w
 
     @property
     def num_agents(self) -> int:
@@ -745,6 +750,7 @@ class Game3DCore:
         self.system.currents[envs] = 0.0
         if self._steady_uniform_current:
             self.system.currents[envs, :, 0:2] = self.world.current.sample(0.0, self.poses[envs, :, 0:2])
+            self.system.currents[envs, :, 2] = self.world.current.vertical  # m/s, positive down
         else:
             self._sample_currents(envs)
         for sonar in self.sonars:

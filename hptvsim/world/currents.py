@@ -19,6 +19,12 @@ all vehicles of all environments in one call without allocating.
 
 Directions are compass directions the water flows *towards*, clockwise from north [rad]
 (files may give ``direction_deg``).
+
+**Vertical current.** A uniform field may also have a ``vertical`` speed ``V_z`` [m/s] (NED,
+positive down: downwelling). Only the 3-D game uses it (as the 6-DOF FMUs' ``current_z``); there
+the site's ``current_profile`` scales it as it scales the horizontal flow, so with the
+``seventh_power`` profile no water flows through the seabed. The planar game holds every vehicle
+at the operating depth and ignores it.
 """
 
 from __future__ import annotations
@@ -39,6 +45,7 @@ __all__ = [
     "MAX_ANGLE",
     "MAX_COORDINATE",
     "MAX_SPEED",
+    "MAX_VERTICAL",
     "CurrentField",
     "CurrentSum",
     "ShearCurrent",
@@ -54,6 +61,8 @@ M2_PERIOD = 44714.16  # s, principal lunar semi-diurnal tide M2 (12.4206 h)
 
 MAX_SPEED = 10.0
 """Largest current speed, amplitude or mean [m/s] a scenario may give (strong tidal races reach 5)."""
+MAX_VERTICAL = 1.0
+"""Largest vertical current speed [m/s] (up- and downwelling are mm/s to cm/s in the open sea)."""
 MAX_ANGLE = 1000.0
 """Largest magnitude of a direction or phase [rad] (about 159 turns; ``_deg`` keys: 57295.78 deg)."""
 MAX_COORDINATE = 1e7
@@ -96,6 +105,11 @@ class CurrentField(abc.ABC):
         """
 
     @property
+    def vertical(self) -> float:
+        """Vertical water speed ``V_z`` [m/s] (NED, positive down), the same everywhere and always."""
+        return 0.0
+
+    @property
     def is_steady(self) -> bool:
         """True when the field does not change with time."""
         return True
@@ -117,13 +131,20 @@ def _unit(direction: float) -> tuple[float, float]:
 
 @dataclass(frozen=True, kw_only=True)
 class UniformCurrent(CurrentField):
-    """The same velocity everywhere and always: ``v_c = speed (cos dir, sin dir)``."""
+    """The same velocity everywhere and always: ``v_c = speed (cos dir, sin dir)``, plus ``vertical``."""
 
     KIND: ClassVar[str] = "uniform"
 
     speed: float = spec(doc="current speed", unit="m/s", ge=0.0, le=MAX_SPEED)
     direction: float = spec(
         doc="direction the water flows towards, clockwise from north", unit="rad", ge=-MAX_ANGLE, le=MAX_ANGLE
+    )
+    vertical: float = spec(
+        0.0,
+        doc="vertical speed, positive down (3-D game only; scaled by site.current_profile)",
+        unit="m/s",
+        ge=-MAX_VERTICAL,
+        le=MAX_VERTICAL,
     )
 
     def __post_init__(self) -> None:
@@ -302,6 +323,10 @@ class CurrentSum(CurrentField):
     @property
     def is_uniform(self) -> bool:  # noqa: D102
         return all(c.is_uniform for c in self.components)
+
+    @property
+    def vertical(self) -> float:  # noqa: D102
+        return float(sum(c.vertical for c in self.components))
 
     def sample(self, t: float | npt.ArrayLike, xy: npt.ArrayLike, out: F64 | None = None) -> F64:  # noqa: D102
         p = _points(xy)

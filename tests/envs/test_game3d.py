@@ -287,6 +287,61 @@ def test_currents_follow_the_seventh_power_profile_with_depth() -> None:
     flat.close()
 
 
+@pytest.mark.parametrize("w", [0.3, -0.3])  # m/s, positive down: downwelling, upwelling
+def test_a_vertical_current_moves_the_vehicles_with_the_water_until_the_controller_holds_them(
+    w: float,
+) -> None:
+    sc = load_scenario("dive_flat")
+    data = sc.to_dict()
+
+    def depth_changes(vertical: float, profile: str = "uniform") -> tuple[Game3DCore, np.ndarray]:
+        data["currents"] = [{"kind": "uniform", "speed": 0.0, "direction": 0.0, "vertical": vertical}]
+        data["site"]["current_profile"] = profile
+        core = Game3DCore(Scenario.from_dict(data, base_dir=sc.base_dir), num_envs=2, seed=2)
+        core.reset()
+        z0 = core.poses[..., 2].copy()
+        hold = Stationary3D().act(core.obs)
+        dz = []
+        for _ in range(120):  # 30 s
+            core.step(hold)
+            dz.append(core.poses[..., 2] - z0)
+        return core, np.array(dz)  # (T, B, N) m
+
+    core, still = depth_changes(0.0)
+    np.testing.assert_array_equal(still, 0.0)  # no current: station-holding vehicles hold their depth
+    core.close()
+    core, dz = depth_changes(w)
+    np.testing.assert_array_equal(core.system.currents[..., 2], w)
+    assert (np.sign(dz[-1]) == np.sign(w)).all() and (np.abs(dz[-1]) > 1e-3).all()  # carried first
+    assert np.abs(dz).max() < 0.1  # then held: the heave controller works against the water
+    core.close()
+    # the seventh-power profile scales it like the horizontal flow: none at the seabed
+    core, _ = depth_changes(w, "seventh_power")
+    water = core.world.heightmap.depth_at(core.poses[..., 0:2])
+    start = core.poses.copy()
+    core.step(Stationary3D().act(core.obs))
+    factor = core.scenario.site.current_factor(water - start[..., 2], water)
+    np.testing.assert_allclose(core.system.currents[..., 2], w * factor, rtol=1e-12)
+    core.close()
+
+
+def test_the_planar_game_ignores_a_vertical_current() -> None:
+    from hptvsim.envs.core import GameCore
+
+    sc = load_scenario("source")
+    data = sc.to_dict()
+    runs = []
+    for vertical in (0.0, 0.5):
+        data["currents"] = [{"kind": "uniform", "speed": 0.2, "direction": 1.0, "vertical": vertical}]
+        core = GameCore(Scenario.from_dict(data, base_dir=sc.base_dir), num_envs=2, seed=3)
+        core.reset()
+        for _ in range(20):
+            r = core.step(np.tile([1.0, 0.1], (2, core.num_agents, 1)))
+        runs.append(np.concatenate([core.state.positions.ravel(), r.obs.ravel()]))
+        core.close()
+    np.testing.assert_array_equal(runs[0], runs[1])
+
+
 def test_potential_field_evader_flees_stationary_pursuers_without_hitting_the_seabed() -> None:
     """The scripted evader opens the 3-D distance to the nearest pursuer and keeps off the seabed."""
     from hptvsim.envs.policies3d import PotentialField3D
