@@ -22,14 +22,13 @@ types only) and move in depth as well. The layers are the planar game's:
 vertical speed ``w_z`` in ``[-w_z_max, w_z_max]`` [m/s] (NED, positive down):
 ``v = v_min + (a_v + 1) (v_max - v_min) / 2``, ``omega = a_omega omega_max``, ``w_z = a_w w_z_max``.
 
-**Observation** per agent (float32, ``K + 16`` values, ``K = A x E`` sonar beams; default
-``12 x 5``, set by the scenario's ``[sensors.sonar3d]`` or the ``azimuth_beams`` and
-``elevation_beams`` arguments): see :class:`Obs3DLayout`. It extends Eq. 14: the sonar ranges
-and their minimum, own state (depth, altitude, speeds, attitude, position) and the target's
-relative position in 3-D. The target is, for a pursuer, the nearest evader (its horizontal position as last
-reported over the acoustic link; before the first report the pursuer "sees" it at its own
-position, as in the planar game); for an evader, the nearest pursuer (true position); in goto,
-the agent's goal point.
+**Observation** per agent (float32, ``K + 16`` values, ``K = A x E`` sonar beams; default 12 x 5,
+set by the scenario's ``[sensors.sonar3d]`` or the ``azimuth_beams`` and ``elevation_beams``
+arguments): see :class:`Obs3DLayout`. It extends Eq. 14: the sonar ranges and their minimum, own
+state (depth, altitude, speeds, attitude, position) and the target's relative position in 3-D. The
+target is, for a pursuer, the nearest evader (its horizontal position as last reported over the
+acoustic link; before the first report the pursuer "sees" it at its own position, as in the planar
+game); for an evader, the nearest pursuer (true position); in goto, the agent's goal point.
 
 **Reward** (Eqs. 17-20 with the scenario's ``[task.reward]``; the planar
 :func:`~hptvsim.envs.task.reward_terms` on 3-D quantities):

@@ -66,8 +66,8 @@ class PurePursuit3D:
     than ``look_ahead`` [m] horizontally give the seabed's height ahead: a return at range ``r``
     and elevation ``e`` (positive down) lies ``r sin(e)`` [m] below the sonar. When the least of
     these is under ``min_altitude``, the vehicle climbs at ``max_vertical`` (slowing as when it
-    dives), and those forward returns push it sideways no more: it goes over the ridge. Above
-    ``min_depth`` it cannot climb, and it turns away as before.
+    dives), and those forward returns push it sideways no more: it goes over the ridge. Where the
+    vehicle is shallower than ``min_depth`` it cannot climb, and it turns away as before.
     """
 
     def __init__(
