@@ -45,10 +45,14 @@ def scenario_validate(files: tuple[str, ...]) -> None:
         world = s.build_world()
         occ = world.obstacles.occupied
         lo, hi = world.heightmap.depth_range
+        where = (
+            "3-D game (the vehicles dive)"
+            if s.simulation.game == "3d"
+            else f"{100.0 * occ.mean():.1f}% obstacles at {s.site.operating_depth:g} m"
+        )
         click.echo(
             f"ok: {s.source} ({s.name}: {s.task.kind}, {len(s.agents)} agent(s) "
-            f"[{', '.join(s.agent_names)}], seabed {lo:.1f}..{hi:.1f} m, "
-            f"{100.0 * occ.mean():.1f}% obstacles at {s.site.operating_depth:g} m)"
+            f"[{', '.join(s.agent_names)}], seabed {lo:.1f}..{hi:.1f} m, {where})"
         )
     if failed:
         sys.exit(1)

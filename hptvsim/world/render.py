@@ -25,6 +25,7 @@ __all__ = [
     "draw_obstacles",
     "render_heightmap",
     "render_scenario",
+    "scenario_figure",
     "shaded_depth",
 ]
 
@@ -117,6 +118,31 @@ def _relief(ax: Any, fig: Any, hm: HeightMap) -> None:
     bar.set_label("seabed depth [m]" + ("; land: tan" if not (hm.depth >= 0.0).all() else ""))
 
 
+def _goal_label(goal: Any, operating_depth: float, three_d: bool) -> str:
+    """Legend label of the goals; in the 3-D game with the depth the game gives them."""
+    if not three_d:
+        return "goal"
+    if goal.depth is None:
+        return f"goal, {operating_depth:g} m deep (the operating depth)"
+    return f"goal, {goal.depth[0]:g}-{goal.depth[1]:g} m deep"
+
+
+def _contours(ax: Any, hm: HeightMap) -> None:
+    """Labelled seabed depth contours [m], about eight levels at round steps."""
+    lo, hi = hm.depth_range
+    if not hi - lo > 1e-9:
+        return
+    step = float(
+        min((s for s in (1, 2, 5, 10, 20, 50, 100, 200, 500, 1000) if (hi - lo) / s <= 8), default=1000)
+    )
+    levels = np.arange(np.ceil(lo / step) * step, hi + 1e-9, step)
+    if not levels.size:
+        return
+    xs, ys = hm.geometry.centres()
+    cs = ax.contour(ys, xs, hm.depth, levels=levels, colors="black", linewidths=0.6, alpha=0.6)
+    ax.clabel(cs, fmt="%g", fontsize=7)
+
+
 def matplotlib_cmap(name: str) -> Any:
     """A matplotlib colormap by name."""
     import matplotlib
@@ -143,19 +169,32 @@ def render_heightmap(hm: HeightMap, path: str | Path, *, title: str | None = Non
 
 
 def render_scenario(scenario: Scenario, path: str | Path, *, dpi: int = 110) -> Path:
-    """Draw a scenario's map to a PNG; returns the path.
+    """Draw a scenario's map (:func:`scenario_figure`) to a PNG; returns the path."""
+    import matplotlib.pyplot as plt
+
+    path = Path(path)
+    fig = scenario_figure(scenario)
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+    return path
+
+
+def scenario_figure(scenario: Scenario) -> Any:
+    """A scenario's map as a matplotlib figure (north up, east right; close it when done).
 
     Shows the shaded seabed depth, obstacles at the operating depth (brown, outlined), the site
     boundary, spawn regions (in their role's first colour of :mod:`hptvsim.palette`: pursuers
     crimson, evaders gold; labelled with count and type), goals (star and radius) and, when
     there is a current, its arrows at ``t = 0``.
+
+    A scenario of the 3-D game (``[simulation] game = "3d"``) has no obstacles at an operating
+    depth (its vehicles dive over the seabed): its map draws depth contours instead, labelled in
+    metres, and the legend gives each group's and goal's depth range.
     """
-    import matplotlib.pyplot as plt
     from matplotlib.patches import Circle, Rectangle
 
     from hptvsim.world.scenario import CircleRegion
 
-    path = Path(path)
     world = scenario.build_world()
     site = scenario.site
     x_min, x_max, y_min, y_max = site.extent
@@ -163,13 +202,19 @@ def render_scenario(scenario: Scenario, path: str | Path, *, dpi: int = 110) -> 
     _relief(ax, fig, world.heightmap)
 
     occ = world.obstacles
-    draw_obstacles(ax, occ)
+    three_d = scenario.simulation.game == "3d"
+    if three_d:
+        _contours(ax, world.heightmap)
+    else:
+        draw_obstacles(ax, occ)
     ax.add_patch(Rectangle((y_min, x_min), y_max - y_min, x_max - x_min, fill=False, lw=1.5, ec="black"))
 
     handles = []
     for g in scenario.vehicles:
         colour = _ROLE_COLOURS[g.role]
         label = f"{g.role} x{g.count} ({g.type})"
+        if three_d and g.depth is not None:
+            label += f", start {g.depth[0]:g}-{g.depth[1]:g} m deep"
         patch: Circle | Rectangle
         if isinstance(g.spawn, CircleRegion):
             cx, cy = g.spawn.centre
@@ -205,7 +250,7 @@ def render_scenario(scenario: Scenario, path: str | Path, *, dpi: int = 110) -> 
             color="lime",
             mec="black",
             ls="none",
-            label="goal" if k == 0 else None,
+            label=_goal_label(goal, site.operating_depth, three_d) if k == 0 else None,
         )
         if k == 0:
             handles.append(star)
@@ -238,18 +283,24 @@ def render_scenario(scenario: Scenario, path: str | Path, *, dpi: int = 110) -> 
     ax.set_xlabel("east y [m]")
     ax.set_ylabel("north x [m]")
     n_occ = int(occ.occupied.sum())
-    ax.set_title(
-        f"{scenario.name}: {scenario.task.kind}, operating depth {site.operating_depth:g} m "
-        f"(+{site.clearance:g} m clearance), {100.0 * n_occ / occ.occupied.size:.1f}% obstacles"
-        + current_text,
-        fontsize=10,
-    )
+    if three_d:
+        lo, hi = world.heightmap.depth_range
+        seabed = (
+            f"seabed {lo:.0f}-{hi:.0f} m deep (contours in m)"
+            if hi - lo > 0.5
+            else f"flat seabed {hi:.0f} m deep"
+        )
+        what = f"3-D game, {scenario.task.kind}, {seabed}"
+    else:
+        what = (
+            f"{scenario.task.kind}, operating depth {site.operating_depth:g} m "
+            f"(+{site.clearance:g} m clearance), {100.0 * n_occ / occ.occupied.size:.1f}% obstacles"
+        )
+    ax.set_title(f"{scenario.name}: {what}" + current_text, fontsize=10)
     if handles:
         ax.legend(handles=handles, loc="lower left", fontsize=8, framealpha=0.85)
     fig.tight_layout()
-    fig.savefig(path, dpi=dpi)
-    plt.close(fig)
-    return path
+    return fig
 
 
 def _rgb(hex_colour: str) -> tuple[float, float, float]:

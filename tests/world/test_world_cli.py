@@ -49,6 +49,40 @@ def test_show_renders_a_north_up_map(tmp_path: Path) -> None:
     assert brown.mean() > 0.02 and blue.mean() > 0.1
 
 
+def test_a_3d_scenario_is_shown_with_depth_contours_not_planar_obstacles(tmp_path: Path) -> None:
+    """In the 3-D game the ridge is passable: no obstacle overlay, labelled depth contours instead."""
+    import matplotlib.pyplot as plt
+
+    from hptvsim.world.render import scenario_figure
+    from hptvsim.world.scenario import load_scenario
+
+    res = run("scenario", "show", "ridge_3d", "--out", str(tmp_path / "ridge.png"))
+    assert res.exit_code == 0, res.output
+    figures = {}
+    for game in ("3d", "planar"):
+        fig = scenario_figure(load_scenario("ridge_3d").with_overrides({"simulation": {"game": game}}))
+        ax = fig.axes[0]
+        figures[game] = (
+            len(ax.images),  # the relief, plus the obstacle overlay in the planar game
+            sorted(t.get_text() for t in ax.texts),  # contour labels [m]
+            [t.get_text() for t in ax.get_legend().get_texts()],
+            ax.get_title(),
+        )
+        plt.close(fig)
+    images, labels, legend, title = figures["3d"]
+    assert images == 1 and figures["planar"][0] == 2
+    assert {"30", "40", "50"} <= set(labels) and not figures["planar"][1]
+    assert legend[:2] == [
+        "pursuer x3 (work_class), start 20-40 m deep",
+        "evader x1 (spherical), start 25-45 m deep",
+    ]
+    assert title.startswith("ridge_3d: 3-D game, pursuit, seabed 25-60 m deep")
+    assert "obstacles" in figures["planar"][3] and "obstacles" not in title
+    out = run("scenario", "validate", "ridge_3d", "target").output
+    assert "ridge_3d: pursuit" in out and "3-D game (the vehicles dive)" in out
+    assert "% obstacles at 30 m" in out  # the planar target scenario
+
+
 def test_list_and_schema() -> None:
     res = run("scenario", "list")
     assert res.exit_code == 0
