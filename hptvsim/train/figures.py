@@ -112,6 +112,40 @@ def _stack(series: Sequence[Sequence[float]], smooth: int) -> np.ndarray:
     return np.stack([_smooth(np.asarray(s[:n], dtype=np.float64), smooth) for s in series])
 
 
+def _stage_labels(ax: Any, marks: Sequence[tuple[int, int, str]], *, fontsize: float) -> float:
+    """Each stage's name above the middle of its span; one that would touch its left neighbour rises.
+
+    Returns:
+        How many points the raised names stand above the others (0 when none is raised), for
+        the title's ``pad``.
+    """
+    renderer = ax.figure.canvas.get_renderer()
+    extra = 0.0
+    previous: Any = None
+    raised_previous = False
+    for start, width, text in marks:
+        label = ax.text(
+            start + width / 2,
+            1.01,
+            text,
+            transform=ax.get_xaxis_transform(),
+            ha="center",
+            va="bottom",
+            fontsize=fontsize,
+            linespacing=0.9,
+        )
+        box = label.get_window_extent(renderer)
+        touches = previous is not None and box.x0 < previous.x1 + 4.0  # px
+        if touches and not raised_previous:
+            label.set_y(1.01 + 1.1 * box.height / ax.bbox.height)
+            extra = max(extra, 1.1 * box.height * 72.0 / ax.figure.dpi)  # px -> pt
+            raised_previous = True
+        else:
+            raised_previous = False
+        previous = box
+    return extra
+
+
 def _t_half(arr: np.ndarray) -> np.ndarray:
     """Half-width of the 95 % t interval of the mean over axis 0 (seeds)."""
     from scipy import stats
@@ -219,6 +253,7 @@ def reward_curve_figures(
     for role in roles:
         fig, ax = plt.subplots(figsize=(8, 4.4))
         offset = 0
+        marks: list[tuple[int, int, str]] = []  # (first episode - 1, episodes, label) per stage
         # seeds per stage in each group's legend entry: the finished runs the band is over
         counts = {
             label: [sum(1 for r, done in runs if k in done and role in of(r, k)) for k in all_stages]
@@ -259,22 +294,16 @@ def reward_curve_figures(
                     )
             if s_idx > 0:
                 ax.axvline(offset + 0.5, color="grey", linestyle="--", linewidth=0.8)
-            ax.text(
-                offset + max(n_max, 1) / 2,
-                1.01,
-                f"STT {s_idx + 1}\n{stage}" if len(all_stages) > 1 else stage,
-                transform=ax.get_xaxis_transform(),
-                ha="center",
-                va="bottom",
-                fontsize=7,
-                linespacing=0.9,
+            marks.append(
+                (offset, max(n_max, 1), f"STT {s_idx + 1}\n{stage}" if len(all_stages) > 1 else stage)
             )
             offset += n_max
+        raised = _stage_labels(ax, marks, fontsize=7)
         only = f"training episode in stage {all_stages[0]}" if len(all_stages) == 1 else ""
         ax.set_xlabel(only or "training episode (all stages in order)")
         ax.set_ylabel("average total reward per episode (dimensionless)")
         fig_no = {"pursuer": "Figs. 7, 9", "evader": "Figs. 8, 10"}.get(role, "")
-        ax.set_title(f"{names.get(role, role)}: mean over seeds, 95 % band (paper {fig_no})", pad=22)
+        ax.set_title(f"{names.get(role, role)}: mean over seeds, 95 % band (paper {fig_no})", pad=22 + raised)
         ax.legend(loc="best", fontsize=8)
         ax.grid(alpha=0.3)
         fig.tight_layout(rect=(0, 0.03, 1, 1))
@@ -325,6 +354,7 @@ def reward_agents_figure(
         keys = sorted({k for r, _ in runs for k in r if stages is None or k[1] in stages})
         agents = sorted({a for r, _ in runs for k in keys for a in r.get(k, {})})
         offset = 0
+        marks: list[tuple[int, int, str]] = []  # (first episode - 1, episodes, label) per stage
         partial_shown = False
         legend: set[str] = set()
         for s_idx, key in enumerate(keys):
@@ -358,20 +388,18 @@ def reward_agents_figure(
                     )
             if s_idx > 0:
                 ax.axvline(offset + 0.5, color="grey", linestyle="--", linewidth=0.8)
-            ax.text(
-                offset + max(n_max, 1) / 2,
-                1.01,
-                key[1],
-                transform=ax.get_xaxis_transform(),
-                ha="center",
-                fontsize=8,
-            )
+            marks.append((offset, max(n_max, 1), key[1]))
             offset += n_max
+        raised = _stage_labels(ax, marks, fontsize=8)
         if partial_shown:
             ax.plot([], [], color="grey", linestyle=":", label="still training (not counted)")
         counts = [sum(1 for _, done in runs if k[1] in done) for k in keys]
-        ax.set_title(_seeds_text(label, counts), fontsize=9, pad=14)
-        ax.set_xlabel("training episode (all stages in order)")
+        ax.set_title(_seeds_text(label, counts), fontsize=9, pad=14 + raised)
+        ax.set_xlabel(
+            f"training episode in stage {keys[0][1]}"
+            if len(keys) == 1
+            else "training episode (all stages in order)"
+        )
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7, loc="best")
     axes[0][0].set_ylabel("total reward per episode (dimensionless)")

@@ -268,3 +268,29 @@ def test_zoo_policies_act_in_the_3d_envs_units() -> None:
         episodes=3,
     )
     assert result.summary["capture_rate"]["mean"] == 1.0, result.summary
+
+
+def test_names_of_narrow_stages_do_not_print_over_each_other() -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from hptvsim.train.figures import _stage_labels
+
+    fig, ax = plt.subplots(figsize=(5, 3))
+    ax.set_xlim(0, 330)
+    raised = _stage_labels(ax, [(0, 27, "source"), (27, 25, "transition"), (52, 278, "target")], fontsize=8)
+    renderer = fig.canvas.get_renderer()  # type: ignore[attr-defined]
+    boxes = [t.get_window_extent(renderer) for t in ax.texts]
+    assert [t.get_text() for t in ax.texts] == ["source", "transition", "target"]
+    assert raised > 0.0 and boxes[1].y0 > boxes[0].y1  # the second name went up a row
+    assert not any(a.overlaps(b) for i, a in enumerate(boxes) for b in boxes[i + 1 :])
+    plt.close(fig)
+    fig, ax = plt.subplots(figsize=(5, 3))
+    ax.set_xlim(0, 300)
+    assert (
+        _stage_labels(ax, [(0, 100, "source"), (100, 100, "transition"), (200, 100, "target")], fontsize=8)
+        == 0.0
+    )
+    plt.close(fig)
