@@ -233,8 +233,11 @@ def test_killed_mid_sweep_it_resumes_to_the_same_results(tmp_path: Path) -> None
     state = cut / "runs-root" / "runs" / "target_only-seed0" / "checkpoint" / "state.json"
     deadline = time.monotonic() + 600
     while time.monotonic() < deadline:
-        if state.is_file() and json.loads(state.read_text())["global_step"] >= 100:
-            break
+        try:  # the checkpoint folder is swapped for a new one as we read: try again
+            if json.loads(state.read_text())["global_step"] >= 100:
+                break
+        except (OSError, json.JSONDecodeError, KeyError):
+            pass
         time.sleep(0.2)
     else:
         proc.kill()
