@@ -18,16 +18,11 @@ def register(main: click.Group, bench: click.Group) -> None:
         """env-steps/s of the 3-vs-1 game: FMU backend, batched B = 1, 64, 1024, mpe2 and VMAS."""
         from hptvsim.bench.env import bench_env
         from hptvsim.cli import emit
-        from hptvsim.world.scenario import ScenarioError, load_scenario
+        from hptvsim.envs.core import planar_scenario
+        from hptvsim.world.scenario import ScenarioError
 
         try:
-            sc = load_scenario(scenario)
-        except ScenarioError as exc:
+            planar_scenario(scenario, "hptvsim bench env --scenario (its 3-D rows always run dive_flat)")
+        except (ScenarioError, ValueError) as exc:
             raise click.BadParameter(str(exc), param_hint="--scenario") from None
-        if sc.simulation.game != "planar":  # the 3-D rows always run dive_flat
-            raise click.BadParameter(
-                f"{scenario!r} is made for the {sc.simulation.game} game; --scenario picks the planar "
-                "game's rows, so it takes a planar scenario (the 3-D rows run dive_flat)",
-                param_hint="--scenario",
-            )
         emit(bench_env(quick=quick, scenario=scenario), as_json)
