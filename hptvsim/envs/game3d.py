@@ -747,11 +747,7 @@ class Game3DCore:
         self.episode_return[envs] = 0.0
         self.system.commands[envs] = 0.0
         self.system.currents[envs] = 0.0
-        if self._steady_uniform_current:
-            self.system.currents[envs, :, 0:2] = self.world.current.sample(0.0, self.poses[envs, :, 0:2])
-            self.system.currents[envs, :, 2] = self.world.current.vertical  # m/s, positive down
-        else:
-            self._sample_currents(envs)
+        self._sample_currents(envs)  # at t = 0; a steady uniform current is then left as it is
         for sonar in self.sonars:
             sonar.reset(envs)
         for k, link in enumerate(self.links):
