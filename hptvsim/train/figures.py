@@ -452,8 +452,8 @@ def final_reward_figure(
 
     Per run: the mean and the variance of the per-episode total reward over the last ``last``
     episodes of ``stage`` (default: each run's last finished stage); bars are the means of those
-    over seeds, error bars their 95 % t intervals. One row per role, so each has its own scale.
-    Runs that have not finished ``stage`` are left out.
+    over seeds, error bars their 95 % t intervals (a variance's cut at 0). One row per role, so
+    each has its own scale. Runs that have not finished ``stage`` are left out.
     """
     import matplotlib
 
@@ -490,8 +490,19 @@ def final_reward_figure(
             vals = [np.asarray([v[c_idx] for v in per[g][role]]) for g in groups]
             heights = [v.mean() if v.size else np.nan for v in vals]
             # one seed has no interval: no error bar rather than a zero-width one
-            errs = [_t_half(v[:, None])[0] if v.size > 1 else np.nan for v in vals]
-            ax.bar(x, heights, 0.6, yerr=errs, capsize=4, color=colors, edgecolor="black", linewidth=0.5)
+            half = [_t_half(v[:, None])[0] if v.size > 1 else np.nan for v in vals]
+            # a variance is >= 0, so its interval is cut at 0 (as in the report's tables)
+            below = [min(e, h) if what == "variance" else e for e, h in zip(half, heights, strict=True)]
+            ax.bar(
+                x,
+                heights,
+                0.6,
+                yerr=np.array([below, half]),
+                capsize=4,
+                color=colors,
+                edgecolor="black",
+                linewidth=0.5,
+            )
             ax.set_xticks(x, ticks, rotation=15, fontsize=8)
             ax.set_ylabel(f"{what} of total reward (dimensionless)", fontsize=8)
             ax.set_title(f"{short.get(role, role)}: {what}, {where}", fontsize=9)
@@ -499,7 +510,7 @@ def final_reward_figure(
             ax.axhline(0, color="black", linewidth=0.6)
     fig.tight_layout(rect=(0, 0.04, 1, 0.95))
     fig.suptitle("Mean and variance of the final total reward (paper Fig. 11)", fontsize=10)
-    bars = "bars: mean over seeds, error bars: 95 % t interval"
+    bars = "bars: mean over seeds, error bars: 95 % t interval (a variance's cut at 0)"
     if any(n < 2 for n in seeds.values()):
         bars += " (none where n = 1: one seed has no interval)"
     _caption(fig, (caption + "; " if caption else "") + bars)

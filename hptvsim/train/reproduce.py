@@ -784,7 +784,7 @@ def claim_result(plan: Plan, results: Results, claim: Claim) -> tuple[Interval, 
         iv = difference(
             results.series(a.setting, plan.seeds, claim.stage, claim.metric),
             results.series(b.setting, plan.seeds, claim.stage, claim.metric),
-        )
+        ).within(*metric_range(claim.metric, difference_of=True))
         v = verdict(iv, claim.direction)
     else:
         xs: list[float] = []
@@ -817,6 +817,25 @@ _MATCHUP_TEXT = {
     "vs_scripted_evader": "run's pursuers vs scripted evader",
     "vs_scripted_pursuers": "run's evader vs scripted pursuers",
 }
+
+
+def metric_range(metric: str, *, difference_of: bool = False) -> tuple[float, float]:
+    """The range a metric's mean (or a difference of two means) cannot leave.
+
+    Args:
+        metric: A metric name (``train_final.pursuer``, ``eval.self.capture_rate``, ...).
+        difference_of: The range of a difference of two settings' means instead.
+
+    Returns:
+        ``(low, high)``: ``(0, 1)`` for a rate (``(-1, 1)`` for a difference), ``(0, inf)`` for a
+        variance or a time to capture (unbounded for a difference), unbounded for a reward.
+    """
+    name = metric.split(".")[-1] if metric.startswith("eval.") else metric.split(".")[0]
+    if name.endswith("_rate"):
+        return (-1.0, 1.0) if difference_of else (0.0, 1.0)
+    if name in ("train_var", "time_to_capture_s") and not difference_of:
+        return (0.0, math.inf)
+    return (-math.inf, math.inf)
 
 
 def metric_text(metric: str) -> str:
@@ -901,7 +920,9 @@ def write_report(
     w(
         "- Statistics: every number is a mean over training seeds with its 95 % Student-t interval "
         "`[low, high]`; differences use Welch's interval, trends the least-squares slope's t interval "
-        "(`hptvsim.train.stats`). A claim **holds** only when the whole interval lies on the claimed "
+        "(`hptvsim.train.stats`); an interval is cut to the range its quantity cannot leave (a "
+        "rate to [0, 1], a difference of rates to [-1, 1], a variance or a time to capture to "
+        ">= 0), which keeps its coverage. A claim **holds** only when the whole interval lies on the claimed "
         "side of zero, **does not hold** when it lies wholly on the other side, and is **not "
         "resolved** otherwise."
     )
@@ -1047,9 +1068,8 @@ def _experiment_section(
         w("| metric | " + " | ".join(f"{e.label}" for e in exp.entries) + " |")
         w("|---|" + "---|" * len(exp.entries))
         for m in metrics:
-            cells = [
-                mean_interval(results.series(e.setting, plan.seeds, stage, m)).format() for e in exp.entries
-            ]
+            ivs = [mean_interval(results.series(e.setting, plan.seeds, stage, m)) for e in exp.entries]
+            cells = [iv.within(*metric_range(m)).format() for iv in ivs]
             w(f"| {metric_text(m)} | " + " | ".join(cells) + " |")
         w("")
 

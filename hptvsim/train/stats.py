@@ -7,6 +7,10 @@ difference of their means (unequal variances, Welch-Satterthwaite degrees of fre
 over a numeric setting (the entropy coefficient) by the ordinary least-squares slope over every
 (setting, seed) value with its t interval (n - 2 degrees of freedom).
 
+A mean that cannot leave a range (a rate in [0, 1], a variance or a time >= 0) has its interval
+cut to that range (:meth:`Interval.within`): the true mean lies in the range, so the cut interval
+covers it whenever the t interval does, and a reader is not shown a capture rate of 1.4.
+
 A claim that one thing is larger than another *holds* when the whole interval of the difference
 lies on the claimed side of zero, *does not hold* when it lies wholly on the other side, and is
 *not resolved* otherwise (or with fewer than two seeds per side).
@@ -47,6 +51,21 @@ class Interval:
     def resolved(self) -> bool:
         """Whether the interval exists (enough values)."""
         return math.isfinite(self.low) and math.isfinite(self.high)
+
+    def within(self, low: float = -math.inf, high: float = math.inf) -> Interval:
+        """This interval cut to the range ``[low, high]`` the estimated quantity cannot leave.
+
+        Args:
+            low: Smallest possible value (0 for a rate, a variance or a time).
+            high: Largest possible value (1 for a rate).
+
+        Returns:
+            The same estimate with ``max(self.low, low)`` and ``min(self.high, high)`` as its ends
+            (an interval without ends stays without).
+        """
+        if not self.resolved:
+            return self
+        return Interval(self.value, max(self.low, low), min(self.high, high), self.n)
 
     def format(self, digits: int = 3) -> str:
         """``value [low, high]`` (or ``value (n = 1, no interval)``)."""

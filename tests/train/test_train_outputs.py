@@ -227,6 +227,13 @@ def test_a_stage_still_training_is_drawn_apart_and_not_counted_as_a_seed(tmp_pat
         assert titles == ["ent_coef=auto_0.1 (seeds per stage: 2, 1)", "ent_coef=auto_0.4 (2 seeds)"]
         ticks = [t.get_text() for t in bars.axes[0].get_xticklabels()]
         assert ticks == ["ent_coef=auto_0.1\n(n = 1)", "ent_coef=auto_0.4\n(n = 2)"]
+        for ax in bars.axes[1::2]:  # the variance column: error bars cut at 0, never below
+            assert "variance" in ax.get_title()
+            bar = next(c for c in ax.containers if hasattr(c, "errorbar"))
+            segments = bar.errorbar.lines[2][0].get_segments()
+            ends = np.concatenate([np.asarray(seg, dtype=float).reshape(-1, 2)[:, 1] for seg in segments])
+            ends = ends[np.isfinite(ends)]  # a one-seed group has no error bar
+            assert ends.size and ends.min() >= 0.0, segments
     finally:
         for fig in [*figs.values(), agents, bars]:
             plt.close(fig)

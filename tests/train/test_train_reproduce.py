@@ -166,6 +166,12 @@ def test_reproduce_end_to_end_at_toy_size(tmp_path: Path) -> None:
         assert re.search(r"\[-?[\d.e+-]+, -?[\d.e+-]+\]", row), (
             f"no interval: {row}"
         )  # 2 seeds: intervals exist
+    # intervals stay in the range of their quantity: rates in [0, 1], variances and times >= 0
+    for line in text.splitlines():
+        name = line.split("|")[1].strip() if line.startswith("| ") else ""
+        bounded = name.startswith(("capture rate", "collision rate", "variance", "time to capture"))
+        for low, high in re.findall(r"\[(-?[\d.e+-]+), (-?[\d.e+-]+)\]", line) if bounded else []:
+            assert float(low) >= 0.0 and (not name.endswith("rate") or float(high) <= 1.0), line
     figs = sorted((tmp_path / "report").rglob("*.png"))
     assert {p.parent.name for p in figs} == {e.id for e in plan.experiments}
     for p in figs:

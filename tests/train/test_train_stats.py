@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from scipy import stats as st
 
+from hptvsim.train.reproduce import metric_range
 from hptvsim.train.stats import difference, mean_interval, slope, verdict
 
 
@@ -52,3 +53,21 @@ def test_verdicts_need_the_whole_interval_on_one_side() -> None:
     assert verdict(overlapping, "greater") == "not resolved"
     assert verdict(difference([1.0], [0.0]), "greater") == "not resolved"  # one seed: no interval
     assert verdict(difference([10.0, 11.0, 10.5], [1.0, 1.2, 0.9]), "greater") == "holds"
+
+
+def test_an_interval_is_cut_to_the_range_of_its_quantity() -> None:
+    rates = [1.0, 0.5]  # a capture rate's t interval with 2 seeds reaches far past 1
+    raw = mean_interval(rates)
+    assert raw.low < 0.0 and raw.high > 1.0
+    cut = raw.within(*metric_range("eval.vs_scripted_evader.capture_rate"))
+    assert (cut.value, cut.low, cut.high, cut.n) == (0.75, 0.0, 1.0, 2)
+    assert mean_interval([3.0]).within(0.0, 1.0).format() == "3 (n = 1, no interval)"
+    assert metric_range("eval.self.collision_rate", difference_of=True) == (-1.0, 1.0)
+    assert metric_range("train_var.evader") == (0.0, math.inf)
+    assert metric_range("eval.self.time_to_capture_s") == (0.0, math.inf)
+    for unbounded in ("train_final.pursuer", "train_mean.evader", "eval.self.return_pursuer"):
+        assert metric_range(unbounded) == (-math.inf, math.inf)
+    assert metric_range("train_var.pursuer", difference_of=True) == (-math.inf, math.inf)
+    # a verdict is the same before and after the cut: 0 stays inside or outside [-1, 1]
+    d = difference([1.0, 0.9, 1.0], [0.0, 0.1, 0.2])
+    assert verdict(d, "greater") == verdict(d.within(-1.0, 1.0), "greater")
