@@ -10,10 +10,11 @@ The map colours live here too (the seabed's depth ramp :data:`DEPTH_STOPS`, obst
 sonar), and the dashboard's generated module ``web/js/frames.gen.js`` carries them
 (:func:`display_constants`), so the browser draws with the same colours as Python.
 
-The colours are chosen to be told apart from each other and from the seabed's depth ramp
-(sand to dark blue, :data:`DEPTH_STOPS`) and the dashboard's dark page:
-pursuers are warm (crimson, orange, pink, ...), evaders are bright and never blue or cyan
-(gold first), so an evader stays visible over deep water.
+The colours are chosen to be told apart from each other (the three pursuers and the evader of
+the shipped scenarios at least 35 CIEDE2000 units apart, every pair of the palette at least 12),
+from the seabed's depth ramp (sand to dark blue, :data:`DEPTH_STOPS`), from the dashboard's dark
+page and from the white of the figures: pursuers are crimson, violet, green, ...; evaders are
+bright and never blue or cyan (gold first), so an evader stays visible over deep water.
 
 This module imports nothing of hptvsim, so every layer may use it.
 """
@@ -42,8 +43,11 @@ __all__ = [
 ROLES: Final = ("pursuer", "evader")
 """The roles an agent can have."""
 
-PURSUER_COLORS: Final = ("#e8203a", "#ff7a1a", "#ff5ec8", "#a970ff", "#ff9e9e", "#c45a1b")
-"""Pursuer ``k`` gets ``PURSUER_COLORS[k % 6]``: crimson, orange, pink, violet, salmon, rust."""
+PURSUER_COLORS: Final = ("#e8203a", "#a970ff", "#3fcf6f", "#ff5ec8", "#ff7a1a", "#ff9e9e")
+"""Pursuer ``k`` gets ``PURSUER_COLORS[k % 6]``: crimson, violet, green, pink, orange, salmon.
+
+No warm second or third pursuer: an orange ``pursuer_1`` was 23 CIEDE2000 units from the gold
+evader, hard to tell apart in a figure's legend on white."""
 
 EVADER_COLORS: Final = ("#f2b400", "#9be22d", "#f2f2f2", "#ffe4a0")
 """Evader ``k`` gets ``EVADER_COLORS[k % 4]``: gold, lime, white, apricot (no blue, no cyan)."""

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import colorsys
 import itertools
+import math
+from collections.abc import Sequence
 
 import numpy as np
 import pytest
@@ -38,6 +40,54 @@ def _distance(a: str, b: str | tuple[int, int, int]) -> float:
     return float(np.linalg.norm(_lab(hex_rgb(a)) - _lab(rgb_b)))
 
 
+def _ciede2000(a: str, b: str) -> float:
+    """CIEDE2000 colour difference of two sRGB colours: CIE76 overstates how far apart yellows
+    and oranges look, this does not."""
+    return _ciede2000_lab(tuple(_lab(hex_rgb(a))), tuple(_lab(hex_rgb(b))))
+
+
+def _ciede2000_lab(lab1: Sequence[float], lab2: Sequence[float]) -> float:
+    """CIEDE2000 of two L*a*b* colours (Sharma, Wu & Dalal 2005, eqs. 1-22)."""
+    (l1, a1, b1), (l2, a2, b2) = lab1, lab2
+    c_bar = (math.hypot(a1, b1) + math.hypot(a2, b2)) / 2.0
+    g = 0.5 * (1.0 - math.sqrt(c_bar**7 / (c_bar**7 + 25.0**7)))
+    a1p, a2p = (1.0 + g) * a1, (1.0 + g) * a2
+    c1, c2 = math.hypot(a1p, b1), math.hypot(a2p, b2)
+    h1, h2 = math.degrees(math.atan2(b1, a1p)) % 360.0, math.degrees(math.atan2(b2, a2p)) % 360.0
+    dh = 0.0 if c1 * c2 == 0.0 else (h2 - h1 + 180.0) % 360.0 - 180.0
+    d_l, d_c = l2 - l1, c2 - c1
+    d_h = 2.0 * math.sqrt(c1 * c2) * math.sin(math.radians(dh / 2.0))
+    l_bar, cp_bar = (l1 + l2) / 2.0, (c1 + c2) / 2.0
+    if c1 * c2 == 0.0:
+        h_bar = h1 + h2
+    elif abs(h1 - h2) <= 180.0:
+        h_bar = (h1 + h2) / 2.0
+    else:
+        h_bar = (h1 + h2 + 360.0) / 2.0 if h1 + h2 < 360.0 else (h1 + h2 - 360.0) / 2.0
+    t = (
+        1.0
+        - 0.17 * math.cos(math.radians(h_bar - 30.0))
+        + 0.24 * math.cos(math.radians(2.0 * h_bar))
+        + 0.32 * math.cos(math.radians(3.0 * h_bar + 6.0))
+        - 0.20 * math.cos(math.radians(4.0 * h_bar - 63.0))
+    )
+    r_c = 2.0 * math.sqrt(cp_bar**7 / (cp_bar**7 + 25.0**7))
+    r_t = -math.sin(math.radians(60.0 * math.exp(-(((h_bar - 275.0) / 25.0) ** 2)))) * r_c
+    s_l = 1.0 + 0.015 * (l_bar - 50.0) ** 2 / math.sqrt(20.0 + (l_bar - 50.0) ** 2)
+    s_c, s_h = 1.0 + 0.045 * cp_bar, 1.0 + 0.015 * cp_bar * t
+    return math.sqrt((d_l / s_l) ** 2 + (d_c / s_c) ** 2 + (d_h / s_h) ** 2 + r_t * (d_c / s_c) * (d_h / s_h))
+
+
+def test_ciede2000_matches_the_published_test_pairs() -> None:
+    """Sharma et al.'s test data (pairs 1, 7 and 17), then sRGB colours through our sRGB -> Lab."""
+    assert _ciede2000_lab((50.0, 2.6772, -79.7751), (50.0, 0.0, -82.7485)) == pytest.approx(2.0425, abs=1e-4)
+    assert _ciede2000_lab((50.0, 0.0, 0.0), (50.0, -1.0, 2.0)) == pytest.approx(2.3669, abs=1e-4)
+    assert _ciede2000_lab((50.0, 2.5, 0.0), (73.0, 25.0, -18.0)) == pytest.approx(27.1492, abs=1e-4)
+    assert _ciede2000("#ffffff", "#ffffff") == 0.0
+    assert _ciede2000("#f2b400", "#ff7a1a") == pytest.approx(_ciede2000("#ff7a1a", "#f2b400"))
+    assert _ciede2000("#000000", "#ffffff") == pytest.approx(100.0, abs=0.01)
+
+
 def test_every_agent_of_every_shipped_scenario_has_its_own_colour() -> None:
     for name in scenario_names():
         agents = shipped_scenario(name).agents
@@ -51,10 +101,12 @@ def test_pursuers_do_not_share_a_red_and_every_colour_is_distinct() -> None:
     every = PURSUER_COLORS + EVADER_COLORS
     assert len(set(every)) == len(every)
     for a, b in itertools.combinations(every, 2):
-        assert _distance(a, b) > 20.0, (a, b)
+        assert _ciede2000(a, b) > 12.0, (a, b)
     shipped = [agent_color("pursuer", k) for k in range(3)] + [agent_color("evader", 0)]
     for a, b in itertools.combinations(shipped, 2):
-        assert _distance(a, b) > 35.0, (a, b)  # the shipped scenarios' agents: far apart
+        assert _ciede2000(a, b) > 35.0, (a, b)  # the shipped scenarios' agents: far apart
+    for c in shipped:  # each shows on the figures' white and on the dashboard's dark page
+        assert _ciede2000(c, "#ffffff") > 25.0 and _ciede2000(c, "#132338") > 40.0, c
 
 
 @pytest.mark.parametrize("color", EVADER_COLORS)
