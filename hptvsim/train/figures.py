@@ -349,6 +349,8 @@ def reward_agents_figure(
         groups[label].append((agent_returns(run), finished_stages(run)))
     shown = list(groups)[:max_groups]
     fig, axes = plt.subplots(1, len(shown), figsize=(5.2 * len(shown), 4.2), squeeze=False, sharey=True)
+    raised = 0.0  # points the highest raised stage name stands above the others, in any panel
+    titles: list[str] = []
     for ax, label in zip(axes[0], shown, strict=True):
         runs = groups[label]
         keys = sorted({k for r, _ in runs for k in r if stages is None or k[1] in stages})
@@ -390,11 +392,11 @@ def reward_agents_figure(
                 ax.axvline(offset + 0.5, color="grey", linestyle="--", linewidth=0.8)
             marks.append((offset, max(n_max, 1), key[1]))
             offset += n_max
-        raised = _stage_labels(ax, marks, fontsize=8)
+        raised = max(raised, _stage_labels(ax, marks, fontsize=8))
         if partial_shown:
             ax.plot([], [], color="grey", linestyle=":", label="still training (not counted)")
         counts = [sum(1 for _, done in runs if k[1] in done) for k in keys]
-        ax.set_title(_seeds_text(label, counts), fontsize=9, pad=14 + raised)
+        titles.append(_seeds_text(label, counts))
         ax.set_xlabel(
             f"training episode in stage {keys[0][1]}"
             if len(keys) == 1
@@ -402,6 +404,8 @@ def reward_agents_figure(
         )
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7, loc="best")
+    for ax, title in zip(axes[0], titles, strict=True):  # one height for every panel's title
+        ax.set_title(title, fontsize=9, pad=14 + raised)
     axes[0][0].set_ylabel("total reward per episode (dimensionless)")
     fig.tight_layout(rect=(0, 0.04, 1, 1))
     _caption(fig, (caption + "; " if caption else "") + "each agent's own reward, mean over seeds, 95 % band")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -301,3 +302,41 @@ def test_names_of_narrow_stages_do_not_print_over_each_other() -> None:
         == 0.0
     )
     plt.close(fig)
+
+
+def _write_run(run: Path, stages: Sequence[tuple[str, int]]) -> None:
+    """A run folder as the trainer leaves it, as far as the figures read it: ``episodes.csv``
+    (one row per agent and episode) and ``stages/<name>/stage.json`` for each finished stage."""
+    rows = ["stage_index,stage,episode,agent,return"]
+    for index, (stage, episodes) in enumerate(stages):
+        for ep in range(episodes):
+            for k, agent in enumerate(("pursuer_0", "pursuer_1", "pursuer_2", "evader_0")):
+                rows.append(f"{index},{stage},{ep},{agent},{100.0 * k + ep}")
+        (run / "stages" / stage).mkdir(parents=True)
+        (run / "stages" / stage / "stage.json").write_text("{}")
+    (run / "episodes.csv").write_text("\n".join(rows) + "\n")
+
+
+def test_every_panel_title_of_the_per_agent_figure_stands_at_one_height(tmp_path: Path) -> None:
+    """One panel raises a narrow stage's name, the other does not: their titles still line up."""
+    import matplotlib.pyplot as plt
+
+    from hptvsim.palette import color_of
+    from hptvsim.train.figures import reward_agents_figure
+
+    narrow, even = tmp_path / "narrow-seed0", tmp_path / "even-seed0"
+    _write_run(narrow, [("source", 30), ("transition", 3), ("target", 120)])
+    _write_run(even, [("source", 50), ("transition", 50), ("target", 50)])
+    fig = reward_agents_figure([narrow, even], labels=["narrow", "even"], smooth=1)
+    try:
+        renderer = fig.canvas.get_renderer()
+        stage_rows = [{round(t.get_position()[1], 3) for t in ax.texts} for ax in fig.axes]
+        assert len(stage_rows[0]) == 2 and len(stage_rows[1]) == 1  # only the first raised a name
+        heights = [ax.title.get_window_extent(renderer).y0 for ax in fig.axes]
+        assert heights[0] == pytest.approx(heights[1], abs=0.5), heights
+        palette = {a: color_of(a) for a in ("pursuer_0", "pursuer_1", "pursuer_2", "evader_0")}
+        for ax in fig.axes:  # each agent in its palette colour
+            drawn = {ln.get_label(): ln.get_color() for ln in ax.lines if not ln.get_label().startswith("_")}
+            assert drawn == palette
+    finally:
+        plt.close(fig)
