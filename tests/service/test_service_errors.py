@@ -145,7 +145,7 @@ def test_api_key_job_limits_timeouts_and_idle_episodes(tmp_path: Path) -> None:
         "HPTVSIM_MAX_INTERACTIVE": "1",
         "HPTVSIM_MAX_STEPS": "20000",
         "HPTVSIM_JOB_TIMEOUT_S": "3",
-        "HPTVSIM_IDLE_TIMEOUT_S": "2",
+        "HPTVSIM_IDLE_TIMEOUT_S": "6",  # the second interactive POST must come before it (loaded CI)
         "HPTVSIM_CORS_ORIGINS": "http://dashboard.example",
     }
     srv = start_server(tmp_path / "keyed", env)
