@@ -393,8 +393,10 @@ def register(main: click.Group, bench: click.Group) -> None:
 
         Trains every (setting, seed) the plan needs (resuming killed runs, skipping finished
         ones), evaluates every stage on fixed seeds, and writes the report with its figures and
-        the verdict on each of the paper's claims. Ctrl-C (or a kill) loses at most the episode
-        in progress: run the same command again to go on.
+        the verdict on each of the paper's claims. Ctrl-C (or SIGTERM to this process) stops
+        each run in progress at the end of its episode with a checkpoint, so nothing is lost (a
+        second Ctrl-C stops at once); a hard kill loses at most the config's `checkpoint_every` env
+        steps per run. Run the same command again to go on.
         """
         from hptvsim.train.config import ConfigError
         from hptvsim.train.reproduce import load_plan, plan_jobs, reproduce, resolve_plan_path, write_report

@@ -12,7 +12,8 @@ paper's statements, each a comparison or a trend of one metric). :func:`reproduc
 2. trains them, ``workers`` at a time in separate processes (one torch thread each); a run
    killed at any point resumes from its last checkpoint, which the plan's configs take at
    episode ends (``checkpoint_at_episode_end``), so a resumed run is bit-identical to an
-   uninterrupted one;
+   uninterrupted one; interrupted (Ctrl-C, SIGTERM), the runs in progress stop at their
+   episodes' ends with a checkpoint, so an interruption loses nothing;
 3. evaluates every finished stage of every run on fixed seeds (``hptvsim.offline.rollout.play``:
    the same spawn poses and noise for every run): the run's agents against each other, the
    run's pursuers against a scripted evader, and the run's evader against scripted pursuers;
@@ -52,6 +53,7 @@ import math
 import os
 import signal
 import sys
+import threading
 import time
 import tomllib
 from collections.abc import Callable, Iterator, Mapping, Sequence
@@ -519,8 +521,23 @@ def plan_jobs(
 # --- one job: train, then evaluate -------------------------------------------------------------
 
 
+STOP_SIGNAL = signal.SIGUSR1
+"""What the sweep sends its workers to stop them at their episode's end (see :func:`reproduce`)."""
+
+_stop = {"requested": False}  # in a worker: the parent asked it to stop (STOP_SIGNAL)
+
+
+def _stop_requested() -> bool:
+    return _stop["requested"]
+
+
 def _die_with_parent() -> None:
-    """Worker initializer: one torch thread; on Linux, end when the parent process ends."""
+    """Worker initializer: one torch thread; on Linux, end when the parent process ends.
+
+    Ctrl-C reaches every process of the terminal's group; a worker ignores it and stops when its
+    parent asks (:data:`STOP_SIGNAL`), at the end of the episode in progress, so that nothing is
+    lost and a resumed run stays bit-identical to an uninterrupted one.
+    """
     import torch
 
     torch.set_num_threads(1)
@@ -528,6 +545,8 @@ def _die_with_parent() -> None:
         with suppress(OSError):
             ctypes.CDLL("libc.so.6").prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
     signal.signal(signal.SIGTERM, lambda *_: os._exit(143))
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(STOP_SIGNAL, lambda *_: _stop.update(requested=True))
 
 
 @contextmanager
@@ -574,14 +593,20 @@ def run_job(plan_path: str, job: ReproJob, out: str) -> dict[str, Any]:
         if not (run_dir / "summary.json").is_file():
             cfg = build_config(setting, job.seed, plan.fixed)
             status = "resumed" if has_checkpoint(run_dir) else "trained"
-            train(
+            result = train(
                 cfg,
                 run_dir,
                 resume=has_checkpoint(run_dir),
                 progress=False,
                 tensorboard=False,
+                stop_requested=_stop_requested,
                 label=setting.label,
             )
+            if not result.finished:  # asked to stop: checkpointed at an episode's end
+                note = f"at env step {result.global_step:,}, checkpoint written"
+                return {"run_dir": job.run_dir, "status": "stopped", "note": note}
+        if _stop_requested():
+            return {"run_dir": job.run_dir, "status": "stopped", "note": "before its evaluation"}
         evaluated = evaluate_run(run_dir, plan.evaluation)
     return {
         "run_dir": job.run_dir,
@@ -1077,6 +1102,41 @@ def _experiment_section(
 # --- the driver ---------------------------------------------------------------------------------
 
 
+def _raise_interrupt(*_: Any) -> None:
+    raise KeyboardInterrupt
+
+
+def _status_line(job: ReproJob, st: Mapping[str, Any]) -> str:
+    """``[HH:MM:SS] <status> <run folder> (<why> | in <minutes>)``: one line of the sweep's log."""
+    why = st.get("error") or st.get("note")
+    tail = f" ({why})" if why else f" in {st['seconds'] / 60:.1f} min"
+    return f"[{time.strftime('%H:%M:%S')}] {st['status']} {job.run_dir}{tail}"
+
+
+def _stop_workers(
+    pending: Mapping[Future[dict[str, Any]], ReproJob], grace_s: float, log: Callable[[str], None]
+) -> None:
+    """Ask every worker to stop at its episode's end, wait up to ``grace_s``, then end them."""
+    import multiprocessing
+
+    for p in multiprocessing.active_children():
+        if p.pid is not None:
+            with suppress(OSError):
+                os.kill(p.pid, STOP_SIGNAL)
+    try:
+        done, _ = wait(list(pending), timeout=grace_s)
+        for fut in done:
+            try:
+                st = fut.result()
+            except Exception as exc:
+                st = {"status": "failed", "error": f"{type(exc).__name__}: {exc}"}
+            log(_status_line(pending[fut], st))
+    except KeyboardInterrupt:
+        log("stopping at once")
+    for p in multiprocessing.active_children():
+        p.terminate()
+
+
 def reproduce(
     plan: Plan,
     out: Path,
@@ -1088,11 +1148,18 @@ def reproduce(
     progress: bool = True,
     figures: bool = True,
     log: Callable[[str], None] = print,
+    stop_grace_s: float = 600.0,
 ) -> dict[str, Any]:
     """Train, evaluate and report (see the module docstring); returns the job statuses.
 
     Runs already finished are skipped; killed ones resume. The report is written at the end, and
-    also when the sweep is interrupted (Ctrl-C), from whatever is finished.
+    also when the sweep is interrupted, from whatever is finished.
+
+    Interrupted (Ctrl-C, or SIGTERM to this process), every run in progress stops at the end of
+    its episode with a checkpoint, so nothing is lost and a resumed run stays bit-identical; a
+    second Ctrl-C, or ``stop_grace_s`` passing, ends the workers at once (each run then resumes
+    from its last periodic checkpoint, losing at most ``checkpoint_every`` env steps, as after a
+    kill). Then :class:`KeyboardInterrupt` is raised.
 
     Args:
         plan: The plan.
@@ -1104,6 +1171,7 @@ def reproduce(
         progress: A progress bar over runs.
         figures: Draw the figures.
         log: Where status lines go.
+        stop_grace_s: Longest wait [s] for the runs to reach their episodes' ends when interrupted.
     """
     out.mkdir(parents=True, exist_ok=True)
     jobs = plan_jobs(plan, experiments=experiments, seeds=seeds)
@@ -1131,8 +1199,11 @@ def reproduce(
     pool = ProcessPoolExecutor(
         max_workers=n, mp_context=multiprocessing.get_context("spawn"), initializer=_die_with_parent
     )
+    previous_term = None  # SIGTERM (kill, docker stop) stops the sweep as Ctrl-C does
+    if threading.current_thread() is threading.main_thread():
+        previous_term = signal.signal(signal.SIGTERM, _raise_interrupt)
+    pending: dict[Future[dict[str, Any]], ReproJob] = {}
     try:
-        pending: dict[Future[dict[str, Any]], ReproJob] = {}
         queue = list(jobs)
         while queue or pending:
             while queue and len(pending) < n:
@@ -1147,20 +1218,23 @@ def reproduce(
                 except Exception as exc:  # a failed run is reported; the others go on
                     st = {"run_dir": job.run_dir, "status": "failed", "error": f"{type(exc).__name__}: {exc}"}
                 statuses[job.run_dir] = st
-                log(
-                    f"[{time.strftime('%H:%M:%S')}] {st['status']} {job.run_dir}"
-                    + (f" ({st['error']})" if "error" in st else f" in {st['seconds'] / 60:.1f} min")
-                )
+                log(_status_line(job, st))
                 if bar is not None:
                     bar.update(1)
     except KeyboardInterrupt:
-        log("interrupted: writing the report from the finished runs; run the same command to go on")
-        for p in multiprocessing.active_children():
-            p.terminate()
+        log(
+            f"[{time.strftime('%H:%M:%S')}] interrupted: each run in progress stops at the end of "
+            f"its episode with a checkpoint (at most {stop_grace_s / 60:.0f} min; Ctrl-C again stops "
+            "at once, and the runs lose what they did since their last checkpoint)"
+        )
+        _stop_workers(pending, stop_grace_s, log)
         pool.shutdown(wait=False, cancel_futures=True)
+        log("writing the report from the finished runs; run the same command to go on")
         write_report(plan, out, report, figures=figures)
         raise
     finally:
+        if previous_term is not None:
+            signal.signal(signal.SIGTERM, previous_term)
         if bar is not None:
             bar.close()
         pool.shutdown(wait=True, cancel_futures=True)

@@ -76,7 +76,8 @@ class RunResult:
     Attributes:
         run_dir: The run's folder.
         global_step: Env steps done over all stages.
-        finished: Every stage ran to its budget (false when stopped by ``stop_after``).
+        finished: Every stage ran to its budget (false when stopped by ``stop_after`` or
+            ``stop_requested``).
         stage_dirs: Folders of the finished stages' models, in order.
     """
 
@@ -312,6 +313,7 @@ def train(
     tensorboard: bool = True,
     env_factories: Mapping[str, EnvFactory] | None = None,
     stop_after: int | None = None,
+    stop_requested: Callable[[], bool] | None = None,
     on_stage_end: Callable[[int, Path], None] | None = None,
     label: str | None = None,
     update_config: bool = False,
@@ -330,6 +332,11 @@ def train(
         tensorboard: Write TensorBoard events.
         env_factories: ``stage name -> factory`` replacing the stages' env specs.
         stop_after: Stop (with a checkpoint) once this many env steps are done in total.
+        stop_requested: Polled as the run goes; once it returns true the run stops with a
+            checkpoint at the end of the episode in progress, so that a resumed run is the same
+            as an uninterrupted one (a config that does not checkpoint at episode ends stops at
+            once, and the cut episode is replayed on resume, as after Ctrl-C). The result then
+            has ``finished`` false.
         on_stage_end: Called with (stage index, stage model folder) after each stage.
         label: Name of the run's group in figures (a sweep's setting), kept in ``run.json``.
         update_config: On resume, go on with ``cfg`` where it differs from the saved config in
@@ -405,7 +412,17 @@ def train(
                 state.stage_started = True
                 ckpt_models = None
                 stopped = _run_stage(
-                    cfg, idx, env, learner, fixed, state, logger, run_dir, progress, stop_after
+                    cfg,
+                    idx,
+                    env,
+                    learner,
+                    fixed,
+                    state,
+                    logger,
+                    run_dir,
+                    progress,
+                    stop_after,
+                    stop_requested,
                 )
             finally:
                 env.close()
@@ -425,7 +442,8 @@ def train(
             save_checkpoint(run_dir, state, None)
             if on_stage_end is not None:
                 on_stage_end(idx, folder)
-            if stop_after is not None and state.global_step >= stop_after and not state.finished:
+            asked = stop_requested is not None and stop_requested()
+            if (asked or (stop_after is not None and state.global_step >= stop_after)) and not state.finished:
                 return RunResult(run_dir, state.global_step, False, tuple(stage_dirs))
     finally:
         logger.close()
@@ -473,8 +491,9 @@ def _run_stage(
     run_dir: Path,
     progress: bool,
     stop_after: int | None,
+    stop_requested: Callable[[], bool] | None = None,
 ) -> bool:
-    """Train one stage to its budget; returns True when stopped early by ``stop_after``."""
+    """Train one stage to its budget; returns True when stopped early (``stop_after``, ``stop_requested``)."""
     stage = cfg.stages[idx]
     by_steps = stage.budget_steps is not None
     total = stage.budget_steps if by_steps else stage.budget_episodes
@@ -517,6 +536,7 @@ def _run_stage(
                 }
             )
 
+    asked = False  # a stop was requested: stop at the end of this episode
     try:
         while not _stage_done(stage, state):
             obs, _ = env.reset(seed=episode_seed(cfg.seed, idx, state.stage_episode))
@@ -584,6 +604,9 @@ def _run_stage(
                 if cfg.checkpoint_at_episode_end and not episode_over:
                     due = False
                 stop = stop_after is not None and state.global_step >= stop_after
+                asked = asked or (stop_requested is not None and stop_requested())  # polled every step
+                if asked and (episode_over or not cfg.checkpoint_at_episode_end):
+                    stop = True
                 if (due or stop) and not _stage_done(stage, state):
                     checkpoint(at_boundary=episode_over)
                 if stop and not _stage_done(stage, state):

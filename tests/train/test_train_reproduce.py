@@ -258,3 +258,120 @@ def test_killed_mid_sweep_it_resumes_to_the_same_results(tmp_path: Path) -> None
     assert a.keys() == b.keys() and len(a) == 2 + 4  # 2 runs' episodes.csv, 4 stage evaluations
     for k in a:
         assert a[k] == b[k], k
+
+
+def _stop_plan(root: Path) -> Path:
+    """One MAISAC run in the source scenario, long enough to be interrupted, that takes no
+    periodic checkpoint: whatever checkpoint it has after an interruption, the interruption wrote."""
+    plan = root / "stop.toml"
+    plan.write_text(
+        f"""name = "stop"
+config = "{PLANS / "pursuit-stt.toml"}"
+seeds = [0]
+workers = 1
+
+[set]
+"stage.0.budget_steps" = 1800
+"stage.*.env.options.max_steps" = 60
+"sac.learning_starts" = 64
+"sac.batch_size" = 32
+"sac.net_arch" = [32, 32]
+checkpoint_every = 1000000
+log_every = 50
+
+[evaluation]
+episodes = 2
+num_envs = 2
+seed = 0
+last_episodes = 2
+
+[setting.base]
+label = "MAISAC"
+stages = ["source"]
+
+[[experiment]]
+id = "only"
+figure = "none"
+title = "One run"
+entries = [{{ label = "MAISAC", setting = "base" }}, {{ label = "the same", setting = "base" }}]
+"""
+    )
+    return plan
+
+
+def _episodes_done(run: Path) -> int:
+    try:
+        return len({line.split(",")[2] for line in (run / "episodes.csv").read_text().splitlines()[1:]})
+    except OSError:
+        return 0
+
+
+def _interrupt(plan: Path, out: Path, *, after_episodes: int, group: bool) -> tuple[int, str]:
+    """Start the sweep, let its run reach ``after_episodes`` episodes, then Ctrl-C the terminal's
+    process group (``group``) or SIGTERM the sweep's process alone; its exit code and output."""
+    proc = subprocess.Popen(
+        [*HPTVSIM, "reproduce", "--plan", str(plan), "--out", str(out), "--report", str(out / "r.md")],
+        cwd=ROOT,
+        env=_env(),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        start_new_session=True,  # a process group of its own, as a terminal gives a command
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
+    deadline = time.monotonic() + 300
+    while _episodes_done(out / "runs" / "base-seed0") < after_episodes and time.monotonic() < deadline:
+        assert proc.poll() is None, proc.communicate()[0]
+        time.sleep(0.1)
+    if group:
+        os.killpg(proc.pid, signal.SIGINT)
+    else:
+        proc.send_signal(signal.SIGTERM)
+    output = proc.communicate(timeout=300)[0]
+    return proc.returncode, output
+
+
+@pytest.mark.slow
+def test_interrupted_it_stops_at_an_episode_end_and_resumes_bit_identically(tmp_path: Path) -> None:
+    plan = _stop_plan(tmp_path)
+    clean = _reproduce_plan(plan, tmp_path / "clean")
+    assert clean.returncode == 0, clean.stdout[-3000:] + clean.stderr[-3000:]
+    out = tmp_path / "cut"
+    run = out / "runs" / "base-seed0"
+    steps: list[int] = []
+    for n, group in ((3, True), (12, False)):  # Ctrl-C in a terminal, then SIGTERM (kill, docker stop)
+        code, output = _interrupt(plan, out, after_episodes=n, group=group)
+        assert code == 130, output
+        state = json.loads((run / "checkpoint" / "state.json").read_text())
+        assert state["at_boundary"] and state["global_step"] > (steps[-1] if steps else 0), state
+        assert f"stopped runs/base-seed0 (at env step {state['global_step']:,}, checkpoint written)" in output
+        assert not (run / "summary.json").exists() and (out / "r.md").is_file()
+        steps.append(state["global_step"])
+    resumed = _reproduce_plan(plan, out)
+    assert resumed.returncode == 0, resumed.stdout[-3000:] + resumed.stderr[-3000:]
+    assert "resumed runs/base-seed0" in resumed.stdout
+    for name in ("episodes.csv", "eval/source.json"):
+        assert (run / name).read_text() == (tmp_path / "clean" / "runs" / "base-seed0" / name).read_text(), (
+            name
+        )
+
+
+def _reproduce_plan(plan: Path, out: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [
+            *HPTVSIM,
+            "reproduce",
+            "--plan",
+            str(plan),
+            "--out",
+            str(out),
+            "--report",
+            str(out / "r.md"),
+            "--no-figures",
+        ],
+        cwd=ROOT,
+        env=_env(),
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )

@@ -130,6 +130,28 @@ def test_resume_at_an_episode_boundary_is_bit_identical(tmp_path: Path, algo: st
             torch.testing.assert_close(b[agent][k], a[agent][k], rtol=0, atol=0, msg=f"{agent} {k}")
 
 
+def test_a_stop_request_stops_at_the_episode_end_and_resume_is_bit_identical(tmp_path: Path) -> None:
+    """``stop_requested`` (what ``hptvsim reproduce`` passes its workers for Ctrl-C): asked mid-way
+    through an episode, the run ends that episode, checkpoints at its end and loses nothing."""
+    cfg = toy_config(checkpoint_every=10_000, checkpoint_at_episode_end=True)
+    train(cfg, tmp_path / "full", progress=False, tensorboard=False)
+    calls = 0
+
+    def asked() -> bool:  # from the 50th poll on, mid-way through the second episode
+        nonlocal calls
+        calls += 1
+        return calls >= 50
+
+    part = train(cfg, tmp_path / "cut", progress=False, tensorboard=False, stop_requested=asked)
+    rows = _rows(tmp_path / "cut" / "episodes.csv")
+    assert not part.finished and part.global_step == max(int(r["env_step"]) for r in rows) > 50
+    state = json.loads((tmp_path / "cut" / "checkpoint" / "state.json").read_text())
+    assert state["at_boundary"] and state["global_step"] == part.global_step
+    done = train(cfg, tmp_path / "cut", resume=True, progress=False, tensorboard=False)
+    assert done.finished
+    assert (tmp_path / "cut" / "episodes.csv").read_text() == (tmp_path / "full" / "episodes.csv").read_text()
+
+
 def test_existing_run_needs_resume_and_resume_needs_a_checkpoint(tmp_path: Path) -> None:
     cfg = toy_config(stage=[config_to_dict(toy_config().stages[0])])
     train(cfg, tmp_path / "run", progress=False, tensorboard=False, stop_after=60)
