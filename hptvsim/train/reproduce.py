@@ -1106,6 +1106,46 @@ def _raise_interrupt(*_: Any) -> None:
     raise KeyboardInterrupt
 
 
+def steps_done(run_dir: Path) -> int:
+    """Env steps a run has done so far: the ``env_step`` of its last logged episode (0 before one).
+
+    Reads only the end of ``episodes.csv``, so it is cheap to call often on a long run.
+    """
+    try:
+        with (run_dir / "episodes.csv").open("rb") as f:
+            size = f.seek(0, os.SEEK_END)
+            f.seek(max(0, size - 65536))
+            lines = f.read().splitlines()[1:]  # the header, or a line cut by the seek
+    except OSError:
+        return 0
+    for line in reversed(lines):
+        fields = line.split(b",", 5)
+        if len(fields) > 4 and fields[4].isdigit():  # stage_index,stage,episode,agent,env_step,...
+            return int(fields[4])
+    return 0
+
+
+def sweep_progress(out: Path, budgets: Mapping[str, int]) -> tuple[int, int, list[str]]:
+    """How far a sweep is: env steps done over all its runs, runs finished, runs training.
+
+    Args:
+        out: Folder of the runs.
+        budgets: ``run folder (relative to out) -> total env-step budget`` of every run.
+
+    Returns:
+        ``(env steps done, runs finished, run folders with steps but not finished)``; a finished
+        run counts its whole budget.
+    """
+    done, finished, training = 0, 0, []
+    for run, budget in budgets.items():
+        if (out / run / "summary.json").is_file():
+            done, finished = done + budget, finished + 1
+        elif (n := min(steps_done(out / run), budget)) > 0:
+            done += n
+            training.append(run)
+    return done, finished, training
+
+
 def _status_line(job: ReproJob, st: Mapping[str, Any]) -> str:
     """``[HH:MM:SS] <status> <run folder> (<why> | in <minutes>)``: one line of the sweep's log."""
     why = st.get("error") or st.get("note")
@@ -1168,7 +1208,8 @@ def reproduce(
         workers: Processes training side by side (default: the plan's).
         experiments: Only these experiments' runs (the report still covers all).
         seeds: Only these seeds.
-        progress: A progress bar over runs.
+        progress: A progress bar over the env steps of every run (with its rate and the time
+            left), naming the runs training.
         figures: Draw the figures.
         log: Where status lines go.
         stop_grace_s: Longest wait [s] for the runs to reach their episodes' ends when interrupted.
@@ -1190,10 +1231,28 @@ def reproduce(
     n = workers or plan.workers
     statuses: dict[str, dict[str, Any]] = {}
     bar: Any = None
+    stages = {j.run_dir: build_config(plan.settings[j.setting], j.seed, plan.fixed).stages for j in jobs}
+    budgets = {run: sum(st.budget_steps or 0 for st in sts) for run, sts in stages.items()}
+    by_steps = all(st.budget_steps for sts in stages.values() for st in sts)  # else no total: no ETA
+
+    def show_progress() -> None:  # the bar counts env steps over every run: its rate and ETA mean something
+        steps, finished, training = sweep_progress(out, budgets)
+        bar.update(max(0, steps - bar.n))
+        names = ", ".join(Path(r).name for r in training if r in running) or "-"
+        bar.set_postfix_str(f"runs finished {finished}/{len(jobs)}, training: {names}", refresh=True)
+
     if progress:
         from tqdm.auto import tqdm
 
-        bar = tqdm(total=len(jobs), desc=f"reproduce {plan.name}", unit="run", dynamic_ncols=True)
+        start, _, _ = sweep_progress(out, budgets)
+        bar = tqdm(
+            total=sum(budgets.values()) if by_steps else None,
+            initial=start,
+            desc=f"reproduce {plan.name}",
+            unit="step",
+            unit_scale=True,
+            dynamic_ncols=True,
+        )
     import multiprocessing
 
     pool = ProcessPoolExecutor(
@@ -1203,6 +1262,7 @@ def reproduce(
     if threading.current_thread() is threading.main_thread():
         previous_term = signal.signal(signal.SIGTERM, _raise_interrupt)
     pending: dict[Future[dict[str, Any]], ReproJob] = {}
+    running: set[str] = set()
     try:
         queue = list(jobs)
         while queue or pending:
@@ -1210,7 +1270,10 @@ def reproduce(
                 job = queue.pop(0)
                 log(f"[{time.strftime('%H:%M:%S')}] start {job.run_dir}")
                 pending[pool.submit(run_job, str(plan.path), job, str(out))] = job
-            done, _ = wait(list(pending), return_when=FIRST_COMPLETED)
+            running = {j.run_dir for j in pending.values()}
+            done, _ = wait(list(pending), timeout=None if bar is None else 10.0, return_when=FIRST_COMPLETED)
+            if bar is not None:
+                show_progress()
             for fut in done:
                 job = pending.pop(fut)
                 try:
@@ -1219,8 +1282,6 @@ def reproduce(
                     st = {"run_dir": job.run_dir, "status": "failed", "error": f"{type(exc).__name__}: {exc}"}
                 statuses[job.run_dir] = st
                 log(_status_line(job, st))
-                if bar is not None:
-                    bar.update(1)
     except KeyboardInterrupt:
         log(
             f"[{time.strftime('%H:%M:%S')}] interrupted: each run in progress stops at the end of "

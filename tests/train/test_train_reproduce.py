@@ -350,6 +350,8 @@ def test_interrupted_it_stops_at_an_episode_end_and_resumes_bit_identically(tmp_
     resumed = _reproduce_plan(plan, out)
     assert resumed.returncode == 0, resumed.stdout[-3000:] + resumed.stderr[-3000:]
     assert "resumed runs/base-seed0" in resumed.stdout
+    # the bar counts env steps over the sweep, from where the interrupted runs stopped
+    assert "1.80k/1.80k" in resumed.stderr and "runs finished 1/1" in resumed.stderr, resumed.stderr[-2000:]
     for name in ("episodes.csv", "eval/source.json"):
         assert (run / name).read_text() == (tmp_path / "clean" / "runs" / "base-seed0" / name).read_text(), (
             name
@@ -375,3 +377,25 @@ def _reproduce_plan(plan: Path, out: Path) -> subprocess.CompletedProcess[str]:
         text=True,
         timeout=900,
     )
+
+
+def test_the_sweep_bar_counts_the_env_steps_of_every_run(tmp_path: Path) -> None:
+    """What the progress bar of ``hptvsim reproduce`` shows, from the run folders alone: a finished
+    run counts its budget, a run training the env step of its last logged episode, read from the
+    end of a long ``episodes.csv``."""
+    from hptvsim.train.reproduce import steps_done, sweep_progress
+
+    header = "stage_index,stage,episode,agent,env_step,return,length,terminated,truncated,info\n"
+    training = tmp_path / "runs" / "a-seed0"
+    training.mkdir(parents=True)
+    rows = [f'0,source,{k},pursuer_0,{60 * (k + 1)},1.5,60,0,1,"{{""d"":1,""x"":2}}"\n' for k in range(3000)]
+    (training / "episodes.csv").write_text(header + "".join(rows))  # ~150 kB: only its end is read
+    assert steps_done(training) == 180_000
+    (training / "episodes.csv").write_text(header + "".join(rows[:2]) + "0,source,2,purs")  # cut mid-line
+    assert steps_done(training) == 120
+    finished = tmp_path / "runs" / "b-seed0"
+    finished.mkdir()
+    (finished / "summary.json").write_text("{}")
+    assert steps_done(tmp_path / "runs" / "c-seed0") == 0
+    budgets = {"runs/a-seed0": 1_000, "runs/b-seed0": 30_000, "runs/c-seed0": 5_000}
+    assert sweep_progress(tmp_path, budgets) == (120 + 30_000, 1, ["runs/a-seed0"])
