@@ -421,7 +421,8 @@ def register(main: click.Group, bench: click.Group) -> None:
             click.echo(str(write_report(plan, out, report, figures=not no_figures)))
             return
         n = len(plan_jobs(plan, experiments=experiments or None, seeds=seeds or None))
-        click.echo(f"{n} runs in {out} ({workers or plan.workers} side by side); report: {report}")
+        runs = f"{n} run" + ("" if n == 1 else "s")
+        click.echo(f"{runs} in {out} ({workers or plan.workers} side by side); report: {report}")
         try:
             statuses = reproduce(
                 plan,
