@@ -30,7 +30,10 @@ def test_the_shipped_plan_runs_every_experiment_on_the_pursuit_game_with_three_s
     # deduplicated: the base run serves four experiments once per seed; seed-major order
     assert [j.run_dir for j in jobs].count("runs/base-seed0") == 1
     assert [j.seed for j in jobs] == sorted(j.seed for j in jobs)
-    assert len(jobs) == 8 * 3
+    assert len(jobs) == 9 * 3
+    for setting in plan.settings.values():  # every run trains at least 150k env steps
+        cfg = build_config(setting, 0, plan.fixed)
+        assert sum(s.budget_steps or 0 for s in cfg.stages) >= 150_000, setting.label
     base = build_config(plan.settings["base"], 0, plan.fixed)
     assert [s.name for s in base.stages] == ["source", "transition", "target"]
     assert all(s.env.task == "pursuit" for s in base.stages)
@@ -43,8 +46,10 @@ def test_the_shipped_plan_runs_every_experiment_on_the_pursuit_game_with_three_s
     only = build_config(plan.settings["target_only"], 1, plan.fixed)
     assert [s.name for s in only.stages] == ["target"] and only.seed == 1
     assert only.stages[0].budget_steps == sum(s.budget_steps or 0 for s in base.stages)
-    ent = build_config(plan.settings["ent04"], 2, plan.fixed)
-    assert [s.name for s in ent.stages] == ["source"] and ent.sac.ent_coef == "auto_0.4"
+    for k in range(1, 5):  # Fig. 11: every alpha_0 in the source scenario alone, 150k env steps each
+        ent = build_config(plan.settings[f"src_alpha0{k}"], 2, plan.fixed)
+        assert [s.name for s in ent.stages] == ["source"] and ent.sac.ent_coef == f"auto_0.{k}"
+        assert ent.stages[0].budget_steps == 150_000 and ent.stages[0].env.scenario == "source"
     vmax = build_config(plan.settings["vmax35"], 0, plan.fixed)
     assert all(s.env.options["vehicle_parameters"]["pursuer"]["v_max"] == 3.5 for s in vmax.stages)
 
@@ -100,8 +105,8 @@ def test_a_report_without_runs_says_what_is_missing(tmp_path: Path) -> None:
     plan = load_plan(PLANS / "toy.toml")
     report = write_report(plan, tmp_path / "out", tmp_path / "report.md")
     text = report.read_text()
-    assert "Runs finished: 0 of 16" in text
-    assert "**Missing:** 16 run(s)" in text
+    assert "Runs finished: 0 of 18" in text
+    assert "**Missing:** 18 run(s)" in text
     assert text.count("**not resolved** (no finished runs)") == len(plan.claims)
     for exp in plan.experiments:
         assert f"({exp.figure})" in text
@@ -155,7 +160,7 @@ def test_reproduce_end_to_end_at_toy_size(tmp_path: Path) -> None:
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
     plan = load_plan(PLANS / "toy.toml")
     text = (tmp_path / "report.md").read_text()
-    assert "Runs finished: 16 of 16" in text and "**Missing:**" not in text
+    assert "Runs finished: 18 of 18" in text and "**Missing:**" not in text
     assert "## Budget" in text and "## Verdicts" in text and "## Runs" in text
     for exp in plan.experiments:
         assert f"## {exp.title} ({exp.figure})" in text
