@@ -513,7 +513,7 @@ def final_reward_figure(
             ax.grid(alpha=0.3, axis="y")
             ax.axhline(0, color="black", linewidth=0.6)
     fig.tight_layout(rect=(0, 0.04, 1, 0.95))
-    fig.suptitle("Mean and variance of the final total reward (paper Fig. 11)", fontsize=10)
+    fig.suptitle("Mean and variance of the final total reward (drawn as in the paper's Fig. 11)", fontsize=10)
     bars = "bars: mean over seeds, error bars: 95 % t interval (a variance's cut at 0)"
     if any(n < 2 for n in seeds.values()):
         bars += " (none where n = 1: one seed has no interval)"

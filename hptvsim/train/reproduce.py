@@ -1057,6 +1057,8 @@ def _experiment_section(
             written = make_figures([folder], fig_dir, with_trajectories=False, stages=stages)
         except FileNotFoundError:
             written = []
+        for stale in set(fig_dir.glob("*.png")) - set(written):  # of an earlier plan or report
+            stale.unlink()
         running = [
             f"`runs/{e.setting}-seed{s}`"
             for e in exp.entries

@@ -103,7 +103,11 @@ def test_a_bad_plan_is_refused_with_the_key_and_the_valid_values(
 
 def test_a_report_without_runs_says_what_is_missing(tmp_path: Path) -> None:
     plan = load_plan(PLANS / "toy.toml")
+    stale = tmp_path / "report" / "ent_coef" / "reward_agents.png"  # from an earlier report
+    stale.parent.mkdir(parents=True)
+    stale.write_bytes(b"\x89PNG\r\n\x1a\n")
     report = write_report(plan, tmp_path / "out", tmp_path / "report.md")
+    assert not stale.exists()  # a figure the report does not show is not left beside it
     text = report.read_text()
     assert "Runs finished: 0 of 18" in text
     assert "**Missing:** 18 run(s)" in text
