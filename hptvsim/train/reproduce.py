@@ -766,8 +766,13 @@ class Results:
         return out
 
 
+def budget_steps(stages: Sequence[Any]) -> int:
+    """A run's env-step budget: its stages' ``budget_steps`` summed (a stage budgeted in episodes adds 0)."""
+    return sum(st.budget_steps or 0 for st in stages)
+
+
 def _progress_of(run_dir: Path, cfg: TrainConfig) -> str:
-    total = sum(s.budget_steps or 0 for s in cfg.stages)
+    total = budget_steps(cfg.stages)
     if (run_dir / "summary.json").is_file():
         n_eval = len(list((run_dir / "eval").glob("*.json"))) if (run_dir / "eval").is_dir() else 0
         return (
@@ -1021,7 +1026,7 @@ def _budget_text(plan: Plan) -> str:
             else f"{st.name} {st.budget_episodes} episodes"
             for st in cfg.stages
         ]
-        total = sum(st.budget_steps or 0 for st in cfg.stages)
+        total = budget_steps(cfg.stages)
         rows.append(
             f"| {s.label} | {cfg.algo.upper()} | {' + '.join(parts)} | {total:,} "
             f"| {total / (PAPER_BUDGET_STEPS * len(cfg.stages)):.2%} |"
@@ -1234,7 +1239,7 @@ def reproduce(
     statuses: dict[str, dict[str, Any]] = {}
     bar: Any = None
     stages = {j.run_dir: build_config(plan.settings[j.setting], j.seed, plan.fixed).stages for j in jobs}
-    budgets = {run: sum(st.budget_steps or 0 for st in sts) for run, sts in stages.items()}
+    budgets = {run: budget_steps(sts) for run, sts in stages.items()}
     by_steps = all(st.budget_steps for sts in stages.values() for st in sts)  # else no total: no ETA
 
     def show_progress() -> None:  # the bar counts env steps over every run: its rate and ETA mean something
