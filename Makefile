@@ -44,9 +44,10 @@ lint: setup
 typecheck: setup
 	$(BIN)/mypy
 
-# HPTVSIM_REQUIRE_POSTGRES=1: the PostgreSQL tests fail, never skip, when PostgreSQL is missing
+# HPTVSIM_REQUIRE_POSTGRES=1: the PostgreSQL tests fail, never skip, when PostgreSQL is missing;
+# --durations: the log names the slowest tests (the default suite must stay well under 15 min)
 unit: setup system-deps
-	HPTVSIM_REQUIRE_POSTGRES=1 $(BIN)/pytest -n $(WORKERS)
+	HPTVSIM_REQUIRE_POSTGRES=1 $(BIN)/pytest -n $(WORKERS) --durations=25
 
 test: lint typecheck unit
 
@@ -57,7 +58,7 @@ reproduce: setup
 	$(BIN)/hptvsim reproduce
 
 test-slow: setup system-deps
-	HPTVSIM_REQUIRE_POSTGRES=1 $(BIN)/pytest -n $(WORKERS) -m slow
+	HPTVSIM_REQUIRE_POSTGRES=1 $(BIN)/pytest -n $(WORKERS) -m slow --durations=25
 
 BENCHES := dynamics cosim sensors world env train dt episode
 
