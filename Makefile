@@ -53,7 +53,8 @@ test: lint typecheck unit
 
 # The paper's section V on the pursuit game (configs/reproduce/section5.toml): 27 runs of
 # 150k env steps, two side by side, then docs/reproduction.md. Many hours on 2 cores: stop it any
-# time and run it again to go on (finished runs are kept, killed ones resume).
+# time and run it again to go on (finished runs are kept, killed ones resume; finished runs'
+# results are archived in docs/reproduction/results/, committed, so a fresh clone skips them).
 reproduce: setup
 	$(BIN)/hptvsim reproduce
 

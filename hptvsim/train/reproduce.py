@@ -26,6 +26,15 @@ Folders::
     OUT/plan.json                    the resolved plan and every job
     OUT/runs/<setting>-seed<k>/      a training run (hptvsim.train.trainer) plus eval/<stage>.json
     OUT/experiments/<id>/sweep.json  the runs of one experiment with their labels (for figures)
+    <report stem>/results/<run>/     a finished run's results, archived beside the report
+
+The archive (:func:`archive_finished`) keeps what the report reads of every finished run (its
+config, ``run.json``, ``summary.json``, the episode and update logs, the stages' ``stage.json``
+and the evaluations; no models, no checkpoints: a few hundred kB per run) in a folder that is
+committed with the report, so the results outlive the run folders: a fresh clone's sweep
+restores them (:func:`restore_archived`) and trains only the runs not in the archive, and the
+report regenerates from a clone alone. An archived run is restored only while the plan still
+builds the config it was trained with.
 
 Metrics (per run; then mean and 95 % interval over seeds, :mod:`hptvsim.train.stats`):
 
@@ -51,6 +60,7 @@ import fcntl
 import json
 import math
 import os
+import shutil
 import signal
 import sys
 import threading
@@ -83,6 +93,8 @@ __all__ = [
     "Plan",
     "ReproJob",
     "Setting",
+    "archive_dir",
+    "archive_finished",
     "build_config",
     "collect",
     "load_plan",
@@ -90,6 +102,7 @@ __all__ = [
     "plan_jobs",
     "reproduce",
     "resolve_plan_path",
+    "restore_archived",
     "run_job",
     "write_report",
 ]
@@ -805,6 +818,93 @@ def collect(plan: Plan, out: Path) -> Results:
     return Results(values, progress)
 
 
+# --- the archive of finished runs' results ------------------------------------------------------
+
+ARCHIVE_FILES = ("config.toml", "run.json", "episodes.csv", "updates.csv")
+ARCHIVE_GLOBS = ("stages/*/stage.json", "eval/*.json")
+
+
+def archive_dir(report: Path) -> Path:
+    """Where the finished runs' results of the report ``report`` are archived: ``<report stem>/results``."""
+    return report.parent / report.stem / "results"
+
+
+def _result_files(run_dir: Path) -> list[Path]:
+    """A run's result files (relative), ``summary.json`` last: a copy cut short is never finished."""
+    files = [Path(f) for f in ARCHIVE_FILES if (run_dir / f).is_file()]
+    for pattern in ARCHIVE_GLOBS:
+        files += sorted(p.relative_to(run_dir) for p in run_dir.glob(pattern))
+    if (run_dir / "summary.json").is_file():
+        files.append(Path("summary.json"))
+    return files
+
+
+def _copy_results(src: Path, dst: Path) -> bool:
+    """Copy the result files of ``src`` over those of ``dst``; whether anything changed."""
+    changed = False
+    for rel in _result_files(src):
+        a, b = src / rel, dst / rel
+        if b.is_file() and b.read_bytes() == a.read_bytes():
+            continue
+        b.parent.mkdir(parents=True, exist_ok=True)
+        tmp = b.with_name(b.name + ".tmp")
+        shutil.copyfile(a, tmp)
+        tmp.replace(b)
+        changed = True
+    return changed
+
+
+def archive_finished(plan: Plan, out: Path, archive: Path) -> list[str]:
+    """Copy the results of every finished run under ``out`` into ``archive/<run>/``.
+
+    Only finished runs (trained and every stage evaluated) are archived; their models and
+    checkpoints are not.
+
+    Returns:
+        The runs whose archived results were written or changed.
+    """
+    done = []
+    for job in plan_jobs(plan):
+        src = out / job.run_dir
+        if _progress_of(src, build_config(plan.settings[job.setting], job.seed, plan.fixed)) != "finished":
+            continue
+        if _copy_results(src, archive / Path(job.run_dir).name):
+            done.append(Path(job.run_dir).name)
+    return done
+
+
+def restore_archived(plan: Plan, out: Path, archive: Path, log: Callable[[str], None] = print) -> list[str]:
+    """Put the archived results of every finished run the plan needs into ``out`` where missing.
+
+    A run is restored only when its archived config is the one the plan builds now (else the
+    archive is stale for this plan and the run trains again) and when no process is training it.
+
+    Returns:
+        The runs restored.
+    """
+    from hptvsim.train.config import config_to_dict
+    from hptvsim.train.trainer import load_run_config
+
+    restored = []
+    for job in plan_jobs(plan):
+        name = Path(job.run_dir).name
+        src, dst = archive / name, out / job.run_dir
+        cfg = build_config(plan.settings[job.setting], job.seed, plan.fixed)
+        if _progress_of(src, cfg) != "finished" or _progress_of(dst, cfg) == "finished":
+            continue
+        if config_to_dict(load_run_config(src)) != config_to_dict(cfg):
+            log(f"{src} was trained with another config than the plan builds now: {name} trains again")
+            continue
+        try:
+            with _run_lock(dst, wait_s=0.0):
+                _copy_results(src, dst)
+        except RuntimeError:
+            log(f"{name} is being trained by another process: not restored")
+            continue
+        restored.append(name)
+    return restored
+
+
 def claim_result(plan: Plan, results: Results, claim: Claim) -> tuple[Interval, str]:
     """The claim's interval (difference or slope) and verdict."""
     exp = plan.experiment(claim.experiment)
@@ -914,10 +1014,15 @@ def write_report(
     """Write the Markdown report (and its figures beside it) from the results under ``out``.
 
     Figures go to ``<report stem>/<experiment>/`` next to the report. A partial set of results
-    gives a partial report that lists what is missing.
+    gives a partial report that lists what is missing. First the archive beside the report
+    (:func:`archive_dir`) and ``out`` are brought level: archived runs missing under ``out`` are
+    restored, finished runs missing from the archive are archived.
     """
     from hptvsim.bench.common import machine_summary
 
+    archive = archive_dir(report)
+    restore_archived(plan, out, archive)
+    archive_finished(plan, out, archive)
     results = collect(plan, out)
     report.parent.mkdir(parents=True, exist_ok=True)
     fig_root = report.parent / report.stem
@@ -936,7 +1041,10 @@ def write_report(
     w("")
     w(
         f"- Plan: `{_rel(plan.path)}`; runs in `{_rel(out)}/runs/<setting>-seed<k>/` "
-        "(each holds its `config.toml` and `run.json`)."
+        "(each holds its `config.toml` and `run.json`). Each finished run's results (config, "
+        "seeds, episode and update logs, stage summaries, evaluations; no models) are archived in "
+        f"`{_rel(archive)}/<setting>-seed<k>/`, beside this report: a fresh clone regenerates the "
+        "report from them and its sweep trains only the runs not archived."
     )
     w(
         f"- Training seeds: {', '.join(map(str, plan.seeds))}. Evaluation: {plan.evaluation.episodes} "
@@ -1199,8 +1307,10 @@ def reproduce(
 ) -> dict[str, Any]:
     """Train, evaluate and report (see the module docstring); returns the job statuses.
 
-    Runs already finished are skipped; killed ones resume. The report is written at the end, and
-    also when the sweep is interrupted, from whatever is finished.
+    Runs already finished are skipped, and so are runs whose results are archived beside the
+    report (restored first, :func:`restore_archived`); killed ones resume. Each run is archived
+    as soon as it finishes. The report is written at the end, and also when the sweep is
+    interrupted, from whatever is finished.
 
     Interrupted (Ctrl-C, or SIGTERM to this process), every run in progress stops at the end of
     its episode with a checkpoint, so nothing is lost and a resumed run stays bit-identical; a
@@ -1222,6 +1332,10 @@ def reproduce(
         stop_grace_s: Longest wait [s] for the runs to reach their episodes' ends when interrupted.
     """
     out.mkdir(parents=True, exist_ok=True)
+    archive = archive_dir(report)
+    restored = restore_archived(plan, out, archive, log)
+    if restored:
+        log(f"restored from {archive}: {', '.join(restored)}")
     jobs = plan_jobs(plan, experiments=experiments, seeds=seeds)
     (out / "plan.json").write_text(
         json.dumps(
@@ -1289,6 +1403,8 @@ def reproduce(
                     st = {"run_dir": job.run_dir, "status": "failed", "error": f"{type(exc).__name__}: {exc}"}
                 statuses[job.run_dir] = st
                 log(_status_line(job, st))
+                if st["status"] in ("trained", "resumed"):  # kept beside the report at once
+                    archive_finished(plan, out, archive)
     except KeyboardInterrupt:
         log(
             f"[{time.strftime('%H:%M:%S')}] interrupted: each run in progress stops at the end of "

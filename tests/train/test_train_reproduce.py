@@ -408,3 +408,97 @@ def test_the_sweep_bar_counts_the_env_steps_of_every_run(tmp_path: Path) -> None
     assert steps_done(tmp_path / "runs" / "c-seed0") == 0
     budgets = {"runs/a-seed0": 1_000, "runs/b-seed0": 30_000, "runs/c-seed0": 5_000}
     assert sweep_progress(tmp_path, budgets) == (120 + 30_000, 1, ["runs/a-seed0"])
+
+
+def _tiny_plan(root: Path, budget: int = 200) -> Path:
+    """One MAISAC run of ``budget`` env steps in the source scenario, evaluated on 2 episodes."""
+    plan = root / f"tiny{budget}.toml"
+    plan.write_text(
+        f"""name = "tiny"
+config = "{PLANS / "pursuit-stt.toml"}"
+seeds = [0]
+workers = 1
+
+[set]
+"stage.0.budget_steps" = {budget}
+"stage.*.env.options.max_steps" = 50
+"sac.learning_starts" = 64
+"sac.batch_size" = 32
+"sac.net_arch" = [32, 32]
+checkpoint_every = 100
+log_every = 50
+
+[evaluation]
+episodes = 2
+num_envs = 2
+seed = 0
+last_episodes = 2
+
+[setting.base]
+label = "MAISAC"
+stages = ["source"]
+
+[[experiment]]
+id = "only"
+figure = "none"
+title = "One run"
+entries = [{{ label = "MAISAC", setting = "base" }}, {{ label = "the same", setting = "base" }}]
+"""
+    )
+    return plan
+
+
+def _tables(report: Path) -> list[str]:
+    return [line for line in report.read_text().splitlines() if line.startswith("|")]
+
+
+def test_finished_runs_are_archived_beside_the_report_and_a_fresh_clone_trains_only_the_rest(
+    tmp_path: Path,
+) -> None:
+    plan = _tiny_plan(tmp_path)
+    report = tmp_path / "docs" / "repro.md"
+
+    def run(out: str, *extra: str) -> subprocess.CompletedProcess[str]:
+        args = ["--plan", str(plan), "--out", str(tmp_path / out), "--report", str(report), "--no-figures"]
+        r = subprocess.run(
+            [*HPTVSIM, "reproduce", *args, *extra], capture_output=True, text=True, cwd=ROOT, env=_env()
+        )
+        assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+        return r
+
+    first = run("a")
+    assert "trained runs/base-seed0" in first.stdout
+    archived = tmp_path / "docs" / "repro" / "results" / "base-seed0"
+    files = {str(p.relative_to(archived)) for p in archived.rglob("*") if p.is_file()}
+    assert files == {
+        "config.toml",
+        "run.json",
+        "summary.json",
+        "episodes.csv",
+        "updates.csv",
+        "stages/source/stage.json",
+        "eval/source.json",
+    }  # results only: no models, no checkpoint
+    assert "docs/repro/results/<setting>-seed<k>/" in report.read_text().replace(str(tmp_path) + "/", "")
+    tables = _tables(report)
+    assert any("capture rate" in t for t in tables)
+
+    # a fresh clone has the report and the archive, not the run folders: the report regenerates
+    report.write_text("")
+    run("b", "--report-only")
+    assert _tables(report) == tables
+    assert (tmp_path / "b" / "runs" / "base-seed0" / "summary.json").is_file()
+    # and its sweep trains nothing: the archived run is done
+    again = run("c")
+    assert "restored from" in again.stdout and "done before runs/base-seed0" in again.stdout
+    assert not (tmp_path / "c" / "runs" / "base-seed0" / "checkpoint").exists()
+    assert _tables(report) == tables
+
+    # an archive the plan no longer builds is not restored: that run would train again
+    from hptvsim.train.reproduce import restore_archived
+
+    said: list[str] = []
+    changed = load_plan(_tiny_plan(tmp_path, budget=300))
+    assert restore_archived(changed, tmp_path / "d", archived.parent, said.append) == []
+    assert said and "trained with another config than the plan builds now: base-seed0 trains again" in said[0]
+    assert not (tmp_path / "d" / "runs" / "base-seed0" / "summary.json").exists()
