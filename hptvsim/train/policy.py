@@ -7,6 +7,8 @@ and shipped entries of kind ``sb3`` load wherever policies load: the environment
 
 from __future__ import annotations
 
+import threading
+from collections import OrderedDict
 from pathlib import Path
 from typing import Any
 
@@ -18,7 +20,13 @@ from hptvsim.envs.game3d import Game3DCore
 from hptvsim.envs.task import EXTENDED_SIZE, fill_extended
 from hptvsim.zoo import Commands3D, register_loader
 
-__all__ = ["ExtendedObservation", "SB3Policy", "load_sb3_model"]
+__all__ = ["MODEL_CACHE_SIZE", "ExtendedObservation", "SB3Policy", "cached_sb3_model", "load_sb3_model"]
+
+MODEL_CACHE_SIZE = 16
+"""SB3 models a process keeps open (:func:`cached_sb3_model`), the least recently used dropped."""
+
+_models: OrderedDict[tuple[str, int, int], Any] = OrderedDict()
+_models_lock = threading.Lock()
 
 
 def load_sb3_model(path: Path) -> Any:
@@ -36,6 +44,34 @@ def load_sb3_model(path: Path) -> Any:
         except Exception as exc:  # the other algorithm's file: try the next, report both
             errors.append(f"{cls.__name__}: {exc}")
     raise ValueError(f"{path} is not an SB3 SAC or PPO file ({'; '.join(errors)})")
+
+
+def cached_sb3_model(path: Path) -> Any:
+    """:func:`load_sb3_model`, kept open for the next episode until the file changes.
+
+    Opening a zip costs about 0.1 s a model (torch's unpickling), a third of a short service
+    episode; the models are only read (deterministic ``predict``), so episodes of one process
+    share them. The key is the resolved path with the file's modification time and size: a
+    file written again is opened again. At most :data:`MODEL_CACHE_SIZE` models stay open.
+
+    Raises:
+        ValueError: The file is neither SAC nor PPO (see :func:`load_sb3_model`).
+        OSError: The file cannot be read.
+    """
+    resolved = Path(path).resolve()
+    st = resolved.stat()
+    key = (str(resolved), st.st_mtime_ns, st.st_size)
+    with _models_lock:
+        if key in _models:
+            _models.move_to_end(key)
+            return _models[key]
+    model = load_sb3_model(resolved)  # outside the lock: two threads may both open it, both get one
+    with _models_lock:
+        _models[key] = model
+        _models.move_to_end(key)
+        while len(_models) > MODEL_CACHE_SIZE:
+            _models.popitem(last=False)
+    return model
 
 
 class ExtendedObservation:
@@ -120,7 +156,7 @@ class SB3Policy:
 
 
 def _load(path: Path, core: GameCore | Game3DCore, agent: str) -> SB3Policy | Commands3D:
-    model = load_sb3_model(path)
+    model = cached_sb3_model(path)
     if isinstance(core, Game3DCore):
         # a model of the 3-D envs (make_sb3_vec_env_3d, the UPEG3D ids): normalised actions
         if model.action_space.shape != (3,):

@@ -38,6 +38,7 @@ of the wrong type, raises :class:`FrameSchemaError` naming the path to it. The J
 from __future__ import annotations
 
 import dataclasses
+import gc
 import json
 import math
 import re
@@ -109,13 +110,13 @@ class SchemaObject:
 
     def to_dict(self) -> dict[str, Any]:
         """This object as plain JSON-ready data."""
-        out: dict[str, Any] = _encode(self)
+        out: dict[str, Any] = _encode_all(self)
         return out
 
     def to_json(self, *, indent: int | None = None) -> str:
         """This object as JSON text (compact unless ``indent``)."""
         seps = (",", ":") if indent is None else (",", ": ")
-        return json.dumps(_encode(self), indent=indent, allow_nan=False, separators=seps)
+        return json.dumps(_encode_all(self), indent=indent, allow_nan=False, separators=seps)
 
     @classmethod
     def from_dict(cls, data: Any) -> Self:
@@ -831,18 +832,59 @@ def _fields(cls: type[Any]) -> tuple[dataclasses.Field[Any], ...]:
 
 
 _NUMBER: Final = (float, int)
+_PLAIN: Final = (str, int, bool, type(None))
+_FIELD_NAMES: dict[type[Any], tuple[str, ...]] = {}
+
+
+def _field_names(cls: type[Any]) -> tuple[str, ...] | None:
+    """The init fields of a dataclass (cached), or None for any other type."""
+    names = _FIELD_NAMES.get(cls)
+    if names is None:
+        if not dataclasses.is_dataclass(cls):
+            return None
+        names = _FIELD_NAMES[cls] = tuple(f.name for f in _fields(cls))
+    return names
+
+
+def _finite_numbers(seq: Sequence[Any]) -> bool:
+    """Whether ``seq`` holds only plain numbers (no bools); raises at a non-finite one."""
+    if not all(type(v) in _NUMBER for v in seq):
+        return False
+    if not all(map(math.isfinite, seq)):
+        raise FrameSchemaError(f"non-finite number in {list(seq)[:8]}... cannot be written as JSON")
+    return True
+
+
+def _encode_seq(value: Sequence[Any]) -> list[Any]:
+    if not value:
+        return []
+    first = value[0]
+    if type(first) in _NUMBER and _finite_numbers(value):  # arrays of numbers: ranges, columns
+        return list(value)
+    if type(first) in (tuple, list) and first and type(first[0]) in _NUMBER:
+        # rows of numbers (vertices, triangles, poses): one list per row, no recursion
+        return [
+            list(row) if type(row) in (tuple, list) and row and _finite_numbers(row) else _encode(row)
+            for row in value
+        ]
+    return [_encode(v) for v in value]
 
 
 def _encode(value: Any) -> Any:
-    if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        return {f.name: _encode(getattr(value, f.name)) for f in _fields(type(value))}
+    t = type(value)
+    if t in _PLAIN:
+        return value
+    if t is float:
+        if not math.isfinite(value):
+            raise FrameSchemaError(f"non-finite number {value} cannot be written as JSON")
+        return value
+    if t is tuple or t is list:
+        return _encode_seq(value)
+    names = _field_names(t)
+    if names is not None:
+        return {n: _encode(getattr(value, n)) for n in names}
     if isinstance(value, (tuple, list)):
-        if value and type(value[0]) in _NUMBER and all(type(v) in _NUMBER for v in value):
-            # fast path: arrays of numbers (ranges, vertices, columns)
-            if not all(math.isfinite(v) for v in value):
-                raise FrameSchemaError(f"non-finite number in {list(value)[:8]}... cannot be written as JSON")
-            return list(value)
-        return [_encode(v) for v in value]
+        return _encode_seq(value)
     if isinstance(value, dict):
         return {str(k): _encode(v) for k, v in value.items()}
     if isinstance(value, float) and not math.isfinite(value):
@@ -852,9 +894,24 @@ def _encode(value: Any) -> Any:
     return value
 
 
+def _encode_all(value: Any) -> Any:
+    """:func:`_encode` with the cyclic garbage collector paused.
+
+    Encoding a mesh allocates tens of thousands of small lists, each of which would count
+    towards a collection, and none of which can form a cycle.
+    """
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        return _encode(value)
+    finally:
+        if enabled:
+            gc.enable()
+
+
 def to_dict(obj: Any) -> Any:
     """Plain JSON-ready data (dicts, lists, numbers, strings) of a schema object."""
-    return _encode(obj)
+    return _encode_all(obj)
 
 
 def _is_union(tp: Any) -> bool:

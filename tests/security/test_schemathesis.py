@@ -24,7 +24,7 @@ HERE = Path(__file__).parent
 KEY = "schemathesis-key"
 ENV = {
     "HPTVSIM_API_KEY": KEY,
-    "HPTVSIM_EVENT_STREAM_S": "2",
+    "HPTVSIM_EVENT_STREAM_S": "0.5",
     "HPTVSIM_MAX_STEPS": "40",
     "HPTVSIM_MAX_JOBS": "16",
     "HPTVSIM_WORKERS": "1",

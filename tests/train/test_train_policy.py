@@ -88,3 +88,30 @@ def test_a_model_of_the_3d_envs_drives_a_3d_episode_in_si_units(tmp_path: Path) 
     dt.write_bytes(b"")
     with pytest.raises(ValueError, match="dt checkpoint files play the planar game only"):
         check_policy_spec(f"dt:{dt}", "pursuer", allow_paths=True, game="3d")
+
+
+def test_models_stay_open_for_the_next_episode_until_their_file_changes(tmp_path: Path) -> None:
+    import os
+
+    from hptvsim.train import policy
+
+    core = GameCore("source", seed=0)
+    lim = core.robots.limits[0]
+    low, high = np.array([lim[0], -lim[2]]), np.array([lim[1], lim[2]])
+    file = _save_untrained_sac(tmp_path / "p", core.layout.size, low, high)
+    first = load_policy(f"sb3:{file}", core, "pursuer_0", allow_paths=True)
+    again = load_policy(f"sb3:{file}", core, "pursuer_0", allow_paths=True)
+    assert isinstance(first, policy.SB3Policy) and isinstance(again, policy.SB3Policy)
+    assert again.model is first.model  # opened once
+    obs = core.reset(seed=0)[:, 0]
+    np.testing.assert_array_equal(first.act(obs), again.act(obs))
+    # the file written again (another model at the same path) is opened again
+    _save_untrained_sac(tmp_path / "p", core.layout.size, low, high)
+    st = file.stat()
+    os.utime(file, ns=(st.st_atime_ns, st.st_mtime_ns + 1_000_000))
+    reopened = load_policy(f"sb3:{file}", core, "pursuer_0", allow_paths=True)
+    assert isinstance(reopened, policy.SB3Policy) and reopened.model is not first.model
+    # at most MODEL_CACHE_SIZE models stay open
+    for k in range(policy.MODEL_CACHE_SIZE + 2):
+        policy.cached_sb3_model(_save_untrained_sac(tmp_path / f"m{k}", 4, low, high))
+    assert len(policy._models) == policy.MODEL_CACHE_SIZE

@@ -110,6 +110,29 @@ def test_non_finite_numbers_are_refused() -> None:
         a.to_json()
 
 
+def test_rows_of_numbers_encode_as_the_general_path_does() -> None:
+    """The encoder's shortcut for rows of numbers (mesh vertices, triangles) gives what encoding
+    each value would, refuses non-finite numbers there too, and leaves mixed rows to the general
+    path (bools stay bools, numpy scalars become numbers)."""
+    rows = [(0.0, 1.5, -2.0), (3, 4, 5), [6.0, 7.0, 8.0]]
+    assert F.to_dict(rows) == [[0.0, 1.5, -2.0], [3, 4, 5], [6.0, 7.0, 8.0]]
+    mixed = [(1.0, True), (np.float64(2.0), np.int64(3)), ("a", 1.0), ()]
+    assert F.to_dict(mixed) == [[1.0, True], [2.0, 3], ["a", 1.0], []]
+    assert type(F.to_dict(mixed)[1][0]) is float and type(F.to_dict(mixed)[1][1]) is int
+    with pytest.raises(F.FrameSchemaError, match="non-finite"):
+        F.to_dict([(0.0, 1.0), (math.inf, 2.0)])
+    with pytest.raises(F.FrameSchemaError, match="non-finite"):
+        F.to_dict([(np.float64(math.nan), 1.0)])
+    mesh = F.terrain_mesh(np.full((6, 5), 20.0), (0.0, 12.0, 0.0, 10.0), max_cells=8)
+    data = mesh.to_dict()
+    verts, tris = mesh.arrays()
+    assert json.loads(mesh.to_json()) == data
+    assert F.TerrainMesh.from_dict(data) == mesh
+    flat = [x for row in data.values() if isinstance(row, list) for x in row]
+    assert flat and all(isinstance(x, (int, float, list)) for x in flat)
+    assert verts.size and tris.size
+
+
 def test_terrain_mesh_axes_and_triangles() -> None:
     # non-square grid with depth rising to the north only, so swapped axes are caught
     nx, ny = 40, 25  # cells of 2 m: 80 m north x 50 m east
