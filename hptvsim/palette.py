@@ -32,6 +32,7 @@ __all__ = [
     "PURSUER_COLORS",
     "ROLES",
     "SONAR_HIT_COLOR",
+    "SONAR_RANGE_STOPS",
     "agent_color",
     "agent_colors",
     "agent_rgb",
@@ -52,8 +53,20 @@ evader, hard to tell apart in a figure's legend on white."""
 EVADER_COLORS: Final = ("#f2b400", "#9be22d", "#f2f2f2", "#ffe4a0")
 """Evader ``k`` gets ``EVADER_COLORS[k % 4]``: gold, lime, white, apricot (no blue, no cyan)."""
 
-SONAR_HIT_COLOR: Final = "#ff3c3c"
-"""Sonar hit points (the same for every vehicle)."""
+SONAR_HIT_COLOR: Final = "#1ee6ff"
+"""Sonar hit points (the same for every vehicle): cyan, a hue no agent has.
+
+It was red (``#ff3c3c``), 7 CIEDE2000 units from the crimson ``pursuer_0``, and the dashboard's
+range ramp ran on through orange to pale yellow, beside the gold evader: an echo near a
+vehicle read as the vehicle."""
+
+SONAR_RANGE_STOPS: Final[tuple[tuple[float, tuple[int, int, int]], ...]] = (
+    (0.0, (30, 230, 255)),  # an echo at the vehicle: SONAR_HIT_COLOR
+    (0.5, (110, 200, 255)),
+    (1.0, (165, 225, 255)),  # at the sonar's maximum range: pale
+)
+"""Colour ramp of a sonar echo's range, from 0 to the maximum range (the dashboard's sonar fans),
+all cyan to sky blue: at least 25 CIEDE2000 units from the shipped scenarios' agents."""
 
 DEPTH_STOPS: Final[tuple[tuple[float, tuple[int, int, int]], ...]] = (
     (0.0, (222, 196, 140)),  # shallow: sand
@@ -146,6 +159,7 @@ def display_constants() -> dict[str, object]:
         "pursuer_colors": list(PURSUER_COLORS),
         "evader_colors": list(EVADER_COLORS),
         "sonar_hit_color": SONAR_HIT_COLOR,
+        "sonar_range_stops": [[t, list(rgb)] for t, rgb in SONAR_RANGE_STOPS],
         "depth_stops": [[t, list(rgb)] for t, rgb in DEPTH_STOPS],
         "obstacle_color": OBSTACLE_COLOR,
         "land_color": LAND_COLOR,

@@ -109,6 +109,25 @@ def test_pursuers_do_not_share_a_red_and_every_colour_is_distinct() -> None:
         assert _ciede2000(c, "#ffffff") > 25.0 and _ciede2000(c, "#132338") > 40.0, c
 
 
+def test_sonar_echoes_are_not_read_as_vehicles() -> None:
+    """Every colour of the sonar's range ramp (the dashboard's fans; its first stop is the hit
+    colour of viser and rerun) is far from the shipped scenarios' agents and apart from every
+    agent colour; it was red through orange to pale yellow, 7 units from the crimson pursuer."""
+    ramp = ["#{:02x}{:02x}{:02x}".format(*rgb) for _, rgb in palette.SONAR_RANGE_STOPS]
+    assert ramp[0] == palette.SONAR_HIT_COLOR
+    assert [t for t, _ in palette.SONAR_RANGE_STOPS] == sorted(
+        {0.0, 1.0, *(t for t, _ in palette.SONAR_RANGE_STOPS)}
+    )
+    shipped = [agent_color("pursuer", k) for k in range(3)] + [agent_color("evader", 0)]
+    for c in ramp:
+        assert min(_ciede2000(c, a) for a in shipped) > 25.0, c
+        assert min(_ciede2000(c, a) for a in PURSUER_COLORS + EVADER_COLORS) > 15.0, c
+        assert _ciede2000(c, "#132338") > 40.0, c  # shows on the dashboard's dark page
+    assert palette.display_constants()["sonar_range_stops"] == [
+        [t, list(rgb)] for t, rgb in palette.SONAR_RANGE_STOPS
+    ]
+
+
 @pytest.mark.parametrize("color", EVADER_COLORS)
 def test_evaders_are_neither_blue_nor_cyan_and_show_over_the_seabed(color: str) -> None:
     from hptvsim.viz.style import DEPTH_STOPS

@@ -19,9 +19,8 @@ function rgbOf(hex) {
   return [parseInt(c.slice(0, 2), 16), parseInt(c.slice(2, 4), 16), parseInt(c.slice(4, 6), 16)];
 }
 
-/** The seabed's colour at depth fraction t in [0, 1] (palette.DEPTH_STOPS). */
-function depthRgb(t) {
-  const stops = DISPLAY.depth_stops;
+/** The colour at t in [0, 1] of a ramp of [t, [r, g, b]] stops, linear between them. */
+function rampRgb(stops, t) {
   t = Math.min(1, Math.max(0, t));
   for (let k = 1; k < stops.length; k++) {
     const [t1, c1] = stops[k];
@@ -34,14 +33,14 @@ function depthRgb(t) {
   return stops[stops.length - 1][1];
 }
 
-/** Sonar range colour: near red (the palette's hit colour) through orange to pale yellow. */
+/** The seabed's colour at depth fraction t in [0, 1] (palette.DEPTH_STOPS). */
+function depthRgb(t) {
+  return rampRgb(DISPLAY.depth_stops, t);
+}
+
+/** Sonar range colour of a range fraction: cyan near through sky blue to pale (palette.SONAR_RANGE_STOPS). */
 export function rangeColor(frac) {
-  const near = rgbOf(DISPLAY.sonar_hit_color);
-  const mid = [255, 159, 28];
-  const far = [255, 236, 140];
-  const f = Math.min(1, Math.max(0, frac));
-  const [a, b, g] = f < 0.5 ? [near, mid, f / 0.5] : [mid, far, (f - 0.5) / 0.5];
-  const c = a.map((v, i) => Math.round(v + g * (b[i] - v)));
+  const c = rampRgb(DISPLAY.sonar_range_stops, frac).map(Math.round);
   return `rgb(${c[0]},${c[1]},${c[2]})`;
 }
 

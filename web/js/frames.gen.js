@@ -1469,4 +1469,4 @@ export const FRAME_SCHEMA = {
 };
 
 /** The display colours of every view (hptvsim/palette.py). */
-export const DISPLAY = {"pursuer_colors": ["#e8203a", "#a970ff", "#3fcf6f", "#ff5ec8", "#ff7a1a", "#ff9e9e"], "evader_colors": ["#f2b400", "#9be22d", "#f2f2f2", "#ffe4a0"], "sonar_hit_color": "#ff3c3c", "depth_stops": [[0.0, [222, 196, 140]], [0.35, [120, 170, 150]], [0.7, [50, 110, 150]], [1.0, [20, 40, 90]]], "obstacle_color": "#7a5c3a", "land_color": "#d9c79a"};
+export const DISPLAY = {"pursuer_colors": ["#e8203a", "#a970ff", "#3fcf6f", "#ff5ec8", "#ff7a1a", "#ff9e9e"], "evader_colors": ["#f2b400", "#9be22d", "#f2f2f2", "#ffe4a0"], "sonar_hit_color": "#1ee6ff", "sonar_range_stops": [[0.0, [30, 230, 255]], [0.5, [110, 200, 255]], [1.0, [165, 225, 255]]], "depth_stops": [[0.0, [222, 196, 140]], [0.35, [120, 170, 150]], [0.7, [50, 110, 150]], [1.0, [20, 40, 90]]], "obstacle_color": "#7a5c3a", "land_color": "#d9c79a"};
