@@ -24,6 +24,7 @@ import contextlib
 import ctypes
 import itertools
 import math
+import os
 import shutil
 import tempfile
 import threading
@@ -323,6 +324,40 @@ def _new_callbacks(sink: deque[str]) -> tuple[fmi2CallbackFunctions, int]:
     return cb, env_id
 
 
+_EXTRACT_PREFIX: Final = "hptvsim-fmu-"
+"""Temporary folders of extracted FMUs: ``hptvsim-fmu-<pid>-<model identifier>-<random>``."""
+
+_orphans_swept = {"done": False}
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # alive, another user's
+        return True
+    return True
+
+
+def _remove_orphaned_extractions() -> None:
+    """Remove (once per process) the extracted FMUs of processes that are gone.
+
+    A process removes its own at exit or when the FMU is collected; one that was killed
+    (SIGKILL, a timed-out service worker) cannot, and left about 250 kB each in the
+    temporary folder. The owner's pid is in the folder's name; a folder whose pid is alive
+    (maybe reused by another process) is left alone.
+    """
+    if _orphans_swept["done"]:
+        return
+    _orphans_swept["done"] = True
+    root = Path(tempfile.gettempdir())
+    for folder in root.glob(f"{_EXTRACT_PREFIX}*"):
+        pid = folder.name[len(_EXTRACT_PREFIX) :].split("-", 1)[0]
+        if pid.isdigit() and int(pid) != os.getpid() and not _pid_alive(int(pid)):
+            shutil.rmtree(folder, ignore_errors=True)
+
+
 class FmuModel:
     """An FMU loaded once: model description read, archive extracted (removed at exit).
 
@@ -354,7 +389,8 @@ class FmuModel:
         self.can_get_set_state = bool(cs.canGetAndSetFMUstate)
         self.unit_definitions: dict[str, Any] = {u.name: u for u in md.unitDefinitions}
         self.live: dict[int, str] = {}  # id -> instance name of the instances not yet freed
-        self._tmp = tempfile.mkdtemp(prefix=f"hptvsim-{self.identifier}-")
+        _remove_orphaned_extractions()
+        self._tmp = tempfile.mkdtemp(prefix=f"{_EXTRACT_PREFIX}{os.getpid()}-{self.identifier}-")
         self.unzip_dir = Path(extract(str(self.path), unzipdir=self._tmp))
         weakref.finalize(self, shutil.rmtree, self._tmp, True)
         self.variables: dict[str, Variable] = {}

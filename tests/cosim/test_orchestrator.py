@@ -342,3 +342,36 @@ def test_orchestrator_knows_nothing_vehicle_specific() -> None:
     source = Path(mod.__file__).read_text()
     for word in ("vehicle", "v_cmd", "psi", "hptvsim.dynamics", "hptvsim.fmu"):
         assert word not in source.replace("Nothing here is specific to the vehicle FMUs.", ""), word
+
+
+def test_extracted_fmus_of_killed_processes_are_removed(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """An FMU is extracted into ``hptvsim-fmu-<pid>-...``; a process killed before it could clean
+    up leaves its folder, which the next process to open an FMU removes (pid gone), while a
+    living process's folder stays."""
+    import os
+    import subprocess
+    import sys
+    import tempfile
+
+    from hptvsim.cosim import fmi2
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    monkeypatch.setitem(fmi2._orphans_swept, "done", False)
+    gone = subprocess.Popen([sys.executable, "-c", "pass"])
+    gone.wait()
+    orphan = tmp_path / f"hptvsim-fmu-{gone.pid}-WorkClassUUV-abc"
+    living = tmp_path / f"hptvsim-fmu-{os.getppid()}-WorkClassUUV-def"
+    other = tmp_path / "hptvsim-fmu-notapid-x"
+    for folder in (orphan, living, other):
+        (folder / "binaries").mkdir(parents=True)
+    model = fmi2.FmuModel(fmu_path("work_class"))
+    assert not orphan.exists() and living.exists() and other.exists()
+    assert model.unzip_dir.parent == tmp_path
+    assert model.unzip_dir.name.startswith(f"hptvsim-fmu-{os.getpid()}-")
+    # once per process: a later orphan waits for the next process
+    later = tmp_path / f"hptvsim-fmu-{gone.pid}-SphericalUUV-ghi"
+    later.mkdir()
+    fmi2.FmuModel(fmu_path("work_class"))
+    assert later.exists()
