@@ -269,23 +269,22 @@ def test_killed_mid_sweep_it_resumes_to_the_same_results(tmp_path: Path) -> None
         assert a[k] == b[k], k
 
 
-def _stop_plan(root: Path) -> Path:
-    """One MAISAC run in the source scenario, long enough to be interrupted, that takes no
-    periodic checkpoint: whatever checkpoint it has after an interruption, the interruption wrote."""
-    plan = root / "stop.toml"
+def _one_run_plan(root: Path, name: str, *, budget: int, max_steps: int, checkpoint_every: int) -> Path:
+    """A plan of one MAISAC run in the source scenario with small networks, evaluated on 2 episodes."""
+    plan = root / f"{name}.toml"
     plan.write_text(
-        f"""name = "stop"
+        f"""name = "{name}"
 config = "{PLANS / "pursuit-stt.toml"}"
 seeds = [0]
 workers = 1
 
 [set]
-"stage.0.budget_steps" = 1800
-"stage.*.env.options.max_steps" = 60
+"stage.0.budget_steps" = {budget}
+"stage.*.env.options.max_steps" = {max_steps}
 "sac.learning_starts" = 64
 "sac.batch_size" = 32
 "sac.net_arch" = [32, 32]
-checkpoint_every = 1000000
+checkpoint_every = {checkpoint_every}
 log_every = 50
 
 [evaluation]
@@ -306,6 +305,17 @@ entries = [{{ label = "MAISAC", setting = "base" }}, {{ label = "the same", sett
 """
     )
     return plan
+
+
+def _stop_plan(root: Path) -> Path:
+    """One run long enough to be interrupted, that takes no periodic checkpoint: whatever
+    checkpoint it has after an interruption, the interruption wrote."""
+    return _one_run_plan(root, "stop", budget=1800, max_steps=60, checkpoint_every=1_000_000)
+
+
+def _tiny_plan(root: Path, budget: int = 200) -> Path:
+    """One run of ``budget`` env steps, checkpointed every 100."""
+    return _one_run_plan(root, f"tiny{budget}", budget=budget, max_steps=50, checkpoint_every=100)
 
 
 def _episodes_done(run: Path) -> int:
@@ -408,44 +418,6 @@ def test_the_sweep_bar_counts_the_env_steps_of_every_run(tmp_path: Path) -> None
     assert steps_done(tmp_path / "runs" / "c-seed0") == 0
     budgets = {"runs/a-seed0": 1_000, "runs/b-seed0": 30_000, "runs/c-seed0": 5_000}
     assert sweep_progress(tmp_path, budgets) == (120 + 30_000, 1, ["runs/a-seed0"])
-
-
-def _tiny_plan(root: Path, budget: int = 200) -> Path:
-    """One MAISAC run of ``budget`` env steps in the source scenario, evaluated on 2 episodes."""
-    plan = root / f"tiny{budget}.toml"
-    plan.write_text(
-        f"""name = "tiny"
-config = "{PLANS / "pursuit-stt.toml"}"
-seeds = [0]
-workers = 1
-
-[set]
-"stage.0.budget_steps" = {budget}
-"stage.*.env.options.max_steps" = 50
-"sac.learning_starts" = 64
-"sac.batch_size" = 32
-"sac.net_arch" = [32, 32]
-checkpoint_every = 100
-log_every = 50
-
-[evaluation]
-episodes = 2
-num_envs = 2
-seed = 0
-last_episodes = 2
-
-[setting.base]
-label = "MAISAC"
-stages = ["source"]
-
-[[experiment]]
-id = "only"
-figure = "none"
-title = "One run"
-entries = [{{ label = "MAISAC", setting = "base" }}, {{ label = "the same", setting = "base" }}]
-"""
-    )
-    return plan
 
 
 def _tables(report: Path) -> list[str]:
