@@ -325,14 +325,26 @@ def _new_callbacks(sink: deque[str]) -> tuple[fmi2CallbackFunctions, int]:
 
 
 _EXTRACT_PREFIX: Final = "hptvsim-fmu-"
-"""Temporary folders of extracted FMUs: ``hptvsim-fmu-<pid>-<model identifier>-<random>``."""
+"""Temporary folders of extracted FMUs: ``hptvsim-fmu-<pid namespace>-<pid>-<model identifier>-<random>``."""
 
 _orphans_swept = {"done": False}
 
 
+def _pid_namespace() -> str:
+    """This process's pid namespace (the inode of ``/proc/self/ns/pid``; ``0`` where there is none)."""
+    try:
+        return str(os.stat("/proc/self/ns/pid").st_ino)
+    except OSError:
+        return "0"
+
+
+def _extract_prefix() -> str:
+    return f"{_EXTRACT_PREFIX}{_pid_namespace()}-{os.getpid()}-"
+
+
 def _pid_alive(pid: int) -> bool:
     try:
-        os.kill(pid, 0)
+        os.kill(pid, 0)  # POSIX only: on Windows, signal 0 is CTRL_C_EVENT
     except ProcessLookupError:
         return False
     except PermissionError:  # alive, another user's
@@ -345,15 +357,17 @@ def _remove_orphaned_extractions() -> None:
 
     A process removes its own at exit or when the FMU is collected; one that was killed
     (SIGKILL, a timed-out service worker) cannot, and left about 250 kB each in the
-    temporary folder. The owner's pid is in the folder's name; a folder whose pid is alive
-    (maybe reused by another process) is left alone.
+    temporary folder. The owner's pid namespace and pid are in the folder's name: only folders
+    of this pid namespace are looked at (a temporary folder shared with a container holds pids
+    this process cannot see), and a folder whose pid is alive (maybe reused by another process)
+    is left alone. POSIX only.
     """
-    if _orphans_swept["done"]:
+    if _orphans_swept["done"] or os.name != "posix":
         return
     _orphans_swept["done"] = True
-    root = Path(tempfile.gettempdir())
-    for folder in root.glob(f"{_EXTRACT_PREFIX}*"):
-        pid = folder.name[len(_EXTRACT_PREFIX) :].split("-", 1)[0]
+    ours = f"{_EXTRACT_PREFIX}{_pid_namespace()}-"
+    for folder in Path(tempfile.gettempdir()).glob(f"{ours}*"):
+        pid = folder.name[len(ours) :].split("-", 1)[0]
         if pid.isdigit() and int(pid) != os.getpid() and not _pid_alive(int(pid)):
             shutil.rmtree(folder, ignore_errors=True)
 
@@ -390,7 +404,7 @@ class FmuModel:
         self.unit_definitions: dict[str, Any] = {u.name: u for u in md.unitDefinitions}
         self.live: dict[int, str] = {}  # id -> instance name of the instances not yet freed
         _remove_orphaned_extractions()
-        self._tmp = tempfile.mkdtemp(prefix=f"{_EXTRACT_PREFIX}{os.getpid()}-{self.identifier}-")
+        self._tmp = tempfile.mkdtemp(prefix=f"{_extract_prefix()}{self.identifier}-")
         self.unzip_dir = Path(extract(str(self.path), unzipdir=self._tmp))
         weakref.finalize(self, shutil.rmtree, self._tmp, True)
         self.variables: dict[str, Variable] = {}

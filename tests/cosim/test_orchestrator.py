@@ -347,9 +347,9 @@ def test_orchestrator_knows_nothing_vehicle_specific() -> None:
 def test_extracted_fmus_of_killed_processes_are_removed(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """An FMU is extracted into ``hptvsim-fmu-<pid>-...``; a process killed before it could clean
-    up leaves its folder, which the next process to open an FMU removes (pid gone), while a
-    living process's folder stays."""
+    """An FMU is extracted into ``hptvsim-fmu-<pid namespace>-<pid>-...``; a process killed before
+    it could clean up leaves its folder, which the next process to open an FMU removes (pid
+    gone), while a living process's folder, and one of another pid namespace, stay."""
     import os
     import subprocess
     import sys
@@ -361,17 +361,19 @@ def test_extracted_fmus_of_killed_processes_are_removed(
     monkeypatch.setitem(fmi2._orphans_swept, "done", False)
     gone = subprocess.Popen([sys.executable, "-c", "pass"])
     gone.wait()
-    orphan = tmp_path / f"hptvsim-fmu-{gone.pid}-WorkClassUUV-abc"
-    living = tmp_path / f"hptvsim-fmu-{os.getppid()}-WorkClassUUV-def"
-    other = tmp_path / "hptvsim-fmu-notapid-x"
-    for folder in (orphan, living, other):
+    ns = fmi2._pid_namespace()
+    orphan = tmp_path / f"hptvsim-fmu-{ns}-{gone.pid}-WorkClassUUV-abc"
+    living = tmp_path / f"hptvsim-fmu-{ns}-{os.getppid()}-WorkClassUUV-def"
+    elsewhere = tmp_path / f"hptvsim-fmu-{ns}1-{gone.pid}-WorkClassUUV-jkl"  # another pid namespace
+    other = tmp_path / f"hptvsim-fmu-{ns}-notapid-x"
+    for folder in (orphan, living, elsewhere, other):
         (folder / "binaries").mkdir(parents=True)
     model = fmi2.FmuModel(fmu_path("work_class"))
-    assert not orphan.exists() and living.exists() and other.exists()
+    assert not orphan.exists() and living.exists() and elsewhere.exists() and other.exists()
     assert model.unzip_dir.parent == tmp_path
-    assert model.unzip_dir.name.startswith(f"hptvsim-fmu-{os.getpid()}-")
+    assert model.unzip_dir.name.startswith(f"hptvsim-fmu-{ns}-{os.getpid()}-WorkClassUUV-")
     # once per process: a later orphan waits for the next process
-    later = tmp_path / f"hptvsim-fmu-{gone.pid}-SphericalUUV-ghi"
+    later = tmp_path / f"hptvsim-fmu-{ns}-{gone.pid}-SphericalUUV-ghi"
     later.mkdir()
     fmi2.FmuModel(fmu_path("work_class"))
     assert later.exists()
