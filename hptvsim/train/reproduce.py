@@ -858,7 +858,8 @@ def archive_finished(plan: Plan, out: Path, archive: Path) -> list[str]:
     """Copy the results of every finished run under ``out`` into ``archive/<run>/``.
 
     Only finished runs (trained and every stage evaluated) are archived; their models and
-    checkpoints are not.
+    checkpoints are not. An archived run of another config (the plan has changed since) is
+    replaced whole.
 
     Returns:
         The runs whose archived results were written or changed.
@@ -868,7 +869,11 @@ def archive_finished(plan: Plan, out: Path, archive: Path) -> list[str]:
         src = out / job.run_dir
         if _progress_of(src, build_config(plan.settings[job.setting], job.seed, plan.fixed)) != "finished":
             continue
-        if _copy_results(src, archive / Path(job.run_dir).name):
+        dst = archive / Path(job.run_dir).name
+        old = dst / "config.toml"
+        if old.is_file() and old.read_bytes() != (src / "config.toml").read_bytes():
+            shutil.rmtree(dst)  # another config's results (another plan): none of its files stay
+        if _copy_results(src, dst):
             done.append(Path(job.run_dir).name)
     return done
 

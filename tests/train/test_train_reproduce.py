@@ -474,3 +474,10 @@ def test_finished_runs_are_archived_beside_the_report_and_a_fresh_clone_trains_o
     assert restore_archived(changed, tmp_path / "d", archived.parent, said.append) == []
     assert said and "trained with another config than the plan builds now: base-seed0 trains again" in said[0]
     assert not (tmp_path / "d" / "runs" / "base-seed0" / "summary.json").exists()
+    # and an archived run of another config is replaced whole when the run of this one finishes
+    from hptvsim.train.reproduce import archive_finished
+
+    (archived / "config.toml").write_text((archived / "config.toml").read_text() + "# another plan\n")
+    (archived / "eval" / "gone.json").write_text("{}")
+    assert archive_finished(load_plan(plan), tmp_path / "a", archived.parent) == ["base-seed0"]
+    assert {str(p.relative_to(archived)) for p in archived.rglob("*") if p.is_file()} == files
