@@ -185,6 +185,10 @@ CASES: dict[str, tuple[list[str], tuple[str, ...]]] = {
         ["reproduce", "--plan", "nosuch", "--out", "rep", "--report", "rep/r.md"],
         ("nosuch", "section5"),
     ),
+    "reproduce-status-and-report": (
+        ["reproduce", "--status", "--report-only", "--out", "rep", "--report", "rep/r.md"],
+        ("--status", "--report-only"),
+    ),
     "collect": (["collect", "--scenario", "nosuch", "--out", "ds"], ("nosuch", "target")),
     "collect-3d-scenario": (
         ["collect", "--scenario", "dive_flat", "--out", "ds3d"],

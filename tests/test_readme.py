@@ -236,7 +236,7 @@ COMMANDS: dict[str, tuple[Run | Help, ...]] = {
         ),
     ),
     "hptvsim reproduce": (
-        Help("section5.toml: 24 runs, many hours on 2 cores", "hptvsim reproduce --help", r"--report-only"),
+        Help("section5.toml: 27 runs, many hours on 2 cores", "hptvsim reproduce --help", r"--report-only"),
         Help("make reproduce runs it", "make -n reproduce", r"(?m)^\.venv/bin/hptvsim reproduce$"),
         Run(  # the toy plan, one experiment, one seed
             "hptvsim reproduce --plan toy --experiment vmax --seed 0 --workers 1 --out {tmp}/rep"
@@ -244,6 +244,13 @@ COMMANDS: dict[str, tuple[Run | Help, ...]] = {
             r"report: .*report\.md",
             ("{tmp}/report.md", "{tmp}/rep/runs/vmax35-seed0/summary.json"),
             slow=True,
+        ),
+    ),
+    "hptvsim reproduce --status": (
+        Run(
+            "hptvsim reproduce --plan toy --status --out {tmp}/rep --report {tmp}/report.md",
+            r"0 of 18 runs finished; 0 of [\d,]+ env steps \(0\.0 %\)",
+            (),
         ),
     ),
     "hptvsim reproduce --report-only": (

@@ -378,6 +378,12 @@ def register(main: click.Group, bench: click.Group) -> None:
     )
     @click.option("--seed", "seeds", type=int, multiple=True, help="Only this training seed (repeatable).")
     @click.option("--report-only", is_flag=True, help="Write the report from the runs found; train nothing.")
+    @click.option(
+        "--status",
+        "status_only",
+        is_flag=True,
+        help="Print each run's state and env steps (run folders and archive); write and train nothing.",
+    )
     @click.option("--no-figures", is_flag=True, help="Write the report without figures.")
     def reproduce_cmd(
         plan_file: str,
@@ -387,6 +393,7 @@ def register(main: click.Group, bench: click.Group) -> None:
         experiments: tuple[str, ...],
         seeds: tuple[int, ...],
         report_only: bool,
+        status_only: bool,
         no_figures: bool,
     ) -> None:
         """The paper's section-V experiments on the pursuit game, with seeds, intervals and verdicts.
@@ -399,8 +406,18 @@ def register(main: click.Group, bench: click.Group) -> None:
         steps per run. Run the same command again to go on.
         """
         from hptvsim.train.config import ConfigError
-        from hptvsim.train.reproduce import load_plan, plan_jobs, reproduce, resolve_plan_path, write_report
+        from hptvsim.train.reproduce import (
+            archive_dir,
+            load_plan,
+            plan_jobs,
+            reproduce,
+            resolve_plan_path,
+            sweep_status,
+            write_report,
+        )
 
+        if report_only and status_only:
+            raise click.UsageError("give one of --status and --report-only, not both")
         try:
             plan = load_plan(resolve_plan_path(plan_file))
             for e in experiments:
@@ -417,6 +434,19 @@ def register(main: click.Group, bench: click.Group) -> None:
                 f"--experiment {exc.args[0]!r} is unknown; valid: {', '.join(e.id for e in plan.experiments)}"
             ) from None
         out = out_dir if out_dir is not None else Path("hptvsim-out") / "reproduce" / plan.name
+        if status_only:
+            rows = sweep_status(plan, out, archive_dir(report))
+            width = max(len(j.run_dir) for j, *_ in rows)
+            for job, state, done, total in rows:
+                click.echo(f"{job.run_dir:<{width}}  {done:>9,} / {total:,} env steps  {state}")
+            n_done = sum(1 for _, state, _, _ in rows if state.startswith("finished"))
+            steps = sum(min(done, total) for _, _, done, total in rows)
+            all_steps = sum(total for *_, total in rows)
+            click.echo(
+                f"{n_done} of {len(rows)} runs finished; {steps:,} of {all_steps:,} env steps "
+                f"({100.0 * steps / max(all_steps, 1):.1f} %); runs in {out}, archive {archive_dir(report)}"
+            )
+            return
         if report_only:
             click.echo(str(write_report(plan, out, report, figures=not no_figures)))
             return

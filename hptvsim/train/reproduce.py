@@ -104,6 +104,7 @@ __all__ = [
     "resolve_plan_path",
     "restore_archived",
     "run_job",
+    "sweep_status",
     "write_report",
 ]
 
@@ -908,6 +909,25 @@ def restore_archived(plan: Plan, out: Path, archive: Path, log: Callable[[str], 
             continue
         restored.append(name)
     return restored
+
+
+def sweep_status(plan: Plan, out: Path, archive: Path) -> list[tuple[ReproJob, str, int, int]]:
+    """Every run's state without writing anything: ``(job, state, env steps done, budget)``.
+
+    The state is that of the run folder under ``out`` (see :class:`Results`), or ``"finished
+    (archived)"`` for a run not finished there whose results are in ``archive`` (the next sweep
+    or report restores it).
+    """
+    rows = []
+    for job in plan_jobs(plan):
+        cfg = build_config(plan.settings[job.setting], job.seed, plan.fixed)
+        total = budget_steps(cfg.stages)
+        state = _progress_of(out / job.run_dir, cfg)
+        done = total if state == "finished" else steps_done(out / job.run_dir)
+        if state != "finished" and _progress_of(archive / Path(job.run_dir).name, cfg) == "finished":
+            state, done = "finished (archived)", total
+        rows.append((job, state, done, total))
+    return rows
 
 
 def claim_result(plan: Plan, results: Results, claim: Claim) -> tuple[Interval, str]:

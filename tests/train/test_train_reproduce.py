@@ -455,6 +455,12 @@ def test_finished_runs_are_archived_beside_the_report_and_a_fresh_clone_trains_o
     tables = _tables(report)
     assert any("capture rate" in t for t in tables)
 
+    # --status reads, writes nothing: finished here, or finished in the archive only
+    for out, state in (("a", "finished"), ("fresh", "finished (archived)")):
+        status = run(out, "--status").stdout.splitlines()
+        assert status[0].split() == ["runs/base-seed0", "200", "/", "200", "env", "steps", *state.split()]
+        assert status[-1].startswith("1 of 1 runs finished; 200 of 200 env steps (100.0 %)")
+    assert not (tmp_path / "fresh").exists()
     # a fresh clone has the report and the archive, not the run folders: the report regenerates
     report.write_text("")
     run("b", "--report-only")
