@@ -89,6 +89,18 @@ window._colourCount = (canvas, [x, y], rgb, half = 6, tol = 30) => {
   }
   return n;
 };
+// The sonar legend under the depth bar: its top and bottom pixels with the fans on and off,
+// and the colours of ranges 0 and max.
+window._sonarLegend = (m) => {
+  const x = m.ox + m.siteW + 14 + 5;
+  const y = m.oy + Math.min(160, m.siteH) + 46;
+  const h = Math.min(90, m.siteH - (y - m.oy) - 34);
+  const on = [_px(m.canvas, x, y + 2), _px(m.canvas, x, y + h - 2)];
+  m.setSonar(false);
+  const off = [_px(m.canvas, x, y + 2), _px(m.canvas, x, y + h - 2)];
+  m.setSonar(true);
+  return { on, off, expected: [window.hptvsim.rangeColor(0), window.hptvsim.rangeColor(1)] };
+};
 // Where a map draws each agent now, the pixel there and the agent's colour.
 window._agentProbe = (m) => m.current().map((a) => {
   const xy = m.px(a.x, a.y);
@@ -382,6 +394,11 @@ def test_dashboard_shows_sonar_fans_live(browser: Any, service: str) -> None:
     probes = page.evaluate("_sonarProbe(window.hptvsim.map)")
     _check_sonar_pixels(probes)
     _check_agent_pixels(page.evaluate("_agentProbe(window.hptvsim.map)"))
+    # the legend of the range colours shows near and far while the fans do, and goes with them
+    legend = page.evaluate("_sonarLegend(window.hptvsim.map)")
+    for on, off, expected in zip(legend["on"], legend["off"], legend["expected"], strict=True):
+        assert _close(on, _rgb(expected), 12), legend
+        assert not _close(off, _rgb(expected), 40), legend
     SHOTS.mkdir(parents=True, exist_ok=True)
     page.screenshot(path=str(SHOTS / "dashboard_live_sonar.png"), full_page=True)
     page.click("#cancel-button")

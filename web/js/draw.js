@@ -696,6 +696,36 @@ export class TopDownMap {
       ctx.fillStyle = TEXT;
       ctx.fillText(label, sx + 8, sy + 7);
     }
+    if (this.sonar && !this.compact) this.sonarBar(ctx, sx + this.siteW + 14, sy + Math.min(160, this.siteH) + 46);
+  }
+
+  /**
+   * The sonar's range colours (palette.SONAR_RANGE_STOPS) under the depth bar, from an echo at
+   * the vehicle (top) to one at the maximum range (bottom), while the fans are shown. Each echo's
+   * colour is its range over its own vehicle's maximum range; the label gives that range in m
+   * when every vehicle has the same, else "max".
+   */
+  sonarBar(ctx, x, y) {
+    const h = Math.min(90, this.siteH - (y - this.oy) - 34);
+    if (h < 30) return; // a short map: no room under the depth bar
+    const w = 10;
+    for (let k = 0; k < h; k++) {
+      ctx.fillStyle = rangeColor(k / (h - 1));
+      ctx.fillRect(x, y + k, w, 1.5);
+    }
+    ctx.strokeStyle = AXIS;
+    ctx.lineWidth = 1;
+    ctx.strokeRect(x + 0.5, y + 0.5, w, h);
+    const ranges = [...new Set(this.static.agents.map((a) => a.max_range))];
+    ctx.font = FONT;
+    ctx.fillStyle = AXIS;
+    ctx.textAlign = "left";
+    ctx.textBaseline = "middle";
+    ctx.fillText("0", x + w + 3, y + 4);
+    ctx.fillText(ranges.length === 1 ? tickText(+ranges[0].toFixed(0)) : "max", x + w + 3, y + h - 3);
+    ctx.textBaseline = "top";
+    ctx.fillText("sonar", x - 2, y + h + 4);
+    ctx.fillText("[m]", x - 2, y + h + 17);
   }
 }
 
