@@ -1429,7 +1429,10 @@ def reproduce(
                 statuses[job.run_dir] = st
                 log(_status_line(job, st))
                 if st["status"] in ("trained", "resumed"):  # kept beside the report at once
-                    archive_finished(plan, out, archive)
+                    try:
+                        archive_finished(plan, out, archive)
+                    except OSError as exc:  # a full disk, say: the run is safe in its folder
+                        log(f"archiving into {archive} failed ({exc}); the next report or sweep tries again")
     except KeyboardInterrupt:
         log(
             f"[{time.strftime('%H:%M:%S')}] interrupted: each run in progress stops at the end of "
