@@ -422,22 +422,32 @@ export class TopDownMap {
   }
 
   colourBar(ctx, x, y, [lo, hi]) {
-    const h = Math.min(160, this.siteH);
+    const rgb = (t) => {
+      const c = depthRgb(t);
+      return `rgb(${c[0] | 0},${c[1] | 0},${c[2] | 0})`;
+    };
+    const labels = [tickText(+lo.toFixed(0)), tickText(+hi.toFixed(0))];
+    this.gradientBar(ctx, x, y, Math.min(160, this.siteH), rgb, labels, "depth");
+  }
+
+  /** A vertical colour bar of height h: colourAt(t) for t from 0 (top) to 1, two end labels, a name over "[m]". */
+  gradientBar(ctx, x, y, h, colourAt, [top, bottom], name) {
     const w = 10;
     for (let k = 0; k < h; k++) {
-      const c = depthRgb(k / (h - 1));
-      ctx.fillStyle = `rgb(${c[0] | 0},${c[1] | 0},${c[2] | 0})`;
+      ctx.fillStyle = colourAt(k / (h - 1));
       ctx.fillRect(x, y + k, w, 1.5);
     }
     ctx.strokeStyle = AXIS;
+    ctx.lineWidth = 1;
     ctx.strokeRect(x + 0.5, y + 0.5, w, h);
+    ctx.font = FONT;
     ctx.fillStyle = AXIS;
     ctx.textAlign = "left";
     ctx.textBaseline = "middle";
-    ctx.fillText(tickText(+lo.toFixed(0)), x + w + 3, y + 4);
-    ctx.fillText(tickText(+hi.toFixed(0)), x + w + 3, y + h - 3);
+    ctx.fillText(top, x + w + 3, y + 4);
+    ctx.fillText(bottom, x + w + 3, y + h - 3);
     ctx.textBaseline = "top";
-    ctx.fillText("depth", x - 2, y + h + 4);
+    ctx.fillText(name, x - 2, y + h + 4);
     ctx.fillText("[m]", x - 2, y + h + 17);
   }
 
@@ -708,24 +718,9 @@ export class TopDownMap {
   sonarBar(ctx, x, y) {
     const h = Math.min(90, this.siteH - (y - this.oy) - 34);
     if (h < 30) return; // a short map: no room under the depth bar
-    const w = 10;
-    for (let k = 0; k < h; k++) {
-      ctx.fillStyle = rangeColor(k / (h - 1));
-      ctx.fillRect(x, y + k, w, 1.5);
-    }
-    ctx.strokeStyle = AXIS;
-    ctx.lineWidth = 1;
-    ctx.strokeRect(x + 0.5, y + 0.5, w, h);
     const ranges = [...new Set(this.static.agents.map((a) => a.max_range))];
-    ctx.font = FONT;
-    ctx.fillStyle = AXIS;
-    ctx.textAlign = "left";
-    ctx.textBaseline = "middle";
-    ctx.fillText("0", x + w + 3, y + 4);
-    ctx.fillText(ranges.length === 1 ? tickText(+ranges[0].toFixed(0)) : "max", x + w + 3, y + h - 3);
-    ctx.textBaseline = "top";
-    ctx.fillText("sonar", x - 2, y + h + 4);
-    ctx.fillText("[m]", x - 2, y + h + 17);
+    const far = ranges.length === 1 ? tickText(+ranges[0].toFixed(0)) : "max";
+    this.gradientBar(ctx, x, y, h, rangeColor, ["0", far], "sonar");
   }
 }
 
