@@ -724,6 +724,70 @@ export class TopDownMap {
   }
 }
 
+const LINE_WIDTH = 1.7; // a plotted line [px]
+const BAND_STEP = 2; // how much wider a line is drawn for each line after it that it coincides with [px]
+const COINCIDE_PX = 2; // lines closer than this on screen coincide [px]
+const BAND_MIN_PX = 6; // shorter coincidences (lines crossing) get no band [px]
+
+/**
+ * Where solid lines of one panel coincide on screen (closer than COINCIDE_PX, with the same time
+ * points), so that the later line would hide the earlier one: for each earlier line, the runs of
+ * points to draw widened under the normal lines, LINE_WIDTH + BAND_STEP per later line it meets
+ * there, plus twice the largest offset to them (so that the band sticks out on both sides of
+ * every one). Three pursuers at one depth then show as crimson around violet around green.
+ *
+ * @param {Array<{xs, ys, dash?, fill?}>} series
+ * @param {(y: number) => number} Y the panel's data-to-screen map of y [px]
+ * @param {number} plotW the plot's width [px] (lines are compared at ~2 points per pixel column)
+ * @param {number} xPerPx the x data range of one pixel (runs shorter than BAND_MIN_PX get no band)
+ * @returns {Array<{s, runs: Array<[number, number, number]>}>} runs: first and last point index
+ *   and the line width [px], for the lines that need a band.
+ */
+export function coincidentBands(series, Y, plotW, xPerPx) {
+  const solid = series.filter((s) => !s.dash && !s.fill && s.xs.length > 1);
+  const out = [];
+  solid.forEach((s, i) => {
+    const later = solid.slice(i + 1).filter((o) => o.xs === s.xs || o.xs.length === s.xs.length);
+    if (!later.length) return;
+    const stride = Math.max(1, Math.floor(s.xs.length / (2 * plotW)));
+    const runs = [];
+    let run = null;
+    const close = (k) => {
+      if (run) runs.push([run[0], k, run[1]]);
+      run = null;
+    };
+    let prev = 0;
+    for (let k = 0; k < s.xs.length; k += stride) {
+      const y = s.ys[k];
+      let width = 0;
+      if (Number.isFinite(y) && Number.isFinite(s.xs[k])) {
+        let n = 0, off = 0;
+        for (const o of later) {
+          const d = Number.isFinite(o.ys[k]) ? Math.abs(Y(o.ys[k]) - Y(y)) : Infinity;
+          if (d < COINCIDE_PX) { n += 1; off = Math.max(off, d); }
+        }
+        // wide enough to stick out on both sides of the farthest of them (offset in 0.5 px steps)
+        if (n) width = LINE_WIDTH + BAND_STEP * n + Math.ceil(2 * off);
+      }
+      if (run && width !== run[1]) close(width ? k : prev);
+      if (width && !run) run = [k, width];
+      prev = k;
+    }
+    close(prev);
+    // lines crossing meet for a few pixels only: no band there, the crossing shows both
+    // (runs that touch, where only the width changes, are one coincidence)
+    const long = [];
+    for (let a = 0; a < runs.length; ) {
+      let b = a;
+      while (b + 1 < runs.length && runs[b + 1][0] === runs[b][1]) b += 1;
+      if (Math.abs(s.xs[runs[b][1]] - s.xs[runs[a][0]]) >= BAND_MIN_PX * xPerPx) long.push(...runs.slice(a, b + 1));
+      a = b + 1;
+    }
+    if (long.length) out.push({ s, runs: long });
+  });
+  return out;
+}
+
 /**
  * Line plots on one canvas, in panels stacked vertically that share the time axis.
  *
@@ -863,9 +927,24 @@ export function panelChart(canvas, panels, options = {}) {
       }
       if (first !== null) { ctx.lineTo(lastX, bottom); ctx.closePath(); ctx.fill(); }
     }
+    // where solid lines coincide, the ones drawn first are widened there so that each shows as a
+    // band around the lines drawn after it (the last one drawn stays on top, 1.7 px wide)
+    const bands = coincidentBands(p.series, Y, W - m.l - m.r, (x1 - x0) / (W - m.l - m.r));
+    for (const { s, runs } of bands) {
+      ctx.strokeStyle = s.color;
+      for (const [k0, k1, width] of runs) {
+        ctx.lineWidth = width;
+        ctx.beginPath();
+        for (let k = k0; k <= k1; k++) {
+          const x = X(s.xs[k]), y = Y(s.ys[k]);
+          if (k === k0) ctx.moveTo(x, y); else ctx.lineTo(x, y);
+        }
+        ctx.stroke();
+      }
+    }
     for (const s of p.series) {
       ctx.strokeStyle = s.color;
-      ctx.lineWidth = 1.7;
+      ctx.lineWidth = LINE_WIDTH;
       ctx.setLineDash(s.dash || []);
       ctx.beginPath();
       let started = false;
