@@ -67,7 +67,9 @@ moments can hold them:
 * spherical UUV: equal added mass in all directions, so no Munk moment; but its CG hangs 2 cm below
   its centre, where the thrust acts, so it tilts like a pendulum under acceleration ``a``, by about
   ``atan(a / g)``: a step to ``v_max`` pitches it by up to 32 deg, a turn rolls it by about
-  ``atan(u r / g)``. Its roll and pitch damping is weak, so these motions decay slowly.
+  ``atan(u r / g)`` (into the turn; the P-controlled sway skids, which pitches it a little too:
+  ``tests/dynamics/test_controller6.py`` checks the steady turn against Newton-Euler about the CG
+  to 1 %). Its roll and pitch damping is weak, so these motions decay slowly.
 """
 
 from __future__ import annotations

@@ -267,6 +267,49 @@ def test_work_class_loses_its_pitch_above_the_munk_critical_speed() -> None:
     assert pitch[1.1] > math.radians(45.0)
 
 
+@pytest.mark.parametrize(("v", "omega"), [(1.0, 0.5), (1.5, 1.0), (1.0, 1.5), (2.0, 1.2)])
+def test_sphere_heels_in_a_steady_turn_as_newton_euler_about_its_cg_says(v: float, omega: float) -> None:
+    """The spherical UUV's roll and pitch in a steady level turn, derived without Fossen's matrices.
+
+    Newton-Euler about the CG (Fossen 2021, section 3.1): the sphere's inertia about its CG is
+    isotropic (I_x = I_y = I_z + m z_g^2 about the CO), so ``omega x I_g omega = 0``; with every
+    force through the centre (buoyancy, added mass and damping of a sphere, the thrust) and no
+    rate change, the moment about the CG of the centre's net force ``m a_G - W_vec`` balances the
+    roll and pitch damping moments ``K``, ``M``. Its components give
+
+        cos(theta) sin(phi) = a_Gy / g + K / (z_g W),   sin(theta) = -a_Gx / g + M / (z_g W)
+
+    with ``a_G = omega x nu_1 + omega x (omega x r_g)`` in {b}: the pendulum ``tan(phi) ~ u r / g``
+    of the controller's docstring, plus the skid (the sway is P-controlled: ``v != 0``) and the pitch
+    it causes. The closed loop is the 6-DOF model of :mod:`hptvsim.dynamics.sixdof` (Fossen's
+    ``C_RB``, ``C_A`` and ``g(eta)`` about the CO), which never writes these equations.
+    """
+    p = SIXDOF_VEHICLE_TYPES["spherical"]
+    assert p.I_x == pytest.approx(p.I_z + p.m * p.z_g**2) and p.I_y == p.I_x  # isotropic about the CG
+    n = int(150.0 / H)
+    t = H * np.arange(n)
+    W = np.zeros((NW, n))
+    W[0:2] = np.outer([v, omega], _ramp(t, 0.0, 10.0))
+    X, Y = _simulate("spherical", W)
+    last = slice(-int(10.0 / H), None)  # the last 10 s, about 5 roll periods: averages over the ripple
+    phi, theta = X[last, 3].mean(), X[last, 4].mean()
+    u, vs, w, pr, q, r = (Y[last, OUT[k]].mean() for k in ("u", "v", "w", "p", "q", "r"))
+    assert r == pytest.approx(omega, rel=1e-3) and u == pytest.approx(v, rel=1e-3)  # a steady turn
+    omega_b, nu_1, r_g = np.array([pr, q, r]), np.array([u, vs, w]), np.array([0.0, 0.0, p.z_g])
+    a_g = np.cross(omega_b, nu_1) + np.cross(omega_b, np.cross(omega_b, r_g))  # m/s^2, {b}
+    weight = p.m * G_N  # N
+    K = (p.K_p + p.K_pp * abs(pr)) * pr  # N m, roll damping moment
+    M = (p.M_q + p.M_qq * abs(q)) * q  # N m, pitch damping moment
+    want_phi = math.asin((a_g[1] / G_N + K / (p.z_g * weight)) / math.cos(theta))
+    want_theta = math.asin(-a_g[0] / G_N + M / (p.z_g * weight))
+    assert phi == pytest.approx(want_phi, rel=0.01, abs=math.radians(0.02))
+    assert theta == pytest.approx(want_theta, rel=0.01, abs=math.radians(0.02))
+    # the pendulum alone is within a few per cent; turning to starboard (r > 0) the CG swings out to
+    # port and the sphere heels into the turn (phi > 0)
+    assert phi == pytest.approx(math.atan(u * r / G_N), rel=0.05)
+    assert phi > math.radians(2.0)
+
+
 # --- 5. a positively buoyant vehicle holds its depth ----------------------------------------------------
 
 
