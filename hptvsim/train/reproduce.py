@@ -764,7 +764,8 @@ class Results:
 
     Attributes:
         values: (setting, seed) -> stage -> metric -> value.
-        progress: (setting, seed) -> "finished", "evaluated", "training (<step>/<total>)" or "not started".
+        progress: (setting, seed) -> "finished", "trained, <k>/<n> stages evaluated", "training (...)"
+            (at a checkpoint's step, or started with none yet) or "not started".
     """
 
     values: dict[tuple[str, int], dict[str, dict[str, float]]]
@@ -798,6 +799,8 @@ def _progress_of(run_dir: Path, cfg: TrainConfig) -> str:
     if state.is_file():
         step = json.loads(state.read_text()).get("global_step", 0)
         return f"training ({step:,}/{total:,} env steps at the last checkpoint)"
+    if (run_dir / "run.json").is_file():  # written when it starts; the first checkpoint comes later
+        return "training (no checkpoint yet: a restart begins at env step 0)"
     return "not started"
 
 

@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 from train_helpers import ROOT
 
-from hptvsim.train.config import ConfigError
+from hptvsim.train.config import ConfigError, load_config
 from hptvsim.train.reproduce import build_config, load_plan, plan_jobs, write_report
 
 PLANS = ROOT / "configs" / "reproduce"
@@ -418,6 +418,22 @@ def test_the_sweep_bar_counts_the_env_steps_of_every_run(tmp_path: Path) -> None
     assert steps_done(tmp_path / "runs" / "c-seed0") == 0
     budgets = {"runs/a-seed0": 1_000, "runs/b-seed0": 30_000, "runs/c-seed0": 5_000}
     assert sweep_progress(tmp_path, budgets) == (120 + 30_000, 1, ["runs/a-seed0"])
+
+
+def test_a_run_started_before_its_first_checkpoint_is_not_called_not_started(tmp_path: Path) -> None:
+    """``--status`` and the report's run table: a run is "not started" only until its run.json."""
+    from hptvsim.train.reproduce import _progress_of
+
+    cfg = load_config(ROOT / "configs" / "train" / "quick.toml")
+    run_dir = tmp_path / "runs" / "a-seed0"
+    assert _progress_of(run_dir, cfg) == "not started"
+    run_dir.mkdir(parents=True)
+    (run_dir / "run.json").write_text("{}")
+    assert _progress_of(run_dir, cfg) == "training (no checkpoint yet: a restart begins at env step 0)"
+    (run_dir / "checkpoint").mkdir()
+    (run_dir / "checkpoint" / "state.json").write_text(json.dumps({"global_step": 1234}))
+    total = sum(st.budget_steps or 0 for st in cfg.stages)
+    assert _progress_of(run_dir, cfg) == f"training (1,234/{total:,} env steps at the last checkpoint)"
 
 
 def _tables(report: Path) -> list[str]:
