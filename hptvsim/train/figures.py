@@ -403,7 +403,12 @@ def reward_agents_figure(
             else "training episode (all stages in order)"
         )
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=7, loc="best")
+        if ax.get_legend_handles_labels()[1]:
+            ax.legend(fontsize=7, loc="best")
+        else:  # a setting whose runs have logged no episode yet
+            ax.text(
+                0.5, 0.5, "no episodes yet", transform=ax.transAxes, ha="center", va="center", color="grey"
+            )
     for ax, title in zip(axes[0], titles, strict=True):  # one height for every panel's title
         ax.set_title(title, fontsize=9, pad=14 + raised)
     axes[0][0].set_ylabel("total reward per episode (dimensionless)")

@@ -340,3 +340,27 @@ def test_every_panel_title_of_the_per_agent_figure_stands_at_one_height(tmp_path
             assert drawn == palette
     finally:
         plt.close(fig)
+
+
+def test_a_setting_with_no_episode_yet_gets_a_panel_that_says_so(tmp_path: Path) -> None:
+    """A run just started (its episodes.csv has the header only) beside one with episodes: no
+    matplotlib warning about an empty legend, and its panel says why it is empty."""
+    import warnings
+
+    import matplotlib.pyplot as plt
+
+    from hptvsim.train.figures import reward_agents_figure
+
+    ran, fresh = tmp_path / "ran-seed0", tmp_path / "fresh-seed0"
+    _write_run(ran, [("source", 20)])
+    fresh.mkdir()
+    _write_run(fresh, [])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        fig = reward_agents_figure([ran, fresh], labels=["ran", "fresh"], smooth=1)
+    try:
+        assert [ln.get_label() for ln in fig.axes[1].lines] == []
+        assert [t.get_text() for t in fig.axes[1].texts] == ["no episodes yet"]
+        assert fig.axes[0].get_legend() is not None and fig.axes[1].get_legend() is None
+    finally:
+        plt.close(fig)
