@@ -747,7 +747,9 @@ export function coincidentBands(series, Y, plotW, xPerPx) {
   const solid = series.filter((s) => !s.dash && !s.fill && s.xs.length > 1);
   const out = [];
   solid.forEach((s, i) => {
-    const later = solid.slice(i + 1).filter((o) => o.xs === s.xs || o.xs.length === s.xs.length);
+    const n = s.xs.length;
+    const sameTimes = (o) => o.xs === s.xs || (o.xs.length === n && o.xs[0] === s.xs[0] && o.xs[n - 1] === s.xs[n - 1]);
+    const later = solid.slice(i + 1).filter(sameTimes);
     if (!later.length) return;
     const stride = Math.max(1, Math.floor(s.xs.length / (2 * plotW)));
     const runs = [];
@@ -757,17 +759,17 @@ export function coincidentBands(series, Y, plotW, xPerPx) {
       run = null;
     };
     let prev = 0;
-    for (let k = 0; k < s.xs.length; k += stride) {
+    for (let k = 0; k < n; k += stride) {
       const y = s.ys[k];
       let width = 0;
       if (Number.isFinite(y) && Number.isFinite(s.xs[k])) {
-        let n = 0, off = 0;
+        let met = 0, off = 0;
         for (const o of later) {
           const d = Number.isFinite(o.ys[k]) ? Math.abs(Y(o.ys[k]) - Y(y)) : Infinity;
-          if (d < COINCIDE_PX) { n += 1; off = Math.max(off, d); }
+          if (d < COINCIDE_PX) { met += 1; off = Math.max(off, d); }
         }
         // wide enough to stick out on both sides of the farthest of them (offset in 0.5 px steps)
-        if (n) width = LINE_WIDTH + BAND_STEP * n + Math.ceil(2 * off);
+        if (met) width = LINE_WIDTH + BAND_STEP * met + Math.ceil(2 * off);
       }
       if (run && width !== run[1]) close(width ? k : prev);
       if (width && !run) run = [k, width];
@@ -935,9 +937,11 @@ export function panelChart(canvas, panels, options = {}) {
       for (const [k0, k1, width] of runs) {
         ctx.lineWidth = width;
         ctx.beginPath();
+        let started = false;
         for (let k = k0; k <= k1; k++) {
           const x = X(s.xs[k]), y = Y(s.ys[k]);
-          if (k === k0) ctx.moveTo(x, y); else ctx.lineTo(x, y);
+          if (!Number.isFinite(x) || !Number.isFinite(y)) { started = false; continue; }
+          if (!started) { ctx.moveTo(x, y); started = true; } else ctx.lineTo(x, y);
         }
         ctx.stroke();
       }
