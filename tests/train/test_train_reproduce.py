@@ -422,7 +422,7 @@ def test_the_sweep_bar_counts_the_env_steps_of_every_run(tmp_path: Path) -> None
 
 def test_a_run_started_before_its_first_checkpoint_is_not_called_not_started(tmp_path: Path) -> None:
     """``--status`` and the report's run table: a run is "not started" only until its run.json."""
-    from hptvsim.train.reproduce import _progress_of
+    from hptvsim.train.reproduce import _progress_of, budget_steps
 
     cfg = load_config(ROOT / "configs" / "train" / "quick.toml")
     run_dir = tmp_path / "runs" / "a-seed0"
@@ -432,7 +432,7 @@ def test_a_run_started_before_its_first_checkpoint_is_not_called_not_started(tmp
     assert _progress_of(run_dir, cfg) == "training (no checkpoint yet: a restart begins at env step 0)"
     (run_dir / "checkpoint").mkdir()
     (run_dir / "checkpoint" / "state.json").write_text(json.dumps({"global_step": 1234}))
-    total = sum(st.budget_steps or 0 for st in cfg.stages)
+    total = budget_steps(cfg.stages)
     assert _progress_of(run_dir, cfg) == f"training (1,234/{total:,} env steps at the last checkpoint)"
 
 

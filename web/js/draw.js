@@ -729,6 +729,11 @@ const BAND_STEP = 2; // how much wider a line is drawn for each line after it th
 const COINCIDE_PX = 2; // lines closer than this on screen coincide [px]
 const BAND_MIN_PX = 6; // shorter coincidences (lines crossing) get no band [px]
 
+/** Every how many points a line of n points is drawn: at most ~2 points per pixel column. */
+function pointStride(n, plotW) {
+  return Math.max(1, Math.floor(n / (2 * plotW)));
+}
+
 /**
  * Where solid lines of one panel coincide on screen (closer than COINCIDE_PX, with the same time
  * points), so that the later line would hide the earlier one: for each earlier line, the runs of
@@ -751,7 +756,7 @@ export function coincidentBands(series, Y, plotW, xPerPx) {
     const sameTimes = (o) => o.xs === s.xs || (o.xs.length === n && o.xs[0] === s.xs[0] && o.xs[n - 1] === s.xs[n - 1]);
     const later = solid.slice(i + 1).filter(sameTimes);
     if (!later.length) return;
-    const stride = Math.max(1, Math.floor(s.xs.length / (2 * plotW)));
+    const stride = pointStride(n, plotW);
     const runs = [];
     let run = null;
     const close = (k) => {
@@ -952,8 +957,7 @@ export function panelChart(canvas, panels, options = {}) {
       ctx.setLineDash(s.dash || []);
       ctx.beginPath();
       let started = false;
-      // at most ~2 points per pixel column
-      const stride = Math.max(1, Math.floor(s.xs.length / (2 * (W - m.l - m.r))));
+      const stride = pointStride(s.xs.length, W - m.l - m.r);
       for (let k = 0; k < s.xs.length; k += stride) {
         const x = s.xs[k], y = s.ys[k];
         if (!Number.isFinite(x) || !Number.isFinite(y)) { started = false; continue; }
