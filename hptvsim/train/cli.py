@@ -382,7 +382,8 @@ def register(main: click.Group, bench: click.Group) -> None:
         "--status",
         "status_only",
         is_flag=True,
-        help="Print each run's state and env steps (run folders and archive); write and train nothing.",
+        help="Print each run's state and env steps (run folders and archive), and the running sweep's rate "
+        "and time left; write and train nothing.",
     )
     @click.option("--no-figures", is_flag=True, help="Write the report without figures.")
     def reproduce_cmd(
@@ -412,6 +413,7 @@ def register(main: click.Group, bench: click.Group) -> None:
             plan_jobs,
             reproduce,
             resolve_plan_path,
+            sweep_eta,
             sweep_status,
             write_report,
         )
@@ -446,6 +448,7 @@ def register(main: click.Group, bench: click.Group) -> None:
                 f"{n_done} of {len(rows)} runs finished; {steps:,} of {all_steps:,} env steps "
                 f"({100.0 * steps / max(all_steps, 1):.1f} %); runs in {out}, archive {archive_dir(report)}"
             )
+            click.echo(sweep_eta(out, all_steps - steps))
             return
         if report_only:
             click.echo(str(write_report(plan, out, report, figures=not no_figures)))

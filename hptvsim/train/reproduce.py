@@ -1289,6 +1289,83 @@ def sweep_progress(out: Path, budgets: Mapping[str, int]) -> tuple[int, int, lis
     return done, finished, training
 
 
+SWEEP_FILE = "sweep.json"  # in the runs' folder: the running sweep's pid, env steps and rate
+RATE_WINDOW_S = 900.0  # [s] the rate a sweep reports is measured over its last 15 min
+
+
+class _RateMeter:
+    """Env steps per second over the last :data:`RATE_WINDOW_S`, from ``(time, env steps)`` samples."""
+
+    def __init__(self, window_s: float = RATE_WINDOW_S) -> None:
+        self.window_s = window_s
+        self.samples: list[tuple[float, int]] = []
+
+    def add(self, t: float, steps: int) -> float | None:
+        """Add a sample; the rate [env steps/s] over the window, or ``None`` before a minute of it."""
+        self.samples.append((t, steps))
+        while len(self.samples) > 2 and t - self.samples[1][0] >= self.window_s:
+            self.samples.pop(0)
+        t0, s0 = self.samples[0]
+        return (steps - s0) / (t - t0) if t - t0 >= 60.0 else None
+
+
+def write_sweep_record(out: Path, steps: int, total: int, rate: float | None, now: float) -> None:
+    """Write ``out/sweep.json`` (atomically): this process, its env steps and rate [env steps/s]."""
+    tmp = out / f".{SWEEP_FILE}.{os.getpid()}"
+    tmp.write_text(
+        json.dumps({"pid": os.getpid(), "updated": now, "env_steps": steps, "total": total, "rate": rate})
+    )
+    tmp.replace(out / SWEEP_FILE)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # alive, someone else's
+        return True
+    return True
+
+
+def _duration(seconds: float) -> str:
+    minutes = round(seconds / 60.0)
+    return f"{minutes // 60} h {minutes % 60:02d} min" if minutes >= 60 else f"{minutes} min"
+
+
+def sweep_eta(out: Path, remaining: int, now: float | None = None, stale_s: float = 120.0) -> str:
+    """One line on the sweep of ``out``: running or not, its rate, and the time the rest takes.
+
+    Args:
+        out: Folder of the runs (where a sweep writes ``sweep.json`` every 10 s or so).
+        remaining: Env steps not done yet.
+        now: The time [s since the epoch] (default: now).
+        stale_s: A record older than this [s] means its sweep no longer runs.
+
+    Returns:
+        e.g. ``"sweep running (pid 123): 6,100 env steps/min over the last 15 min; about 6 h 30
+        min left at that rate"``; the time left is an estimate (fewer runs side by side near the
+        end go slower).
+    """
+    now = time.time() if now is None else now
+    try:
+        rec = json.loads((out / SWEEP_FILE).read_text())
+        pid, updated, rate = int(rec["pid"]), float(rec["updated"]), rec.get("rate")
+    except (OSError, ValueError, KeyError, TypeError):
+        return "no sweep has recorded a rate here yet"
+    running = now - updated < stale_s and _alive(pid)
+    when = time.strftime("%Y-%m-%d %H:%M", time.localtime(updated))
+    head = f"sweep running (pid {pid})" if running else f"no sweep running (the last one was seen at {when})"
+    if remaining <= 0:
+        return f"{head}; nothing left to train"
+    if not isinstance(rate, (int, float)) or rate <= 0:
+        return f"{head}; no rate measured yet (it takes a minute)"
+    return (
+        f"{head}: {rate * 60:,.0f} env steps/min over its last {RATE_WINDOW_S / 60:.0f} min; "
+        f"about {_duration(remaining / rate)} left at that rate"
+    )
+
+
 def _status_line(job: ReproJob, st: Mapping[str, Any]) -> str:
     """``[HH:MM:SS] <status> <run folder> (<why> | in <minutes>)``: one line of the sweep's log."""
     why = st.get("error") or st.get("note")
@@ -1384,8 +1461,15 @@ def reproduce(
     budgets = {run: budget_steps(sts) for run, sts in stages.items()}
     by_steps = all(st.budget_steps for sts in stages.values() for st in sts)  # else no total: no ETA
 
+    meter = _RateMeter()
+
     def show_progress() -> None:  # the bar counts env steps over every run: its rate and ETA mean something
         steps, finished, training = sweep_progress(out, budgets)
+        now = time.time()
+        with suppress(OSError):  # for `--status`; a full disk must not stop the sweep
+            write_sweep_record(out, steps, sum(budgets.values()), meter.add(now, steps), now)
+        if bar is None:
+            return
         bar.update(max(0, steps - bar.n))
         names = ", ".join(Path(r).name for r in training if r in running) or "-"
         bar.set_postfix_str(f"runs finished {finished}/{len(jobs)}, training: {names}", refresh=True)
@@ -1420,9 +1504,8 @@ def reproduce(
                 log(f"[{time.strftime('%H:%M:%S')}] start {job.run_dir}")
                 pending[pool.submit(run_job, str(plan.path), job, str(out))] = job
             running = {j.run_dir for j in pending.values()}
-            done, _ = wait(list(pending), timeout=None if bar is None else 10.0, return_when=FIRST_COMPLETED)
-            if bar is not None:
-                show_progress()
+            done, _ = wait(list(pending), timeout=10.0, return_when=FIRST_COMPLETED)
+            show_progress()
             for fut in done:
                 job = pending.pop(fut)
                 try:

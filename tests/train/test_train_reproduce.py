@@ -436,6 +436,42 @@ def test_a_run_started_before_its_first_checkpoint_is_not_called_not_started(tmp
     assert _progress_of(run_dir, cfg) == f"training (1,234/{total:,} env steps at the last checkpoint)"
 
 
+def test_status_gives_the_running_sweeps_rate_and_the_time_left(tmp_path: Path) -> None:
+    """``--status`` reads the ``sweep.json`` a sweep rewrites every 10 s: running or not (its pid
+    alive and the record fresh), its rate over the last 15 min, and the time the rest takes."""
+    from hptvsim.train.reproduce import _RateMeter, sweep_eta, write_sweep_record
+
+    meter = _RateMeter(window_s=900.0)
+    assert meter.add(0.0, 0) is None and meter.add(30.0, 3_000) is None  # under a minute: no rate
+    assert meter.add(60.0, 6_000) == pytest.approx(100.0)
+    for t in range(70, 2001, 10):  # 100 env steps/s, then 50 from t = 1000 s
+        rate = meter.add(float(t), 100 * min(t, 1000) + 50 * max(0, t - 1000))
+    assert rate == pytest.approx(50.0)  # the first 1000 s are out of the window
+    assert 2000.0 - meter.samples[0][0] == pytest.approx(900.0, abs=10.0)
+
+    assert sweep_eta(tmp_path, 1_000) == "no sweep has recorded a rate here yet"
+    write_sweep_record(tmp_path, 40_000, 100_000, 100.0, now=1_000.0)
+    assert json.loads((tmp_path / "sweep.json").read_text())["pid"] == os.getpid()
+    assert sweep_eta(tmp_path, 60_000, now=1_030.0) == (
+        f"sweep running (pid {os.getpid()}): 6,000 env steps/min over its last 15 min; "
+        "about 10 min left at that rate"
+    )
+    assert sweep_eta(tmp_path, 2_000_000, now=1_030.0).endswith("about 5 h 33 min left at that rate")
+    stale = sweep_eta(tmp_path, 60_000, now=1_000.0 + 600.0)
+    assert stale.startswith("no sweep running (the last one was seen at ") and "about 10 min left" in stale
+    dead = subprocess.run(
+        [sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True
+    )
+    record = json.loads((tmp_path / "sweep.json").read_text()) | {"pid": int(dead.stdout)}
+    (tmp_path / "sweep.json").write_text(json.dumps(record))
+    assert sweep_eta(tmp_path, 60_000, now=1_030.0).startswith("no sweep running")
+    write_sweep_record(tmp_path, 0, 100_000, None, now=1_000.0)
+    assert sweep_eta(tmp_path, 100_000, now=1_030.0).endswith("no rate measured yet (it takes a minute)")
+    assert sweep_eta(tmp_path, 0, now=1_030.0).endswith("nothing left to train")
+    (tmp_path / "sweep.json").write_text("{not json")
+    assert sweep_eta(tmp_path, 1_000) == "no sweep has recorded a rate here yet"
+
+
 def _tables(report: Path) -> list[str]:
     return [line for line in report.read_text().splitlines() if line.startswith("|")]
 
@@ -472,10 +508,14 @@ def test_finished_runs_are_archived_beside_the_report_and_a_fresh_clone_trains_o
     assert any("capture rate" in t for t in tables)
 
     # --status reads, writes nothing: finished here, or finished in the archive only
-    for out, state in (("a", "finished"), ("fresh", "finished (archived)")):
+    for out, state, sweep in (
+        ("a", "finished", "no sweep running (the last one was seen at "),  # its sweep.json
+        ("fresh", "finished (archived)", "no sweep has recorded a rate here yet"),
+    ):
         status = run(out, "--status").stdout.splitlines()
         assert status[0].split() == ["runs/base-seed0", "200", "/", "200", "env", "steps", *state.split()]
-        assert status[-1].startswith("1 of 1 runs finished; 200 of 200 env steps (100.0 %)")
+        assert status[-2].startswith("1 of 1 runs finished; 200 of 200 env steps (100.0 %)")
+        assert status[-1].startswith(sweep), status[-1]
     assert not (tmp_path / "fresh").exists()
     # a fresh clone has the report and the archive, not the run folders: the report regenerates
     report.write_text("")
