@@ -1308,13 +1308,30 @@ class _RateMeter:
         t0, s0 = self.samples[0]
         return (steps - s0) / (t - t0) if t - t0 >= 60.0 else None
 
+    @property
+    def span_s(self) -> float:
+        """The time [s] the rate is measured over: up to the window, less in a sweep's first minutes."""
+        return self.samples[-1][0] - self.samples[0][0] if self.samples else 0.0
 
-def write_sweep_record(out: Path, steps: int, total: int, rate: float | None, now: float) -> None:
-    """Write ``out/sweep.json`` (atomically): this process, its env steps and rate [env steps/s]."""
+
+def write_sweep_record(
+    out: Path, steps: int, total: int, rate: float | None, now: float, span_s: float = RATE_WINDOW_S
+) -> None:
+    """Write ``out/sweep.json`` (atomically) for ``--status``.
+
+    It holds this process's pid, the time, the env steps done and in all, the rate [env steps/s]
+    and the time [s] that rate is measured over.
+    """
     tmp = out / f".{SWEEP_FILE}.{os.getpid()}"
-    tmp.write_text(
-        json.dumps({"pid": os.getpid(), "updated": now, "env_steps": steps, "total": total, "rate": rate})
-    )
+    rec = {
+        "pid": os.getpid(),
+        "updated": now,
+        "env_steps": steps,
+        "total": total,
+        "rate": rate,
+        "span_s": span_s,
+    }
+    tmp.write_text(json.dumps(rec))
     tmp.replace(out / SWEEP_FILE)
 
 
@@ -1351,6 +1368,7 @@ def sweep_eta(out: Path, remaining: int, now: float | None = None, stale_s: floa
     try:
         rec = json.loads((out / SWEEP_FILE).read_text())
         pid, updated, rate = int(rec["pid"]), float(rec["updated"]), rec.get("rate")
+        span_s = float(rec.get("span_s", RATE_WINDOW_S))
     except (OSError, ValueError, KeyError, TypeError):
         return "no sweep has recorded a rate here yet"
     running = now - updated < stale_s and _alive(pid)
@@ -1361,7 +1379,7 @@ def sweep_eta(out: Path, remaining: int, now: float | None = None, stale_s: floa
     if not isinstance(rate, (int, float)) or rate <= 0:
         return f"{head}; no rate measured yet (it takes a minute)"
     return (
-        f"{head}: {rate * 60:,.0f} env steps/min over its last {RATE_WINDOW_S / 60:.0f} min; "
+        f"{head}: {rate * 60:,.0f} env steps/min over its last {max(1, round(span_s / 60))} min; "
         f"about {_duration(remaining / rate)} left at that rate"
     )
 
@@ -1467,7 +1485,8 @@ def reproduce(
         steps, finished, training = sweep_progress(out, budgets)
         now = time.time()
         with suppress(OSError):  # for `--status`; a full disk must not stop the sweep
-            write_sweep_record(out, steps, sum(budgets.values()), meter.add(now, steps), now)
+            rate = meter.add(now, steps)
+            write_sweep_record(out, steps, sum(budgets.values()), rate, now, meter.span_s)
         if bar is None:
             return
         bar.update(max(0, steps - bar.n))

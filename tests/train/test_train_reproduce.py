@@ -447,7 +447,7 @@ def test_status_gives_the_running_sweeps_rate_and_the_time_left(tmp_path: Path) 
     for t in range(70, 2001, 10):  # 100 env steps/s, then 50 from t = 1000 s
         rate = meter.add(float(t), 100 * min(t, 1000) + 50 * max(0, t - 1000))
     assert rate == pytest.approx(50.0)  # the first 1000 s are out of the window
-    assert 2000.0 - meter.samples[0][0] == pytest.approx(900.0, abs=10.0)
+    assert meter.span_s == pytest.approx(900.0, abs=10.0)
 
     assert sweep_eta(tmp_path, 1_000) == "no sweep has recorded a rate here yet"
     write_sweep_record(tmp_path, 40_000, 100_000, 100.0, now=1_000.0)
@@ -457,6 +457,8 @@ def test_status_gives_the_running_sweeps_rate_and_the_time_left(tmp_path: Path) 
         "about 10 min left at that rate"
     )
     assert sweep_eta(tmp_path, 2_000_000, now=1_030.0).endswith("about 5 h 33 min left at that rate")
+    write_sweep_record(tmp_path, 40_000, 100_000, 100.0, now=1_000.0, span_s=80.0)  # a sweep's first minutes
+    assert "6,000 env steps/min over its last 1 min; about 10 min" in sweep_eta(tmp_path, 60_000, now=1_030.0)
     stale = sweep_eta(tmp_path, 60_000, now=1_000.0 + 600.0)
     assert stale.startswith("no sweep running (the last one was seen at ") and "about 10 min left" in stale
     dead = subprocess.run(
