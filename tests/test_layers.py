@@ -20,6 +20,7 @@ LAYERS: dict[str, int] = {
     "hptvsim": 0,
     "hptvsim._paths": 0,
     "hptvsim._lazy": 0,
+    "hptvsim._process": 0,
     "hptvsim.palette": 0,
     "hptvsim.native": 0,
     "hptvsim.bench.common": 0,

@@ -46,6 +46,8 @@ from fmpy.fmi2 import (
     fmi2CallbackLoggerTYPE,
 )
 
+from hptvsim._process import pid_alive
+
 __all__ = [
     "FMI2_DISCARD",
     "FMI2_WARNING",
@@ -342,16 +344,6 @@ def _extract_prefix() -> str:
     return f"{_EXTRACT_PREFIX}{_pid_namespace()}-{os.getpid()}-"
 
 
-def _pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)  # POSIX only: on Windows, signal 0 is CTRL_C_EVENT
-    except ProcessLookupError:
-        return False
-    except PermissionError:  # alive, another user's
-        return True
-    return True
-
-
 def _remove_orphaned_extractions() -> None:
     """Remove (once per process) the extracted FMUs of processes that are gone.
 
@@ -368,7 +360,7 @@ def _remove_orphaned_extractions() -> None:
     ours = f"{_EXTRACT_PREFIX}{_pid_namespace()}-"
     for folder in Path(tempfile.gettempdir()).glob(f"{ours}*"):
         pid = folder.name[len(ours) :].split("-", 1)[0]
-        if pid.isdigit() and int(pid) != os.getpid() and not _pid_alive(int(pid)):
+        if pid.isdigit() and int(pid) != os.getpid() and not pid_alive(int(pid)):
             shutil.rmtree(folder, ignore_errors=True)
 
 

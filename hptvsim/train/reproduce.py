@@ -75,6 +75,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from hptvsim._process import pid_alive
 from hptvsim.train.config import (
     ConfigError,
     TrainConfig,
@@ -1335,16 +1336,6 @@ def write_sweep_record(
     tmp.replace(out / SWEEP_FILE)
 
 
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:  # alive, someone else's
-        return True
-    return True
-
-
 def _duration(seconds: float) -> str:
     minutes = round(seconds / 60.0)
     return f"{minutes // 60} h {minutes % 60:02d} min" if minutes >= 60 else f"{minutes} min"
@@ -1360,7 +1351,7 @@ def sweep_eta(out: Path, remaining: int, now: float | None = None, stale_s: floa
         stale_s: A record older than this [s] means its sweep no longer runs.
 
     Returns:
-        e.g. ``"sweep running (pid 123): 6,100 env steps/min over the last 15 min; about 6 h 30
+        e.g. ``"sweep running (pid 123): 6,100 env steps/min over its last 15 min; about 6 h 30
         min left at that rate"``; the time left is an estimate (fewer runs side by side near the
         end go slower).
     """
@@ -1371,7 +1362,7 @@ def sweep_eta(out: Path, remaining: int, now: float | None = None, stale_s: floa
         span_s = float(rec.get("span_s", RATE_WINDOW_S))
     except (OSError, ValueError, KeyError, TypeError):
         return "no sweep has recorded a rate here yet"
-    running = now - updated < stale_s and _alive(pid)
+    running = now - updated < stale_s and pid_alive(pid)
     when = time.strftime("%Y-%m-%d %H:%M", time.localtime(updated))
     head = f"sweep running (pid {pid})" if running else f"no sweep running (the last one was seen at {when})"
     if remaining <= 0:
@@ -1479,6 +1470,7 @@ def reproduce(
     budgets = {run: budget_steps(sts) for run, sts in stages.items()}
     by_steps = all(st.budget_steps for sts in stages.values() for st in sts)  # else no total: no ETA
 
+    total_steps = sum(budgets.values())
     meter = _RateMeter()
 
     def show_progress() -> None:  # the bar counts env steps over every run: its rate and ETA mean something
@@ -1486,7 +1478,7 @@ def reproduce(
         now = time.time()
         with suppress(OSError):  # for `--status`; a full disk must not stop the sweep
             rate = meter.add(now, steps)
-            write_sweep_record(out, steps, sum(budgets.values()), rate, now, meter.span_s)
+            write_sweep_record(out, steps, total_steps, rate, now, meter.span_s)
         if bar is None:
             return
         bar.update(max(0, steps - bar.n))
@@ -1498,7 +1490,7 @@ def reproduce(
 
         start, _, _ = sweep_progress(out, budgets)
         bar = tqdm(
-            total=sum(budgets.values()) if by_steps else None,
+            total=total_steps if by_steps else None,
             initial=start,
             desc=f"reproduce {plan.name}",
             unit="step",
