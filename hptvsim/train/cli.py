@@ -298,7 +298,15 @@ def register(main: click.Group, bench: click.Group) -> None:
         help="Folder for the PNGs (default: figures/ in the first path).",
     )
     @click.option("--no-trajectories", is_flag=True, help="Skip the trajectory plots (they run episodes).")
-    def figures_cmd(paths: tuple[Path, ...], out_dir: Path | None, no_trajectories: bool) -> None:
+    @click.option(
+        "--smooth",
+        type=click.IntRange(1, 1000),
+        default=None,
+        help="Moving-average window of the reward curves, in episodes (default: the sweep's, else 5).",
+    )
+    def figures_cmd(
+        paths: tuple[Path, ...], out_dir: Path | None, no_trajectories: bool, smooth: int | None
+    ) -> None:
         """The paper's figures from training runs, sweeps or DT runs (PATHS), as PNG files.
 
         Training runs and sweeps: reward curves per stage and role with 95 % bands over seeds
@@ -310,7 +318,7 @@ def register(main: click.Group, bench: click.Group) -> None:
 
         out = out_dir if out_dir is not None else paths[0] / "figures"
         try:
-            written = make_figures(list(paths), out, with_trajectories=not no_trajectories)
+            written = make_figures(list(paths), out, with_trajectories=not no_trajectories, smooth=smooth)
         except FileNotFoundError as exc:
             raise click.ClickException(str(exc)) from None
         for p in written:

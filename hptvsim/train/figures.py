@@ -161,6 +161,45 @@ def _caption(fig: Any, text: str) -> None:
     fig.text(0.01, 0.005, text, fontsize=7, color="#555555", ha="left", va="bottom")
 
 
+BAND_CUT = "bands cut at the axes (the tables give the intervals)"
+"""The caption's words when :func:`_fit_ylim` cut the bands."""
+
+
+def _fit_ylim(
+    ax: Any, lines: Sequence[np.ndarray], reach: float = 1.0, data: tuple[float, float] | None = None
+) -> bool:
+    """Keep the lines readable beside much wider bands.
+
+    With few seeds a 95 % t band can be ten times wider than the spread of the mean curves it
+    surrounds, and autoscaling then flattens every curve into one. Where the axis' data (lines
+    and bands) reach further than ``reach`` times the lines' own span below their lowest or above
+    their highest point, the y axis is limited to that: the lines stay whole, the bands run off
+    the axes.
+
+    Args:
+        ax: The axes, already drawn.
+        lines: The y values of every line drawn on it (means and runs still training).
+        reach: How far beyond the lines' range the axis may go, in multiples of their span.
+        data: The y range of everything drawn (default: ``ax``'s data limits; panels sharing
+            the y axis pass the union of theirs).
+
+    Returns:
+        Whether the bands were cut.
+    """
+    ys = np.concatenate([np.asarray(y, dtype=np.float64).ravel() for y in lines]) if lines else np.empty(0)
+    ys = ys[np.isfinite(ys)]
+    if ys.size == 0:
+        return False
+    lo, hi = float(ys.min()), float(ys.max())
+    span = max(hi - lo, 0.1 * max(abs(lo), abs(hi)), 1e-9)
+    low, high = lo - reach * span, hi + reach * span
+    data_lo, data_hi = data if data is not None else ax.dataLim.intervaly
+    if data_lo >= low and data_hi <= high:
+        return False
+    ax.set_ylim(max(float(data_lo), low), min(float(data_hi), high))
+    return True
+
+
 def _labels(run_dirs: Sequence[Path], labels: Sequence[str] | None) -> list[str]:
     return list(labels) if labels is not None else [run_label(r) for r in run_dirs]
 
@@ -260,6 +299,7 @@ def reward_curve_figures(
             for label, runs in groups.items()
         }
         labelled: set[str] = set()
+        drawn: list[np.ndarray] = []  # every line's y values, for the y limits
         for s_idx, stage in enumerate(all_stages):
             n_max = 0
             for g_idx, (label, runs) in enumerate(groups.items()):
@@ -274,6 +314,7 @@ def reward_curve_figures(
                     n_max = max(n_max, n)
                     x = offset + np.arange(1, n + 1)
                     mean, half = arr.mean(0), _t_half(arr)
+                    drawn.append(mean)
                     ax.plot(
                         x,
                         mean,
@@ -286,6 +327,7 @@ def reward_curve_figures(
                 for part in partial:  # a stage still training: each run dotted, outside the band
                     y = _smooth(np.asarray(part, dtype=np.float64), smooth)
                     n_max = max(n_max, len(y))
+                    drawn.append(y)
                     ax.plot(offset + np.arange(1, len(y) + 1), y, color=color, linestyle=":", linewidth=1.0)
                 if partial and f"{label}:partial" not in labelled:
                     labelled.add(f"{label}:partial")
@@ -304,11 +346,13 @@ def reward_curve_figures(
         ax.set_ylabel("average total reward per episode (dimensionless)")
         fig_no = {"pursuer": "Figs. 7, 9", "evader": "Figs. 8, 10"}.get(role, "")
         ax.set_title(f"{names.get(role, role)}: mean over seeds, 95 % band (paper {fig_no})", pad=22 + raised)
+        cut = _fit_ylim(ax, drawn)
         ax.legend(loc="best", fontsize=8)
         ax.grid(alpha=0.3)
         fig.tight_layout(rect=(0, 0.03, 1, 1))
-        if caption:
-            _caption(fig, caption)
+        text = "; ".join(t for t in (caption, BAND_CUT if cut else "") if t)
+        if text:
+            _caption(fig, text)
         figures[role] = fig
     return figures
 
@@ -351,6 +395,7 @@ def reward_agents_figure(
     fig, axes = plt.subplots(1, len(shown), figsize=(5.2 * len(shown), 4.2), squeeze=False, sharey=True)
     raised = 0.0  # points the highest raised stage name stands above the others, in any panel
     titles: list[str] = []
+    drawn: list[np.ndarray] = []  # every line's y values in any panel (they share the y axis)
     for ax, label in zip(axes[0], shown, strict=True):
         runs = groups[label]
         keys = sorted({k for r, _ in runs for k in r if stages is None or k[1] in stages})
@@ -367,6 +412,7 @@ def reward_agents_figure(
                     if key[1] not in done and agent in r.get(key, {}):
                         y = _smooth(np.asarray(r[key][agent], dtype=np.float64), smooth)
                         n_max = max(n_max, len(y))
+                        drawn.append(y)
                         ax.plot(
                             offset + np.arange(1, len(y) + 1), y, color=color, linestyle=":", linewidth=0.9
                         )
@@ -379,6 +425,7 @@ def reward_agents_figure(
                 n_max = max(n_max, n)
                 x = offset + np.arange(1, n + 1)
                 color = agent_color(agent, agents)
+                drawn.append(arr.mean(0))
                 ax.plot(
                     x, arr.mean(0), color=color, linewidth=1.2, label=agent if agent not in legend else None
                 )
@@ -412,8 +459,11 @@ def reward_agents_figure(
     for ax, title in zip(axes[0], titles, strict=True):  # one height for every panel's title
         ax.set_title(title, fontsize=9, pad=14 + raised)
     axes[0][0].set_ylabel("total reward per episode (dimensionless)")
+    spans = [ax.dataLim.intervaly for ax in axes[0]]  # the panels share the y axis
+    cut = _fit_ylim(axes[0][0], drawn, data=(min(a for a, _ in spans), max(b for _, b in spans)))
     fig.tight_layout(rect=(0, 0.04, 1, 1))
-    _caption(fig, (caption + "; " if caption else "") + "each agent's own reward, mean over seeds, 95 % band")
+    what = "each agent's own reward, mean over seeds, 95 % band" + (f"; {BAND_CUT}" if cut else "")
+    _caption(fig, (caption + "; " if caption else "") + what)
     return fig
 
 
@@ -597,22 +647,27 @@ def trajectories(run_dir: Path, out: Path, *, seed: int = 0) -> list[Path]:
     return written
 
 
-def _expand(paths: Sequence[Path]) -> tuple[list[Path], list[str], list[str] | None, str]:
-    """Run folders, their labels, the stages to draw and a caption, from runs and sweep folders.
+def _expand(
+    paths: Sequence[Path],
+) -> tuple[list[Path], list[str], list[str] | None, str, dict[str, int]]:
+    """Run folders, their labels, the stages to draw, a caption and the windows, from runs and sweeps.
 
-    A sweep folder holds ``sweep.json``; its jobs may carry a ``label`` (else the run's own) and
-    it may name the ``stages`` to draw.
+    A sweep folder holds ``sweep.json``; its jobs may carry a ``label`` (else the run's own), and
+    it may name the ``stages`` to draw, the curves' moving-average window ``smooth`` and the
+    ``last_episodes`` behind the final reward (the last such values of the given sweeps count).
     """
     runs: list[Path] = []
     labels: list[str] = []
     stages: list[str] | None = None
     names: list[str] = []
+    windows: dict[str, int] = {}
     for p in paths:
         if (p / "sweep.json").is_file():
             manifest: dict[str, Any] = json.loads((p / "sweep.json").read_text())
             names.append(str(manifest.get("name", p.name)))
             if manifest.get("stages"):
                 stages = list(manifest["stages"])
+            windows.update({k: int(manifest[k]) for k in ("smooth", "last_episodes") if k in manifest})
             for j in manifest["jobs"]:
                 run = p / j["run_dir"]
                 if (run / "episodes.csv").is_file():
@@ -631,11 +686,16 @@ def _expand(paths: Sequence[Path]) -> tuple[list[Path], list[str], list[str] | N
     caption = f"{', '.join(names)}: {seeds} run{'s' * (seeds != 1)}" + (
         f" ({training} still training)" if training else ""
     )
-    return runs, labels, stages, caption
+    return runs, labels, stages, caption, windows
 
 
 def make_figures(
-    paths: Sequence[Path], out: Path, *, with_trajectories: bool = True, stages: Sequence[str] | None = None
+    paths: Sequence[Path],
+    out: Path,
+    *,
+    with_trajectories: bool = True,
+    stages: Sequence[str] | None = None,
+    smooth: int | None = None,
 ) -> list[Path]:
     """All figures for runs and sweeps; returns the written files.
 
@@ -644,6 +704,8 @@ def make_figures(
         out: Folder of the PNGs.
         with_trajectories: Also run one episode per stage and draw the tracks.
         stages: Only these stages (default: a sweep's ``stages``, else all).
+        smooth: Moving-average window of the reward curves [episodes] (default: a sweep's
+            ``smooth``, else 5).
 
     Raises:
         FileNotFoundError: No finished episodes in the given folders.
@@ -657,14 +719,24 @@ def make_figures(
     paths = [p for p in paths if p not in dt_runs]
     if not paths:
         return written
-    runs, labels, sweep_stages, caption = _expand(paths)
+    runs, labels, sweep_stages, caption, windows = _expand(paths)
     if not runs:
         raise FileNotFoundError("no finished episodes in the given folders")
     chosen = list(stages) if stages is not None else sweep_stages
-    written += reward_curves(runs, out, labels=labels, stages=chosen, caption=caption)
-    written.append(reward_agents(runs, out, labels=labels, stages=chosen, caption=caption))
+    window = smooth if smooth is not None else windows.get("smooth", 5)
+    if window < 1:
+        raise ValueError(f"smooth={window}: the moving-average window must be at least 1 episode")
+    curves = (caption + "; " if caption else "") + (
+        f"lines: each seed's trailing {window}-episode moving average" if window > 1 else "lines: unsmoothed"
+    )
+    written += reward_curves(runs, out, smooth=window, labels=labels, stages=chosen, caption=curves)
+    written.append(reward_agents(runs, out, smooth=window, labels=labels, stages=chosen, caption=curves))
     last_stage = chosen[-1] if chosen else None
-    written.append(final_reward_bars(runs, out, labels=labels, stage=last_stage, caption=caption))
+    written.append(
+        final_reward_bars(
+            runs, out, last=windows.get("last_episodes", 20), labels=labels, stage=last_stage, caption=caption
+        )
+    )
     if with_trajectories:
         for run in runs[:1] if len(runs) > 1 else runs:
             written += trajectories(run, out)

@@ -97,6 +97,7 @@ __all__ = [
     "archive_dir",
     "archive_finished",
     "build_config",
+    "claim_count",
     "collect",
     "load_plan",
     "plan_dir",
@@ -957,6 +958,20 @@ def claim_result(plan: Plan, results: Results, claim: Claim) -> tuple[Interval, 
     return iv, v
 
 
+def claim_count(plan: Plan, results: Results, claim: Claim) -> str:
+    """What a claim's interval rests on: ``2 + 3 seeds`` (a comparison), ``10 runs`` (a trend)."""
+    exp = plan.experiment(claim.experiment)
+    if claim.compare is not None:
+        by_label = {e.label: e for e in exp.entries}
+        a, b = (
+            len(results.series(by_label[c].setting, plan.seeds, claim.stage, claim.metric))
+            for c in claim.compare
+        )
+        return f"{a} + {b} seeds"
+    n = sum(len(results.series(e.setting, plan.seeds, claim.stage, claim.metric)) for e in exp.entries)
+    return f"{n} run{'s' * (n != 1)} over {len(exp.entries)} values"
+
+
 # --- the report ---------------------------------------------------------------------------------
 
 _METRIC_TEXT = {
@@ -1031,6 +1046,10 @@ def _write_experiment_sweep(plan: Plan, exp: Experiment, out: Path) -> Path:
         "figure": exp.figure,
         "title": exp.title,
         "stages": _stage_names(plan, exp),
+        # the curves' window is the final reward's: a curve shows along the stage what the tables'
+        # final training reward is at its end (the mean of the last `last_episodes` episodes)
+        "smooth": plan.evaluation.last_episodes,
+        "last_episodes": plan.evaluation.last_episodes,
         "jobs": jobs,
     }
     (folder / "sweep.json").write_text(json.dumps(manifest, indent=2) + "\n")
@@ -1100,10 +1119,12 @@ def write_report(
     w("")
     w("## Verdicts")
     w("")
-    w("| claim | the paper says | metric (stage) | we measure (95 % interval) | verdict |")
-    w("|---|---|---|---|---|")
+    w("| claim | the paper says | metric (stage) | we measure (95 % interval) | over | verdict |")
+    w("|---|---|---|---|---|---|")
+    tally: dict[str, int] = {"holds": 0, "does not hold": 0, "not resolved": 0}
     for c in plan.claims:
         iv, v = claim_result(plan, results, c)
+        tally[v] += 1
         what = (
             f"difference {c.compare[0]} - {c.compare[1]}"
             if c.compare
@@ -1114,8 +1135,14 @@ def write_report(
             bold += " (no finished runs)" if iv.n == 0 else f" (n = {iv.n}: too few seeds)"
         w(
             f"| {c.id} | {c.statement} | {metric_text(c.metric)} ({c.stage}) | {what}: {iv.format()} "
-            f"| {bold} |"
+            f"| {claim_count(plan, results, c)} | {bold} |"
         )
+    w("")
+    w(
+        f"At {n_done} of {len(jobs)} runs: **{tally['holds']} of {len(plan.claims)} claims hold, "
+        f"{tally['does not hold']} do not hold, {tally['not resolved']} are not resolved**."
+        + (" Unfinished runs may change any verdict." if n_done < len(jobs) else "")
+    )
     w("")
     w(f"Each verdict regenerates with `{cmd} --report-only`.")
     w("")

@@ -364,3 +364,100 @@ def test_a_setting_with_no_episode_yet_gets_a_panel_that_says_so(tmp_path: Path)
         assert fig.axes[0].get_legend() is not None and fig.axes[1].get_legend() is None
     finally:
         plt.close(fig)
+
+
+def test_a_sweeps_curves_use_its_window_and_end_at_the_final_reward(tmp_path: Path) -> None:
+    """A sweep folder naming ``smooth`` (as ``hptvsim reproduce`` writes it): ``hptvsim figures``
+    smooths with that window and says so under the figure; at the window of the final reward, a
+    group's curve ends at the mean over seeds of the final training reward of the report's tables."""
+    import matplotlib.pyplot as plt
+
+    from hptvsim.train.figures import _expand, reward_curve_figures
+    from hptvsim.train.reproduce import _training_metrics
+
+    rng = np.random.default_rng(3)
+    runs = [tmp_path / f"runs/s-seed{k}" for k in range(3)]
+    for run in runs:
+        run.mkdir(parents=True)
+        rows = ["stage_index,stage,episode,agent,return"]
+        for ep in range(30):
+            for agent in ("pursuer_0", "pursuer_1", "evader_0"):
+                rows.append(f"0,source,{ep},{agent},{rng.normal(10.0 * ep, 50.0):.6f}")
+        (run / "episodes.csv").write_text("\n".join(rows) + "\n")
+        (run / "stages/source").mkdir(parents=True)
+        (run / "stages/source/stage.json").write_text("{}")
+    sweep = tmp_path / "experiments/x"
+    sweep.mkdir(parents=True)
+    jobs = [{"label": "S", "run_dir": f"../../runs/{r.name}"} for r in runs]
+    manifest = {"name": "t/x", "stages": ["source"], "smooth": 7, "last_episodes": 7, "jobs": jobs}
+    (sweep / "sweep.json").write_text(json.dumps(manifest))
+    assert _expand([sweep])[4] == {"smooth": 7, "last_episodes": 7}
+
+    figs = reward_curve_figures(runs, smooth=7, labels=["S"] * 3, stages=["source"])
+    try:
+        for role, fig in figs.items():
+            (line,) = [ln for ln in fig.axes[0].lines if ln.get_label().startswith("S (")]
+            final = np.mean([_training_metrics(r, 7)["source"][f"train_final.{role}"] for r in runs])
+            assert line.get_ydata()[-1] == pytest.approx(final, rel=1e-12)
+    finally:
+        for fig in figs.values():
+            plt.close(fig)
+
+    drawn = {}
+    for name, extra in (("sweep", []), ("7", ["--smooth", "7"]), ("5", ["--smooth", "5"])):
+        out = tmp_path / f"f{name}"
+        args = ["figures", str(sweep), "--out", str(out), "--no-trajectories", *extra]
+        res = CliRunner().invoke(main, args)
+        assert res.exit_code == 0, res.output
+        drawn[name] = (out / "reward_pursuer.png").read_bytes()
+    assert len(drawn["sweep"]) > 10_000
+    assert drawn["sweep"] == drawn["7"] != drawn["5"]  # the sweep's window, unless --smooth says another
+    bad = CliRunner().invoke(main, ["figures", str(sweep), "--smooth", "0", "--no-trajectories"])
+    assert bad.exit_code == 2 and "--smooth" in bad.output and "1<=x<=1000" in bad.output
+
+
+def _noisy_runs(root: Path, spreads: Sequence[float]) -> list[Path]:
+    """One run per spread: 40 source episodes, each agent's return 10 x episode + N(0, spread)."""
+    rng = np.random.default_rng(0)
+    runs = []
+    for k, spread in enumerate(spreads):
+        run = root / f"s-seed{k}"
+        (run / "stages/source").mkdir(parents=True)
+        (run / "stages/source/stage.json").write_text("{}")
+        rows = ["stage_index,stage,episode,agent,return"]
+        for ep in range(40):
+            for agent in ("pursuer_0", "evader_0"):
+                rows.append(f"0,source,{ep},{agent},{10.0 * ep + rng.normal(0.0, spread):.6f}")
+        (run / "episodes.csv").write_text("\n".join(rows) + "\n")
+        runs.append(run)
+    return runs
+
+
+@pytest.mark.parametrize("spreads", [(1.0, 1.0, 1.0), (1.0, 1.0, 5000.0)])
+def test_bands_much_wider_than_the_curves_are_cut_at_the_axes_and_the_caption_says_so(
+    tmp_path: Path, spreads: tuple[float, ...]
+) -> None:
+    """Seeds that agree: the whole band is shown. One wild seed: the band is cut at the axes so
+    the mean stays readable (whole, within the limits), and the line under the figure says so."""
+    import matplotlib.pyplot as plt
+
+    from hptvsim.train.figures import BAND_CUT, reward_agents_figure, reward_curve_figures
+
+    runs = _noisy_runs(tmp_path, spreads)
+    wild = max(spreads) > 100.0
+    figs = reward_curve_figures(runs, smooth=3, labels=["S"] * 3, caption="c")
+    figs["agents"] = reward_agents_figure(runs, smooth=3, labels=["S"] * 3)
+    try:
+        for fig in figs.values():
+            ax = fig.axes[0]
+            low, high = ax.get_ylim()
+            means = np.concatenate([ln.get_ydata() for ln in ax.lines if ln.get_label() != "_nolegend_"])
+            assert low <= means.min() and means.max() <= high  # every line whole
+            band = ax.collections[0].get_paths()[0].vertices[:, 1]
+            assert (band.min() < low or band.max() > high) == wild  # cut only where far wider
+            if wild:
+                assert high - low <= 3.0 * (means.max() - means.min()) + 1e-9
+            assert any(BAND_CUT in t.get_text() for t in fig.texts) == wild
+    finally:
+        for fig in figs.values():
+            plt.close(fig)

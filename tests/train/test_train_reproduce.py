@@ -112,6 +112,9 @@ def test_a_report_without_runs_says_what_is_missing(tmp_path: Path) -> None:
     assert "Runs finished: 0 of 18" in text
     assert "**Missing:** 18 run(s)" in text
     assert text.count("**not resolved** (no finished runs)") == len(plan.claims)
+    n = len(plan.claims)
+    assert f"At 0 of 18 runs: **0 of {n} claims hold, 0 do not hold, {n} are not resolved**." in text
+    assert "Unfinished runs may change any verdict." in text
     for exp in plan.experiments:
         assert f"({exp.figure})" in text
 
@@ -172,9 +175,17 @@ def test_reproduce_end_to_end_at_toy_size(tmp_path: Path) -> None:
     assert [r.split("|")[1].strip() for r in rows] == [c.id for c in plan.claims]
     for row in rows:
         assert re.search(r"\*\*(holds|does not hold|not resolved)\*\*", row), row
+        assert re.search(r"\| (2 \+ 2 seeds|\d+ runs over \d+ values) \|", row), f"no seed count: {row}"
         assert re.search(r"\[-?[\d.e+-]+, -?[\d.e+-]+\]", row), (
             f"no interval: {row}"
         )  # 2 seeds: intervals exist
+    tally = re.search(r"At 18 of 18 runs: \*\*(\d+) of (\d+) claims hold, (\d+) do not hold, (\d+) are", text)
+    assert tally is not None and "Unfinished runs may change" not in text
+    verdicts = [re.search(r"\*\*(holds|does not hold|not resolved)\*\*", row) for row in rows]
+    counted = [
+        sum(1 for m in verdicts if m and m.group(1) == v) for v in ("holds", "does not hold", "not resolved")
+    ]
+    assert [int(tally.group(i)) for i in (1, 3, 4)] == counted and int(tally.group(2)) == len(rows)
     # intervals stay in the range of their quantity: rates in [0, 1], variances and times >= 0
     for line in text.splitlines():
         name = line.split("|")[1].strip() if line.startswith("| ") else ""
