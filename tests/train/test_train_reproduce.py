@@ -115,6 +115,7 @@ def test_a_report_without_runs_says_what_is_missing(tmp_path: Path) -> None:
     n = len(plan.claims)
     assert f"At 0 of 18 runs: **0 of {n} claims hold, 0 do not hold, {n} are not resolved**." in text
     assert "Unfinished runs may change any verdict." in text
+    assert f"no correction for testing {n} claims at once" in text
     for exp in plan.experiments:
         assert f"({exp.figure})" in text
 
