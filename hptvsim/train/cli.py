@@ -314,12 +314,12 @@ def register(main: click.Group, bench: click.Group) -> None:
         final rewards' mean and variance per setting (Fig. 11) and one episode's trajectories
         per stage (Figs. 12-13). DT runs (a folder with dt.pt): Figs. 14-17.
         """
-        from hptvsim.train.figures import make_figures
+        from hptvsim.train.figures import WindowError, make_figures
 
         out = out_dir if out_dir is not None else paths[0] / "figures"
         try:
             written = make_figures(list(paths), out, with_trajectories=not no_trajectories, smooth=smooth)
-        except FileNotFoundError as exc:
+        except (FileNotFoundError, WindowError) as exc:
             raise click.ClickException(str(exc)) from None
         for p in written:
             click.echo(str(p))

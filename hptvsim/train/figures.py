@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 __all__ = [
+    "WindowError",
     "episode_returns",
     "final_reward_bars",
     "final_reward_figure",
@@ -667,7 +668,9 @@ def _expand(
             names.append(str(manifest.get("name", p.name)))
             if manifest.get("stages"):
                 stages = list(manifest["stages"])
-            windows.update({k: int(manifest[k]) for k in ("smooth", "last_episodes") if k in manifest})
+            for key in ("smooth", "last_episodes"):
+                if key in manifest:
+                    windows[key] = _window(manifest[key], f"{p / 'sweep.json'}: {key!r}")
             for j in manifest["jobs"]:
                 run = p / j["run_dir"]
                 if (run / "episodes.csv").is_file():
@@ -687,6 +690,17 @@ def _expand(
         f" ({training} still training)" if training else ""
     )
     return runs, labels, stages, caption, windows
+
+
+class WindowError(ValueError):
+    """A moving-average window outside 1..1000 episodes (given, or read from a ``sweep.json``)."""
+
+
+def _window(value: Any, where: str) -> int:
+    """A moving-average window [episodes] read from a file, checked to lie in 1..1000."""
+    if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= 1000:
+        raise WindowError(f"{where} is {value!r}: a window must be a whole number of episodes in 1..1000")
+    return value
 
 
 def make_figures(
@@ -709,6 +723,7 @@ def make_figures(
 
     Raises:
         FileNotFoundError: No finished episodes in the given folders.
+        WindowError: ``smooth``, or a window in a sweep's ``sweep.json``, outside 1..1000 episodes.
     """
     dt_runs = [p for p in paths if (p / "dt.pt").is_file()]
     written: list[Path] = []
@@ -723,9 +738,7 @@ def make_figures(
     if not runs:
         raise FileNotFoundError("no finished episodes in the given folders")
     chosen = list(stages) if stages is not None else sweep_stages
-    window = smooth if smooth is not None else windows.get("smooth", 5)
-    if window < 1:
-        raise ValueError(f"smooth={window}: the moving-average window must be at least 1 episode")
+    window = _window(smooth, "smooth") if smooth is not None else windows.get("smooth", 5)
     curves = (caption + "; " if caption else "") + (
         f"lines: each seed's trailing {window}-episode moving average" if window > 1 else "lines: unsmoothed"
     )

@@ -414,6 +414,13 @@ def test_a_sweeps_curves_use_its_window_and_end_at_the_final_reward(tmp_path: Pa
     assert drawn["sweep"] == drawn["7"] != drawn["5"]  # the sweep's window, unless --smooth says another
     bad = CliRunner().invoke(main, ["figures", str(sweep), "--smooth", "0", "--no-trajectories"])
     assert bad.exit_code == 2 and "--smooth" in bad.output and "1<=x<=1000" in bad.output
+    for edited in (0, 2.5, "7", True):  # a hand-edited sweep.json: a short error naming file and key
+        (sweep / "sweep.json").write_text(json.dumps({**manifest, "smooth": edited}))
+        args = ["figures", str(sweep), "--out", str(tmp_path / "e"), "--no-trajectories"]
+        res = CliRunner().invoke(main, args)
+        assert res.exit_code == 1 and res.exception is not None and isinstance(res.exception, SystemExit)
+        assert "sweep.json: 'smooth' is " in res.output and "1..1000" in res.output, res.output
+        assert "Traceback" not in res.output
 
 
 def _noisy_runs(root: Path, spreads: Sequence[float]) -> list[Path]:
