@@ -7,6 +7,8 @@
   intervals over seeds (Fig. 11, the entropy coefficient study).
 * :func:`trajectories`: one evaluation episode per stage, every vehicle's track (Figs. 12-13),
   from the ``position`` (north, east) the agents report in ``infos``.
+* :func:`claims_figure`: every seed behind each of a reproduction's claims, one panel per claim
+  (``hptvsim reproduce`` draws it beside its verdict table).
 
 Runs are grouped by a label: the sweep setting recorded in ``run.json`` (``"label"``) when there
 is one, else the algorithm. Only the stages a run has finished count in the means, bands and
@@ -18,15 +20,20 @@ from __future__ import annotations
 
 import csv
 import json
+import math
+import textwrap
 from collections import defaultdict
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 __all__ = [
+    "ClaimPanel",
     "WindowError",
+    "claims_figure",
     "episode_returns",
     "final_reward_bars",
     "final_reward_figure",
@@ -574,6 +581,115 @@ def final_reward_figure(
     if any(n < 2 for n in seeds.values()):
         bars += " (none where n = 1: one seed has no interval)"
     _caption(fig, (caption + "; " if caption else "") + bars)
+    return fig
+
+
+@dataclass(frozen=True)
+class ClaimPanel:
+    """One claim's per-seed values, for :func:`claims_figure`.
+
+    Attributes:
+        title: The claim's name and what it measures, e.g. ``"C1a: final training reward, UUVs"``.
+        ylabel: The metric with its unit.
+        groups: ``(label, x, ((seed, value), ...))`` per setting compared; ``x`` is the setting's
+            value on a trend's axis (``None`` for a comparison).
+        summary: The claim's interval and verdict in words (the panel's second title line).
+        xlabel: The trend's axis with its unit (comparisons: empty).
+        limits: The range the metric cannot leave (a rate: 0 to 1); the means' intervals are
+            cut to it, as in the report's tables.
+    """
+
+    title: str
+    ylabel: str
+    groups: tuple[tuple[str, float | None, tuple[tuple[int, float], ...]], ...]
+    summary: str
+    xlabel: str = ""
+    limits: tuple[float, float] = (-math.inf, math.inf)
+
+
+SEED_COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#e377c2", "#17becf", "#bcbd22")
+"""One colour per training seed (seed k: ``SEED_COLORS[k % 8]``), the same in every panel."""
+
+
+def claims_figure(panels: Sequence[ClaimPanel], *, caption: str = "", columns: int = 3) -> Any:
+    """Every seed behind each claim: one panel per claim, a dot per (setting, seed).
+
+    A comparison's panel has one column of dots per setting with the mean over seeds and its
+    95 % t interval in black beside them; a trend's panel has the settings' ``x`` on its axis
+    and the least-squares line through every run (the slope the claim's interval is about).
+    A seed has the same colour in every panel, so one seed that is far from the others
+    everywhere shows at a glance.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
+
+    from hptvsim.train.stats import mean_interval
+
+    n = max(len(panels), 1)
+    cols = min(columns, n)
+    rows = -(-n // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(4.6 * cols, 3.3 * rows + 0.7), squeeze=False)
+    seeds_seen: set[int] = set()
+    for ax, panel in zip(axes.ravel(), panels, strict=False):
+        trend = any(x is not None for _, x, _ in panel.groups)
+        xs_all: list[float] = []
+        ys_all: list[float] = []
+        span = [float(x) for _, x, _ in panel.groups if x is not None]
+        step = (max(span) - min(span)) / max(len(span) - 1, 1) if trend and len(span) > 1 else 1.0
+        for i, (_label, x, points) in enumerate(panel.groups):
+            center = float(x) if trend and x is not None else float(i)
+            for seed, value in points:
+                seeds_seen.add(seed)
+                offset = (seed % 5 - 2) * 0.05 * step  # seeds side by side, not on top of each other
+                ax.plot(center + offset, value, "o", ms=5, color=SEED_COLORS[seed % len(SEED_COLORS)])
+                xs_all.append(center)
+                ys_all.append(value)
+            iv = mean_interval([v for _, v in points]).within(*panel.limits)
+            if not trend and iv.n:
+                ax.errorbar(
+                    center + 0.25,
+                    iv.value,
+                    yerr=[[iv.value - iv.low], [iv.high - iv.value]] if iv.resolved else None,
+                    fmt="_",
+                    ms=12,
+                    color="black",
+                    capsize=3,
+                    linewidth=1,
+                )
+        if trend and len(set(xs_all)) > 1:
+            b, a = np.polyfit(np.asarray(xs_all), np.asarray(ys_all), 1)
+            line = np.array([min(xs_all), max(xs_all)])
+            ax.plot(line, a + b * line, "--", color="black", linewidth=1)
+        if trend:
+            ax.set_xticks([float(x) for _, x, _ in panel.groups if x is not None])
+            ax.set_xlabel(panel.xlabel, fontsize=8)
+        else:
+            ax.set_xticks(range(len(panel.groups)), [g[0] for g in panel.groups], fontsize=8)
+            ax.set_xlim(-0.5, len(panel.groups) - 0.3)
+        if not xs_all:
+            ax.text(0.5, 0.5, "no finished runs yet", ha="center", va="center", transform=ax.transAxes)
+        ax.set_ylabel(panel.ylabel, fontsize=7)
+        title = textwrap.fill(panel.title, 62) + "\n" + textwrap.fill(panel.summary, 62)
+        ax.set_title(title, fontsize=7.5)
+        ax.tick_params(labelsize=7)
+        ax.grid(alpha=0.3, axis="y")
+    for ax in axes.ravel()[len(panels) :]:
+        ax.set_visible(False)
+    handles = [
+        Line2D([], [], marker="o", ls="", color=SEED_COLORS[s % len(SEED_COLORS)], label=f"seed {s}")
+        for s in sorted(seeds_seen)
+    ]
+    handles.append(Line2D([], [], marker="_", ms=12, color="black", label="mean, 95 % t interval"))
+    fig.legend(handles=handles, loc="upper center", ncol=len(handles), fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0, 0.03, 1, 1 - 0.35 / (3.3 * rows + 0.7)))
+    text = (
+        "dots: one training seed each (a seed's colour is the same in every panel); "
+        "comparisons: black = mean over seeds with its 95 % t interval; trends: dashed = least-squares line"
+    )
+    _caption(fig, (caption + "; " if caption else "") + text)
     return fig
 
 

@@ -160,6 +160,8 @@ class Experiment:
         title: What it studies.
         entries: The settings compared, with their labels.
         stages: Stages reported (empty: every stage of the first entry's run).
+        x_label: The entries' ``x`` in words with its unit, for a trend's axis (default: the
+            name the labels share before `` = ``, e.g. ``alpha_0`` of ``alpha_0 = 0.1``).
     """
 
     id: str
@@ -167,6 +169,14 @@ class Experiment:
     title: str
     entries: tuple[Entry, ...]
     stages: tuple[str, ...] = ()
+    x_label: str = ""
+
+    def x_text(self) -> str:
+        """The trend axis' name: ``x_label``, else the labels' shared ``name`` of ``name = value``."""
+        if self.x_label:
+            return self.x_label
+        names = {e.label.split(" = ")[0].strip() for e in self.entries if " = " in e.label}
+        return names.pop() if len(names) == 1 and all(" = " in e.label for e in self.entries) else "x"
 
 
 @dataclass(frozen=True)
@@ -355,7 +365,7 @@ def load_plan(path: Path | str) -> Plan:
 
     experiments: list[Experiment] = []
     for raw in data.get("experiment", []):
-        _keys(path, "[[experiment]]", raw, {"id", "figure", "title", "entries", "stages"})
+        _keys(path, "[[experiment]]", raw, {"id", "figure", "title", "entries", "stages", "x_label"})
         eid = str(raw.get("id", ""))
         if not _name_ok(eid):
             raise _err(path, f"[[experiment]] id {eid!r}: a name is letters, digits, '-' or '_'")
@@ -384,6 +394,7 @@ def load_plan(path: Path | str) -> Plan:
                 title=str(raw.get("title", eid)),
                 entries=tuple(entries),
                 stages=tuple(str(s) for s in raw.get("stages", [])),
+                x_label=str(raw.get("x_label", "")),
             )
         )
     ids = [e.id for e in experiments]
@@ -775,11 +786,15 @@ class Results:
 
     def series(self, setting: str, seeds: Sequence[int], stage: str, metric: str) -> list[float]:
         """The metric of every seed of a setting that has it."""
+        return [v for _, v in self.by_seed(setting, seeds, stage, metric)]
+
+    def by_seed(self, setting: str, seeds: Sequence[int], stage: str, metric: str) -> list[tuple[int, float]]:
+        """``(seed, value)`` of every seed of a setting that has the metric, in ``seeds``' order."""
         out = []
         for s in seeds:
             v = self.values.get((setting, s), {}).get(stage, {}).get(metric)
             if v is not None and math.isfinite(v):
-                out.append(v)
+                out.append((s, v))
         return out
 
 
@@ -1148,6 +1163,7 @@ def write_report(
     w("")
     w(f"Each verdict regenerates with `{cmd} --report-only`.")
     w("")
+    _seeds_section(plan, results, fig_root, figures, w)
     for exp in plan.experiments:
         _experiment_section(plan, exp, results, out, fig_root, figures, w)
     w("## Runs")
@@ -1173,6 +1189,84 @@ def write_report(
         w("")
     report.write_text("\n".join(lines).rstrip() + "\n")
     return report
+
+
+def metric_unit(metric: str) -> str:
+    """A metric's axis label with its unit, e.g. ``reward (dimensionless)``."""
+    name = metric.split(".")[-1] if metric.startswith("eval.") else metric.split(".")[0]
+    if name.endswith("_rate"):
+        return f"{name.replace('_', ' ')} (fraction of episodes)"
+    if name == "time_to_capture_s":
+        return "time to capture (s)"
+    if name == "train_var":
+        return "variance of total reward (dimensionless)"
+    return "total reward (dimensionless)"
+
+
+def claim_groups(
+    plan: Plan, results: Results, claim: Claim
+) -> tuple[tuple[str, float | None, tuple[tuple[int, float], ...]], ...]:
+    """Each setting a claim rests on: ``(label, x, ((seed, value), ...))``, in the claim's order."""
+    exp = plan.experiment(claim.experiment)
+    by_label = {e.label: e for e in exp.entries}
+    entries = [by_label[c] for c in claim.compare] if claim.compare is not None else list(exp.entries)
+    return tuple(
+        (
+            e.label,
+            None if claim.compare is not None else float(e.x or 0.0),
+            tuple(results.by_seed(e.setting, plan.seeds, claim.stage, claim.metric)),
+        )
+        for e in entries
+    )
+
+
+def _seeds_section(
+    plan: Plan, results: Results, fig_root: Path, figures: bool, w: Callable[[str], None]
+) -> None:
+    """The report's "every seed behind the verdicts": a panel per claim and a table of the values."""
+    w("### Every seed behind the verdicts")
+    w("")
+    if figures:
+        import matplotlib.pyplot as plt
+
+        from hptvsim.train.figures import ClaimPanel, claims_figure
+
+        panels = []
+        for c in plan.claims:
+            iv, v = claim_result(plan, results, c)
+            what = f"{c.compare[0]} - {c.compare[1]}" if c.compare else "slope"
+            panels.append(
+                ClaimPanel(
+                    title=f"{c.id}: {metric_text(c.metric)} ({c.stage})",
+                    ylabel=metric_unit(c.metric),
+                    groups=claim_groups(plan, results, c),
+                    summary=f"{what}: {iv.format()}: {v}",
+                    xlabel="" if c.compare else plan.experiment(c.experiment).x_text(),
+                    limits=metric_range(c.metric),
+                )
+            )
+        fig = claims_figure(panels, caption=f"{plan.name}: the runs finished so far")
+        fig_root.mkdir(parents=True, exist_ok=True)
+        path = fig_root / "claims.png"
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        w(
+            "Each claim's metric for every finished run (a seed has one colour throughout), so a "
+            "seed far from the others, which widens an interval, shows at a glance:"
+        )
+        w("")
+        w(f"![claims]({os.path.relpath(path, fig_root.parent)})")
+        w("")
+    w("| claim | setting | " + " | ".join(f"seed {k}" for k in plan.seeds) + " |")
+    w("|---|---|" + "---|" * len(plan.seeds))
+    for c in plan.claims:
+        for label, _x, points in claim_groups(plan, results, c):
+            got = dict(points)
+            cells = [f"{got[k]:.3g}" if k in got else "-" for k in plan.seeds]
+            w(f"| {c.id} | {label} | " + " | ".join(cells) + " |")
+    w("")
+    w("A `-` is a run that has not finished the claim's stage.")
+    w("")
 
 
 def _rel(p: Path) -> str:

@@ -468,3 +468,58 @@ def test_bands_much_wider_than_the_curves_are_cut_at_the_axes_and_the_caption_sa
     finally:
         for fig in figs.values():
             plt.close(fig)
+
+
+def test_the_claims_figure_shows_every_seed_in_its_colour_and_the_intervals_the_report_uses() -> None:
+    """One panel per claim; a seed's dots have one colour in every panel; a comparison's black
+    interval is the mean's t interval cut to the metric's range (a rate's to [0, 1]); a trend's
+    dashed line has the least-squares slope of the claim's interval."""
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import to_hex
+
+    from hptvsim.train.figures import SEED_COLORS, ClaimPanel, claims_figure
+    from hptvsim.train.stats import mean_interval, slope
+
+    rate = ClaimPanel(
+        title="R: capture rate",
+        ylabel="capture rate (fraction of episodes)",
+        groups=(("A", None, ((0, 0.4), (1, 0.0))), ("B", None, ((0, 0.0), (1, 0.02), (2, 0.0)))),
+        summary="A - B",
+        limits=(0.0, 1.0),
+    )
+    trend_points = {0.1: ((0, 5.0), (1, 4.0)), 0.2: ((0, 3.0), (1, 3.5)), 0.4: ((0, 1.0),)}
+    trend = ClaimPanel(
+        title="T: final reward",
+        ylabel="total reward (dimensionless)",
+        groups=tuple((f"x = {x}", x, pts) for x, pts in trend_points.items()),
+        summary="slope",
+        xlabel="x (dimensionless)",
+    )
+    empty = ClaimPanel(title="E", ylabel="r", groups=(("A", None, ()), ("B", None, ())), summary="none")
+    fig = claims_figure([rate, trend, empty], columns=2)
+    try:
+        axes = [ax for ax in fig.axes if ax.get_visible()]
+        assert len(axes) == 3 and not fig.axes[3].get_visible()
+        for ax, panel in zip(axes, (rate, trend, empty), strict=True):
+            dots = [ln for ln in ax.lines if ln.get_marker() == "o"]
+            points = [p for _, _, pts in panel.groups for p in pts]
+            assert len(dots) == len(points)
+            for ln, (seed, value) in zip(dots, points, strict=True):
+                assert to_hex(ln.get_color()) == SEED_COLORS[seed] and ln.get_ydata()[0] == value
+            assert ax.get_ylabel() == panel.ylabel and panel.title in ax.get_title()
+        # the rate's interval: A's t interval at n = 2 reaches far beyond [0, 1] and is cut there
+        raw = mean_interval([0.4, 0.0])
+        assert raw.low < -1.0 and raw.high > 2.0
+        ends = [s[:, 1] for c in axes[0].collections for s in c.get_segments()]
+        assert min(float(e.min()) for e in ends) == 0.0 and max(float(e.max()) for e in ends) == 1.0
+        (line,) = [ln for ln in axes[1].lines if ln.get_linestyle() == "--"]
+        (x0, x1), (y0, y1) = line.get_xdata(), line.get_ydata()
+        xs = [x for x, pts in trend_points.items() for _ in pts]
+        ys = [v for pts in trend_points.values() for _, v in pts]
+        assert (y1 - y0) / (x1 - x0) == pytest.approx(slope(xs, ys).value, rel=1e-9)
+        assert axes[1].get_xlabel() == "x (dimensionless)"
+        assert any(t.get_text() == "no finished runs yet" for t in axes[2].texts)
+        legend = [t.get_text() for t in fig.legends[0].get_texts()]
+        assert legend[:3] == ["seed 0", "seed 1", "seed 2"]
+    finally:
+        plt.close(fig)

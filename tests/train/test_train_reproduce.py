@@ -118,6 +118,49 @@ def test_a_report_without_runs_says_what_is_missing(tmp_path: Path) -> None:
     assert f"no correction for testing {n} claims at once" in text
     for exp in plan.experiments:
         assert f"({exp.figure})" in text
+    assert "![claims](report/claims.png)" in text and (tmp_path / "report/claims.png").is_file()
+    seed_rows = [line for line in text.splitlines() if re.match(r"\| C\w+ \| .* \| - \| - \|$", line)]
+    assert len(seed_rows) == sum(
+        2 if c.compare else len(plan.experiment(c.experiment).entries) for c in plan.claims
+    )
+
+
+def test_the_report_lists_every_seed_behind_each_claim(tmp_path: Path) -> None:
+    """The table under the verdicts gives each claim's metric per setting and seed (``-`` where a
+    run has not finished the stage), and the figure beside it is drawn."""
+    from hptvsim.train.reproduce import Results, _seeds_section
+
+    plan = load_plan(PLANS / "toy.toml")
+    c1 = next(c for c in plan.claims if c.compare is not None)
+    c5 = next(c for c in plan.claims if c.trend is not None)
+    by_label = {e.label: e for e in plan.experiment(c1.experiment).entries}
+    a, b = (by_label[x].setting for x in c1.compare or ())
+    values: dict[tuple[str, int], dict[str, dict[str, float]]] = {
+        (a, 0): {c1.stage: {c1.metric: 0.125}},
+        (a, 1): {c1.stage: {c1.metric: -2.5}},
+        (b, 1): {c1.stage: {c1.metric: 1234.5}, "other": {c1.metric: 9.0}},
+    }
+    trend = plan.experiment(c5.experiment)
+    for k, e in enumerate(trend.entries):
+        values[(e.setting, 0)] = {c5.stage: {c5.metric: 10.0 * k}}
+    results = Results(values=values, progress={})
+    lines: list[str] = []
+    _seeds_section(plan, results, tmp_path / "fig", True, lines.append)
+    text = "\n".join(lines)
+    assert f"| {c1.id} | {c1.compare[0]} | 0.125 | -2.5 |" in text  # type: ignore[index]
+    assert f"| {c1.id} | {c1.compare[1]} | - | 1.23e+03 |" in text  # type: ignore[index]
+    for k, e in enumerate(trend.entries):
+        assert f"| {c5.id} | {e.label} | {10.0 * k:.3g} | - |" in text
+    assert "![claims](fig/claims.png)" in text
+    assert (tmp_path / "fig/claims.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert trend.x_text() == "initial entropy coefficient alpha_0 (dimensionless)"
+    from hptvsim.train.reproduce import Entry, Experiment
+
+    def unnamed(*labels: str) -> Experiment:
+        return Experiment("e", "", "", tuple(Entry(lb, "s", float(k)) for k, lb in enumerate(labels)))
+
+    assert unnamed("a = 1", "a = 2").x_text() == "a"  # without x_label: the labels' shared name
+    assert unnamed("a = 1", "b = 2").x_text() == unnamed("a = 1", "plain").x_text() == "x"
 
 
 def test_cli_user_errors_are_one_line(tmp_path: Path) -> None:
@@ -194,7 +237,16 @@ def test_reproduce_end_to_end_at_toy_size(tmp_path: Path) -> None:
         for low, high in re.findall(r"\[(-?[\d.e+-]+), (-?[\d.e+-]+)\]", line) if bounded else []:
             assert float(low) >= 0.0 and (not name.endswith("rate") or float(high) <= 1.0), line
     figs = sorted((tmp_path / "report").rglob("*.png"))
-    assert {p.parent.name for p in figs} == {e.id for e in plan.experiments}
+    assert {p.parent.name for p in figs} == {e.id for e in plan.experiments} | {"report"}
+    assert [p.name for p in figs if p.parent.name == "report"] == ["claims.png"]
+    seed_rows = [
+        line
+        for line in text.splitlines()
+        if re.match(r"\| C\w+ \| [^|]+ \| -?[\d.e+]+ \| -?[\d.e+]+ \|$", line)
+    ]
+    assert len(seed_rows) == sum(
+        2 if c.compare else len(plan.experiment(c.experiment).entries) for c in plan.claims
+    )
     for p in figs:
         assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
         assert f"]({p.relative_to(tmp_path)})" in text
