@@ -173,6 +173,13 @@ BAND_CUT = "bands cut at the axes (the tables give the intervals)"
 """The caption's words when :func:`_fit_ylim` cut the bands."""
 
 
+UNEVEN = (
+    "a group's curve stops where its seed with the fewest episodes in the stage stops (episodes end at "
+    "a capture, so seeds run different numbers); the tables' final rewards are each seed's own last episodes"
+)
+"""The caption's words when the seeds of a group ran different numbers of episodes in a stage."""
+
+
 def _fit_ylim(
     ax: Any, lines: Sequence[np.ndarray], reach: float = 1.0, data: tuple[float, float] | None = None
 ) -> bool:
@@ -308,6 +315,7 @@ def reward_curve_figures(
         }
         labelled: set[str] = set()
         drawn: list[np.ndarray] = []  # every line's y values, for the y limits
+        uneven = False  # a group's seeds ran different numbers of episodes in a stage
         for s_idx, stage in enumerate(all_stages):
             n_max = 0
             for g_idx, (label, runs) in enumerate(groups.items()):
@@ -319,6 +327,7 @@ def reward_curve_figures(
                 if series:
                     arr = _stack(series, smooth)
                     n = arr.shape[1]
+                    uneven |= any(len(y) > n for y in series)
                     n_max = max(n_max, n)
                     x = offset + np.arange(1, n + 1)
                     mean, half = arr.mean(0), _t_half(arr)
@@ -357,8 +366,9 @@ def reward_curve_figures(
         cut = _fit_ylim(ax, drawn)
         ax.legend(loc="best", fontsize=8)
         ax.grid(alpha=0.3)
-        fig.tight_layout(rect=(0, 0.03, 1, 1))
-        text = "; ".join(t for t in (caption, BAND_CUT if cut else "") if t)
+        text = "; ".join(t for t in (caption, BAND_CUT if cut else "", UNEVEN if uneven else "") if t)
+        text = textwrap.fill(text, 150)
+        fig.tight_layout(rect=(0, 0.03 * max(text.count("\n") + 1, 1), 1, 1))
         if text:
             _caption(fig, text)
         figures[role] = fig
@@ -404,6 +414,7 @@ def reward_agents_figure(
     raised = 0.0  # points the highest raised stage name stands above the others, in any panel
     titles: list[str] = []
     drawn: list[np.ndarray] = []  # every line's y values in any panel (they share the y axis)
+    uneven = False  # some agent's seeds ran different numbers of episodes in a stage
     for ax, label in zip(axes[0], shown, strict=True):
         runs = groups[label]
         keys = sorted({k for r, _ in runs for k in r if stages is None or k[1] in stages})
@@ -430,6 +441,7 @@ def reward_agents_figure(
                     continue
                 arr = _stack(series, smooth)
                 n = arr.shape[1]
+                uneven |= any(len(y) > n for y in series)
                 n_max = max(n_max, n)
                 x = offset + np.arange(1, n + 1)
                 color = agent_color(agent, agents)
@@ -469,9 +481,10 @@ def reward_agents_figure(
     axes[0][0].set_ylabel("total reward per episode (dimensionless)")
     spans = [ax.dataLim.intervaly for ax in axes[0]]  # the panels share the y axis
     cut = _fit_ylim(axes[0][0], drawn, data=(min(a for a, _ in spans), max(b for _, b in spans)))
-    fig.tight_layout(rect=(0, 0.04, 1, 1))
     what = "each agent's own reward, mean over seeds, 95 % band" + (f"; {BAND_CUT}" if cut else "")
-    _caption(fig, (caption + "; " if caption else "") + what)
+    text = textwrap.fill((caption + "; " if caption else "") + what + (f"; {UNEVEN}" if uneven else ""), 190)
+    fig.tight_layout(rect=(0, 0.04 * (text.count("\n") + 1), 1, 1))
+    _caption(fig, text)
     return fig
 
 

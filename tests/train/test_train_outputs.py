@@ -464,7 +464,33 @@ def test_bands_much_wider_than_the_curves_are_cut_at_the_axes_and_the_caption_sa
             assert (band.min() < low or band.max() > high) == wild  # cut only where far wider
             if wild:
                 assert high - low <= 3.0 * (means.max() - means.min()) + 1e-9
-            assert any(BAND_CUT in t.get_text() for t in fig.texts) == wild
+            assert any(BAND_CUT in " ".join(t.get_text().split()) for t in fig.texts) == wild
+    finally:
+        for fig in figs.values():
+            plt.close(fig)
+
+
+@pytest.mark.parametrize("cut", [0, 12])
+def test_a_curve_over_seeds_of_unequal_length_says_where_it_stops(tmp_path: Path, cut: int) -> None:
+    """Seeds whose stage ran different numbers of episodes: the group's curve stops at the fewest,
+    and the line under the figure says so (and that the tables use each seed's own last episodes)."""
+    import matplotlib.pyplot as plt
+
+    from hptvsim.train.figures import UNEVEN, reward_agents_figure, reward_curve_figures
+
+    runs = _noisy_runs(tmp_path, (1.0, 1.0, 1.0))
+    csv_path = runs[2] / "episodes.csv"
+    rows = csv_path.read_text().splitlines()
+    csv_path.write_text("\n".join(rows[: len(rows) - 2 * cut]) + "\n")  # two agents per episode
+    figs = reward_curve_figures(runs, smooth=3, labels=["S"] * 3, caption="c")
+    figs["agents"] = reward_agents_figure(runs, smooth=3, labels=["S"] * 3)
+    try:
+        for name, fig in figs.items():
+            start = "pursuer_0" if name == "agents" else "S ("
+            (line,) = [ln for ln in fig.axes[0].lines if ln.get_label().startswith(start)]
+            assert len(line.get_xdata()) == 40 - cut
+            caption = " ".join(" ".join(t.get_text().split()) for t in fig.texts)
+            assert (UNEVEN in caption) == bool(cut), caption
     finally:
         for fig in figs.values():
             plt.close(fig)
