@@ -215,7 +215,8 @@ def test_reproduce_end_to_end_at_toy_size(tmp_path: Path) -> None:
     assert "## Budget" in text and "## Verdicts" in text and "## Runs" in text
     for exp in plan.experiments:
         assert f"## {exp.title} ({exp.figure})" in text
-    rows = [line for line in text.splitlines() if re.match(r"\| C\d", line)]
+    verdicts_table = text.split("## Verdicts")[1].split("### Every seed")[0]  # not the seeds' table
+    rows = [line for line in verdicts_table.splitlines() if re.match(r"\| C\d", line)]
     assert [r.split("|")[1].strip() for r in rows] == [c.id for c in plan.claims]
     for row in rows:
         assert re.search(r"\*\*(holds|does not hold|not resolved)\*\*", row), row
