@@ -169,6 +169,14 @@ def _caption(fig: Any, text: str) -> None:
     fig.text(0.01, 0.005, text, fontsize=7, color="#555555", ha="left", va="bottom")
 
 
+def _layout_with_caption(fig: Any, text: str, *, width: int, line: float) -> None:
+    """Lay the figure out above ``text`` wrapped at ``width`` characters, ``line`` of its height a line."""
+    text = textwrap.fill(text, width)
+    fig.tight_layout(rect=(0, line * (text.count("\n") + 1), 1, 1))
+    if text:
+        _caption(fig, text)
+
+
 BAND_CUT = "bands cut at the axes (the tables give the intervals)"
 """The caption's words when :func:`_fit_ylim` cut the bands."""
 
@@ -367,10 +375,7 @@ def reward_curve_figures(
         ax.legend(loc="best", fontsize=8)
         ax.grid(alpha=0.3)
         text = "; ".join(t for t in (caption, BAND_CUT if cut else "", UNEVEN if uneven else "") if t)
-        text = textwrap.fill(text, 150)
-        fig.tight_layout(rect=(0, 0.03 * max(text.count("\n") + 1, 1), 1, 1))
-        if text:
-            _caption(fig, text)
+        _layout_with_caption(fig, text, width=150, line=0.03)
         figures[role] = fig
     return figures
 
@@ -482,9 +487,8 @@ def reward_agents_figure(
     spans = [ax.dataLim.intervaly for ax in axes[0]]  # the panels share the y axis
     cut = _fit_ylim(axes[0][0], drawn, data=(min(a for a, _ in spans), max(b for _, b in spans)))
     what = "each agent's own reward, mean over seeds, 95 % band" + (f"; {BAND_CUT}" if cut else "")
-    text = textwrap.fill((caption + "; " if caption else "") + what + (f"; {UNEVEN}" if uneven else ""), 190)
-    fig.tight_layout(rect=(0, 0.04 * (text.count("\n") + 1), 1, 1))
-    _caption(fig, text)
+    text = (caption + "; " if caption else "") + what + (f"; {UNEVEN}" if uneven else "")
+    _layout_with_caption(fig, text, width=190, line=0.04)
     return fig
 
 
@@ -661,7 +665,7 @@ def claims_figure(panels: Sequence[ClaimPanel], *, caption: str = "", columns: i
                 xs_all.append(center)
                 ys_all.append(value)
             iv = mean_interval([v for _, v in points]).within(*panel.limits)
-            if not trend and iv.n:
+            if not trend and iv.n:  # a trend's interval is the slope's, in the title
                 ax.errorbar(
                     center + 0.25,
                     iv.value,

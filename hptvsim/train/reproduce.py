@@ -952,39 +952,45 @@ def sweep_status(plan: Plan, out: Path, archive: Path) -> list[tuple[ReproJob, s
 
 def claim_result(plan: Plan, results: Results, claim: Claim) -> tuple[Interval, str]:
     """The claim's interval (difference or slope) and verdict."""
-    exp = plan.experiment(claim.experiment)
+    groups = claim_groups(plan, results, claim)
     if claim.compare is not None:
-        by_label = {e.label: e for e in exp.entries}
-        a, b = (by_label[c] for c in claim.compare)
-        iv = difference(
-            results.series(a.setting, plan.seeds, claim.stage, claim.metric),
-            results.series(b.setting, plan.seeds, claim.stage, claim.metric),
-        ).within(*metric_range(claim.metric, difference_of=True))
-        v = verdict(iv, claim.direction)
-    else:
-        xs: list[float] = []
-        ys: list[float] = []
-        for e in exp.entries:
-            ser = results.series(e.setting, plan.seeds, claim.stage, claim.metric)
-            xs += [float(e.x or 0.0)] * len(ser)
-            ys += ser
-        iv = slope(xs, ys)
-        v = verdict(iv, "greater" if claim.trend == "increasing" else "less")
-    return iv, v
+        (_, _, a), (_, _, b) = groups
+        iv = difference([v for _, v in a], [v for _, v in b]).within(
+            *metric_range(claim.metric, difference_of=True)
+        )
+        return iv, verdict(iv, claim.direction)
+    xs = [float(x or 0.0) for _, x, points in groups for _ in points]
+    iv = slope(xs, [v for _, _, points in groups for _, v in points])
+    return iv, verdict(iv, "greater" if claim.trend == "increasing" else "less")
 
 
 def claim_count(plan: Plan, results: Results, claim: Claim) -> str:
     """What a claim's interval rests on: ``2 + 3 seeds`` (a comparison), ``10 runs`` (a trend)."""
-    exp = plan.experiment(claim.experiment)
+    counts = [len(points) for _, _, points in claim_groups(plan, results, claim)]
     if claim.compare is not None:
-        by_label = {e.label: e for e in exp.entries}
-        a, b = (
-            len(results.series(by_label[c].setting, plan.seeds, claim.stage, claim.metric))
-            for c in claim.compare
+        return f"{counts[0]} + {counts[1]} seeds"
+    n = sum(counts)
+    return f"{n} run{'s' * (n != 1)} over {len(counts)} values"
+
+
+def claim_groups(
+    plan: Plan, results: Results, claim: Claim
+) -> tuple[tuple[str, float | None, tuple[tuple[int, float], ...]], ...]:
+    """Each setting a claim rests on: ``(label, x, ((seed, value), ...))``, in the claim's order.
+
+    A comparison's two settings (``x`` is ``None``), or every setting of a trend's experiment.
+    """
+    exp = plan.experiment(claim.experiment)
+    by_label = {e.label: e for e in exp.entries}
+    entries = [by_label[c] for c in claim.compare] if claim.compare is not None else list(exp.entries)
+    return tuple(
+        (
+            e.label,
+            None if claim.compare is not None else float(e.x or 0.0),
+            tuple(results.by_seed(e.setting, plan.seeds, claim.stage, claim.metric)),
         )
-        return f"{a} + {b} seeds"
-    n = sum(len(results.series(e.setting, plan.seeds, claim.stage, claim.metric)) for e in exp.entries)
-    return f"{n} run{'s' * (n != 1)} over {len(exp.entries)} values"
+        for e in entries
+    )
 
 
 # --- the report ---------------------------------------------------------------------------------
@@ -1139,8 +1145,9 @@ def write_report(
     w("| claim | the paper says | metric (stage) | we measure (95 % interval) | over | verdict |")
     w("|---|---|---|---|---|---|")
     tally: dict[str, int] = {"holds": 0, "does not hold": 0, "not resolved": 0}
+    verdicts = {c.id: claim_result(plan, results, c) for c in plan.claims}
     for c in plan.claims:
-        iv, v = claim_result(plan, results, c)
+        iv, v = verdicts[c.id]
         tally[v] += 1
         what = (
             f"difference {c.compare[0]} - {c.compare[1]}"
@@ -1163,7 +1170,7 @@ def write_report(
     w("")
     w(f"Each verdict regenerates with `{cmd} --report-only`.")
     w("")
-    _seeds_section(plan, results, fig_root, figures, w)
+    _seeds_section(plan, results, verdicts, fig_root, figures, w)
     for exp in plan.experiments:
         _experiment_section(plan, exp, results, out, fig_root, figures, w)
     w("## Runs")
@@ -1203,25 +1210,13 @@ def metric_unit(metric: str) -> str:
     return "total reward (dimensionless)"
 
 
-def claim_groups(
-    plan: Plan, results: Results, claim: Claim
-) -> tuple[tuple[str, float | None, tuple[tuple[int, float], ...]], ...]:
-    """Each setting a claim rests on: ``(label, x, ((seed, value), ...))``, in the claim's order."""
-    exp = plan.experiment(claim.experiment)
-    by_label = {e.label: e for e in exp.entries}
-    entries = [by_label[c] for c in claim.compare] if claim.compare is not None else list(exp.entries)
-    return tuple(
-        (
-            e.label,
-            None if claim.compare is not None else float(e.x or 0.0),
-            tuple(results.by_seed(e.setting, plan.seeds, claim.stage, claim.metric)),
-        )
-        for e in entries
-    )
-
-
 def _seeds_section(
-    plan: Plan, results: Results, fig_root: Path, figures: bool, w: Callable[[str], None]
+    plan: Plan,
+    results: Results,
+    verdicts: Mapping[str, tuple[Interval, str]],
+    fig_root: Path,
+    figures: bool,
+    w: Callable[[str], None],
 ) -> None:
     """The report's "every seed behind the verdicts": a panel per claim and a table of the values."""
     w("### Every seed behind the verdicts")
@@ -1233,7 +1228,7 @@ def _seeds_section(
 
         panels = []
         for c in plan.claims:
-            iv, v = claim_result(plan, results, c)
+            iv, v = verdicts[c.id]
             what = f"{c.compare[0]} - {c.compare[1]}" if c.compare else "slope"
             panels.append(
                 ClaimPanel(

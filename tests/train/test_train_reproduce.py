@@ -128,7 +128,7 @@ def test_a_report_without_runs_says_what_is_missing(tmp_path: Path) -> None:
 def test_the_report_lists_every_seed_behind_each_claim(tmp_path: Path) -> None:
     """The table under the verdicts gives each claim's metric per setting and seed (``-`` where a
     run has not finished the stage), and the figure beside it is drawn."""
-    from hptvsim.train.reproduce import Results, _seeds_section
+    from hptvsim.train.reproduce import Results, _seeds_section, claim_result
 
     plan = load_plan(PLANS / "toy.toml")
     c1 = next(c for c in plan.claims if c.compare is not None)
@@ -145,7 +145,8 @@ def test_the_report_lists_every_seed_behind_each_claim(tmp_path: Path) -> None:
         values[(e.setting, 0)] = {c5.stage: {c5.metric: 10.0 * k}}
     results = Results(values=values, progress={})
     lines: list[str] = []
-    _seeds_section(plan, results, tmp_path / "fig", True, lines.append)
+    verdicts = {c.id: claim_result(plan, results, c) for c in plan.claims}
+    _seeds_section(plan, results, verdicts, tmp_path / "fig", True, lines.append)
     text = "\n".join(lines)
     assert f"| {c1.id} | {c1.compare[0]} | 0.125 | -2.5 |" in text  # type: ignore[index]
     assert f"| {c1.id} | {c1.compare[1]} | - | 1.23e+03 |" in text  # type: ignore[index]
