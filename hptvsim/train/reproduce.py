@@ -1170,7 +1170,7 @@ def write_report(
     w("")
     w(f"Each verdict regenerates with `{cmd} --report-only`.")
     w("")
-    _seeds_section(plan, results, verdicts, fig_root, figures, w)
+    _seeds_section(plan, results, verdicts, fig_root, figures, w, f"{n_done} of {len(jobs)} runs finished")
     for exp in plan.experiments:
         _experiment_section(plan, exp, results, out, fig_root, figures, w)
     w("## Runs")
@@ -1217,8 +1217,12 @@ def _seeds_section(
     fig_root: Path,
     figures: bool,
     w: Callable[[str], None],
+    runs_text: str,
 ) -> None:
-    """The report's "every seed behind the verdicts": a panel per claim and a table of the values."""
+    """The report's "every seed behind the verdicts": a panel per claim and a table of the values.
+
+    ``runs_text`` (e.g. "27 of 27 runs finished") goes into the figure's caption.
+    """
     w("### Every seed behind the verdicts")
     w("")
     if figures:
@@ -1240,7 +1244,7 @@ def _seeds_section(
                     limits=metric_range(c.metric),
                 )
             )
-        fig = claims_figure(panels, caption=f"{plan.name}: the runs finished so far")
+        fig = claims_figure(panels, caption=f"{plan.name}: {runs_text}")
         fig_root.mkdir(parents=True, exist_ok=True)
         path = fig_root / "claims.png"
         fig.savefig(path, dpi=110)

@@ -146,7 +146,7 @@ def test_the_report_lists_every_seed_behind_each_claim(tmp_path: Path) -> None:
     results = Results(values=values, progress={})
     lines: list[str] = []
     verdicts = {c.id: claim_result(plan, results, c) for c in plan.claims}
-    _seeds_section(plan, results, verdicts, tmp_path / "fig", True, lines.append)
+    _seeds_section(plan, results, verdicts, tmp_path / "fig", True, lines.append, "3 of 8 runs finished")
     text = "\n".join(lines)
     assert f"| {c1.id} | {c1.compare[0]} | 0.125 | -2.5 |" in text  # type: ignore[index]
     assert f"| {c1.id} | {c1.compare[1]} | - | 1.23e+03 |" in text  # type: ignore[index]
