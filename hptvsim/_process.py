@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import os
 
-__all__ = ["pid_alive"]
+__all__ = ["pid_alive", "usable_cores"]
 
 
 def pid_alive(pid: int) -> bool:
@@ -16,3 +16,11 @@ def pid_alive(pid: int) -> bool:
     except PermissionError:  # alive, another user's
         return True
     return True
+
+
+def usable_cores() -> int:
+    """The cores this process may run on (its affinity mask; the machine's count off Linux)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not on Linux
+        return os.cpu_count() or 1

@@ -53,6 +53,7 @@ from typing import TYPE_CHECKING, Literal
 import numpy as np
 import numpy.typing as npt
 
+from hptvsim._process import usable_cores
 from hptvsim.native import compile_c
 from hptvsim.sensors.config import SonarConfig
 from hptvsim.world.grid import OccupancyGrid
@@ -223,11 +224,7 @@ def _thread_pool() -> ThreadPoolExecutor:
 
 
 def _default_threads() -> int:
-    try:
-        n = len(os.sched_getaffinity(0))
-    except AttributeError:  # pragma: no cover - not on Linux
-        n = os.cpu_count() or 1
-    return max(1, min(2, n))
+    return max(1, min(2, usable_cores()))
 
 
 def _same_values(given: object, last: object, checked: npt.NDArray[np.generic]) -> bool:

@@ -75,7 +75,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from hptvsim._process import pid_alive
+from hptvsim._process import pid_alive, usable_cores
 from hptvsim.train.config import (
     ConfigError,
     TrainConfig,
@@ -1472,9 +1472,9 @@ def workers_warning(workers: int, cpus: int | None = None) -> str | None:
 
     Args:
         workers: Runs side by side.
-        cpus: Cores usable by this process (default: the affinity mask's size).
+        cpus: Cores usable by this process (default: :func:`hptvsim._process.usable_cores`).
     """
-    n = cpus if cpus is not None else len(os.sched_getaffinity(0))
+    n = cpus if cpus is not None else usable_cores()
     if workers <= n:
         return None
     return (
