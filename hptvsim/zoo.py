@@ -40,9 +40,11 @@ __all__ = [
     "CHECKPOINT_GAMES",
     "GAMES",
     "Commands3D",
+    "PolicyChecker",
     "PolicyInfo",
     "PolicyLoader",
     "UnknownPolicyError",
+    "check_policy_fits",
     "check_policy_spec",
     "default_policy",
     "list_policies",
@@ -57,11 +59,15 @@ GAMES: Final = ("planar", "3d")
 PolicyLoader = Callable[[Path, "GameCore | Game3DCore", str], Policy]
 """Builds a policy for agent ``agent`` of ``core`` from a checkpoint file."""
 
+PolicyChecker = Callable[[Path, "GameCore | Game3DCore", str], None]
+"""Raises :class:`ValueError` where the loader would, without building the policy (quick)."""
+
 CHECKPOINT_GAMES: Final[dict[str, tuple[str, ...]]] = {"sb3": GAMES, "dt": ("planar",)}
 """The games each checkpoint kind can play: an SB3 model observes either game's layout; the
 Decision Transformer is trained on the planar game's datasets only."""
 
 _LOADERS: dict[str, PolicyLoader] = {}
+_CHECKERS: dict[str, PolicyChecker] = {}
 _LOADER_MODULES: dict[str, str] = {
     # kind -> module whose import registers its loader
     "sb3": "hptvsim.train.policy",
@@ -98,9 +104,18 @@ class PolicyInfo:
     games: tuple[str, ...] = ("planar",)
 
 
-def register_loader(kind: str, loader: PolicyLoader) -> None:
-    """Register how checkpoints of ``kind`` become policies."""
+def register_loader(kind: str, loader: PolicyLoader, checker: PolicyChecker | None = None) -> None:
+    """Register how checkpoints of ``kind`` become policies (and, optionally, how to check one quickly).
+
+    Args:
+        kind: The checkpoint kind (``sb3``, ``dt``).
+        loader: Builds the policy.
+        checker: Raises what ``loader`` would about a checkpoint that does not fit the game,
+            without building it (:func:`check_policy_fits`); None: the loader is the check.
+    """
     _LOADERS[kind] = loader
+    if checker is not None:
+        _CHECKERS[kind] = checker
 
 
 def _loader(kind: str) -> PolicyLoader:
@@ -302,11 +317,48 @@ def load_policy(
             dt=core.dt,
             seed=seed,
         )
+    kind, file = _checkpoint(spec, agent)
+    return _loader(kind)(file, core, agent)
+
+
+def _checkpoint(spec: str, agent: str) -> tuple[str, Path]:
+    """The kind and file of a trained policy ``spec`` (a shipped name, or ``<kind>:<path>``) for ``agent``."""
     known = {p.name: p for p in list_policies()}
     if spec in known:
         info = known[spec]
         file = info.files.get(agent, info.path)
         assert file is not None
-        return _loader(info.kind)(file, core, agent)
+        return info.kind, file
     kind, _, path = spec.partition(":")
-    return _loader(kind)(Path(path), core, agent)
+    return kind, Path(path)
+
+
+def check_policy_fits(
+    spec: str, core: GameCore | Game3DCore, agent: str, *, allow_paths: bool = False
+) -> None:
+    """Check that ``spec`` can drive ``agent`` of ``core``: the checks of :func:`load_policy`, quickly.
+
+    Scripted policies are built (that is cheap); a checkpoint is checked by its kind's checker
+    where one is registered (an SB3 model's observation and action spaces are read from its
+    file, without torch), else loaded.
+
+    Raises:
+        UnknownPolicyError: As :func:`load_policy`.
+        ValueError: As :func:`load_policy`: unknown agent, a policy for another role or game, or
+            a model whose observation does not fit the agent's (another beam count).
+    """
+    if agent not in core.agents:
+        raise ValueError(f"unknown agent {agent!r}; agents: {', '.join(core.agents)}")
+    name = spec.removeprefix("scripted:")
+    if spec.startswith("scripted:") or name in POLICY_NAMES or name in POLICY_NAMES_3D:
+        load_policy(spec, core, agent, allow_paths=allow_paths)
+        return
+    game = "3d" if isinstance(core, Game3DCore) else "planar"
+    check_policy_spec(spec, _role(core, agent), allow_paths=allow_paths, agent=agent, game=game)
+    kind, file = _checkpoint(spec, agent)
+    loader = _loader(kind)  # importing the kind's module registers its checker too
+    checker = _CHECKERS.get(kind)
+    if checker is not None:
+        checker(file, core, agent)
+    else:
+        loader(file, core, agent)

@@ -31,13 +31,35 @@ import numpy.typing as npt
 from hptvsim.sensors.config import AcousticLinkConfig
 from hptvsim.sensors.errors import GaussMarkov, as_generator
 
-__all__ = ["AcousticLink"]
+__all__ = ["MAX_REPORTS_PER_STEP", "AcousticLink", "queue_length", "reports_per_step"]
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
 Bool = npt.NDArray[np.bool_]
 
 _EPS_T = 1e-9  # s, tolerance when comparing report times with step times
+
+MAX_REPORTS_PER_STEP = 1000
+"""Most reports one control step may send (``dt / report_period``): each is a loop iteration.
+
+The scenario schema's :data:`~hptvsim.sensors.config.MIN_REPORT_PERIOD` (0.1 s) with its
+largest ``dt`` (10 s) makes at most 100; this bounds the link built with other steps.
+"""
+
+
+def reports_per_step(config: AcousticLinkConfig, dt: float) -> int:
+    """Most reports a control step of ``dt`` [s] sends (0 when the link is disabled)."""
+    return math.ceil(dt / config.report_period - _EPS_T) if config.enabled else 0
+
+
+def queue_length(config: AcousticLinkConfig, dt: float) -> int:
+    """Reports a pursuer's queue holds: those in flight over the longest propagation delay and a step.
+
+    The link's arrays are ``(envs, pursuers, queue_length)`` times 32 bytes (arrival time, position
+    and stamp of each report).
+    """
+    max_delay = config.max_range / config.sound_speed  # s
+    return math.ceil((max_delay + dt) / config.report_period) + 1
 
 
 class AcousticLink:
@@ -52,6 +74,10 @@ class AcousticLink:
         num_pursuers: Pursuers ``P`` per environment.
         dt: Control step [s] (the time :meth:`step` advances).
         rng: Generator or seed for losses and localisation errors.
+
+    Raises:
+        ValueError: Sizes or ``dt`` out of range, or a report period that would send more than
+            :data:`MAX_REPORTS_PER_STEP` reports in a step.
 
     Attributes:
         position: ``(B, P, 2)`` [m], last received target position (NaN before the first).
@@ -74,12 +100,17 @@ class AcousticLink:
             raise ValueError(f"num_envs and num_pursuers must be >= 1, got {num_envs} and {num_pursuers}")
         if not (dt > 0.0 and math.isfinite(dt)):
             raise ValueError(f"dt = {dt!r} is invalid; valid: a control step > 0 s")
+        if reports_per_step(config, dt) > MAX_REPORTS_PER_STEP:
+            raise ValueError(
+                f"report_period = {config.report_period:g} s would send {dt / config.report_period:.3g} "
+                f"reports in every control step of {dt:g} s; valid: report_period >= dt / "
+                f"{MAX_REPORTS_PER_STEP} = {dt / MAX_REPORTS_PER_STEP:g} s"
+            )
         self.config = config
         self.num_envs, self.num_pursuers, self.dt = int(num_envs), int(num_pursuers), float(dt)
         self.rng = as_generator(rng)
         b, p = self.num_envs, self.num_pursuers
-        max_delay = config.max_range / config.sound_speed  # s
-        self.queue_length = math.ceil((max_delay + self.dt) / config.report_period) + 1
+        self.queue_length = queue_length(config, self.dt)
         q = self.queue_length
         self.errors = GaussMarkov(config.position_error, (b, 2), rng=self.rng)
         self.position: F64 = np.full((b, p, 2), np.nan)

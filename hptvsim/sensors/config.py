@@ -22,6 +22,7 @@ from typing import Any, Literal
 from hptvsim.world._schema import describe_bounds, show, spec, within_bounds
 
 __all__ = [
+    "MIN_REPORT_PERIOD",
     "PULSE_KINDS",
     "SONAR_FIDELITIES",
     "TRANSMITTERS",
@@ -38,6 +39,18 @@ PULSE_KINDS: tuple[str, ...] = ("lfm", "cw")
 
 TRANSMITTERS: tuple[str, ...] = ("target", "buoy")
 """Who sends the target's position reports over the acoustic link (see :class:`AcousticLinkConfig`)."""
+
+MIN_REPORT_PERIOD = 0.1
+"""Shortest time between two reports of the acoustic link [s]: 10 reports a second.
+
+Physically, a position report is a packet of tens of bytes that an acoustic modem sends in tens of
+milliseconds at a few kbit/s (plus its preamble and guard time), on a channel every node shares;
+IoUT and USBL position fixes come at about 1 Hz, at best some 10 Hz. It also bounds the link's
+work: at most ``dt / 0.1`` = 100 reports in a control step (``dt`` <= 10 s), and a queue of at
+most ``(max_range / sound_speed + dt) / 0.1 + 1`` reports per pursuer
+(:func:`~hptvsim.sensors.acoustic.queue_length`), instead of the ~1e9 slots (29 GB) that a
+period of 1e-9 s asked for.
+"""
 
 
 def _fail(cls: str, name: str, value: Any, valid: str) -> ValueError:
@@ -298,7 +311,9 @@ class AcousticLinkConfig:
     Attributes:
         enabled: False: perfect, instantaneous knowledge of the target's position.
         sound_speed: Speed of sound [m/s].
-        report_period: Time between reports [s], in (0, 3600].
+        report_period: Time between reports [s], in [0.1, 3600] (:data:`MIN_REPORT_PERIOD`: an
+            acoustic modem sends a position report in tens of milliseconds and shares the
+            channel, so an IoUT network reports a target at most about ten times a second).
         packet_loss: Probability that a pursuer misses a report, in [0, 1).
         max_range: Farthest a report reaches [m], in (0, 1e6] (acoustic modem range).
         transmitter: ``"target"`` or ``"buoy"``.
@@ -311,7 +326,7 @@ class AcousticLinkConfig:
 
     enabled: bool = spec(True, doc="false: perfect, instantaneous knowledge of the target's position")
     sound_speed: float = spec(1500.0, doc="speed of sound [m/s]", ge=1000.0, le=2000.0)
-    report_period: float = spec(1.0, doc="time between reports [s]", gt=0.0, le=3600.0)
+    report_period: float = spec(1.0, doc="time between reports [s]", ge=MIN_REPORT_PERIOD, le=3600.0)
     packet_loss: float = spec(0.1, doc="probability that a pursuer misses a report", ge=0.0, lt=1.0)
     max_range: float = spec(
         1000.0, doc="farthest a report reaches (acoustic modem range) [m]", gt=0.0, le=1e6

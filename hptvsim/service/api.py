@@ -11,20 +11,30 @@ requests that a browser makes without headers (EventSource, links, images) may g
 """
 
 import asyncio
+import contextlib
 import hmac
-import io
 import json
-from collections.abc import AsyncIterator, Awaitable, Callable
+from collections.abc import AsyncGenerator, Awaitable, Callable
 from pathlib import Path as FsPath
 from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Depends, Path, Query, Request, Security, WebSocket, WebSocketDisconnect
 from fastapi.responses import FileResponse, JSONResponse, Response
 from fastapi.security import APIKeyHeader, APIKeyQuery
-from fastapi.sse import EventSourceResponse, ServerSentEvent
+from fastapi.sse import format_sse_event
 from pydantic import ValidationError
+from starlette.websockets import WebSocketState
 
 from hptvsim.service.db import ACTIVE, FINAL, STATUSES, EpisodeRow
+from hptvsim.service.hub import (
+    ALL,
+    KEEPALIVE,
+    SEND_TIMEOUT_S,
+    EventStreamResponse,
+    SubscriberDroppedError,
+    SubscriberLimitError,
+    encode_json,
+)
 from hptvsim.service.schemas import (
     POLICY_PATTERN,
     EpisodeList,
@@ -107,15 +117,14 @@ def _row(svc: Service, episode_id: str) -> EpisodeRow:
     return row
 
 
-def _trajectory_table(svc: Service, row: EpisodeRow) -> Any:
-    import pyarrow.parquet as pq
-
+def _trajectory_path(svc: Service, row: EpisodeRow) -> FsPath:
+    """The stored trajectory file of an episode that has ended (409 before, 404 without one)."""
     if row.status in ACTIVE:
         raise ApiError(409, f"episode {row.id} is {row.status}; its trajectory is ready once it has ended")
     path = svc.episode_file(row, "trajectory")
     if path is None:
         raise ApiError(404, f"episode {row.id} has no trajectory ({row.status}: {row.error or 'no steps'})")
-    return pq.read_table(path)
+    return FsPath(path)
 
 
 async def _prepared(
@@ -140,97 +149,105 @@ def trajectory_json(table: Any) -> dict[str, Any]:
     """A trajectory table (agent-major rows) as the frame schema's ``Trajectories`` data.
 
     Columns an older episode did not store (the reward terms, the sonar ranges) come out as
-    None; sonar ranges are rounded to centimetres.
+    None; sonar ranges are rounded to centimetres. The same document the API streams
+    (:func:`~hptvsim.service.downloads.json_chunks`), for a table already in memory.
     """
-    from hptvsim.viz.frames import AgentTrajectory
+    from hptvsim.service.downloads import TableRows, json_chunks
 
-    names = set(table.column_names)
-    data = table.to_pydict()
-    agents = list(dict.fromkeys(data["agent"]))
-    n_steps = len(data["step"]) // max(len(agents), 1)
-    out: dict[str, Any] = {"step": data["step"][:n_steps], "time": data["time"][:n_steps], "agents": []}
-    for k, name in enumerate(agents):
-        rows = slice(k * n_steps, (k + 1) * n_steps)
-        agent: dict[str, Any] = {"name": name}
-        for c in AgentTrajectory.COLUMNS:
-            agent[c] = data[c][rows] if c in names else None
-        agent["ranges"] = (
-            [[round(v, 2) for v in r] for r in data["ranges"][rows]] if "ranges" in names else None
-        )
-        out["agents"].append(agent)
-    return out
+    data: dict[str, Any] = json.loads(b"".join(json_chunks(TableRows(table))))
+    return data
 
 
 def trajectory_csv(table: Any) -> bytes:
     """A trajectory table as CSV; each row's sonar ranges become one space-separated field.
 
     The header names each column with its SI unit, ``x [m]`` (the Parquet file's fields carry
-    the same units as metadata, from :attr:`~hptvsim.viz.frames.Trajectories.UNITS`).
+    the same units as metadata, from :attr:`~hptvsim.viz.frames.Trajectories.UNITS`). The same
+    text the API streams (:func:`~hptvsim.service.downloads.csv_chunks`), for a table in memory.
     """
-    import pyarrow as pa
-    import pyarrow.csv as pacsv
+    from hptvsim.service.downloads import TableRows, csv_chunks
 
-    from hptvsim.viz.frames import Trajectories
-
-    if "ranges" in table.column_names:
-        text = [" ".join(f"{v:.2f}" for v in r) for r in table.column("ranges").to_pylist()]
-        i = table.column_names.index("ranges")
-        table = table.set_column(i, "ranges", pa.array(text, pa.string()))
-    table = table.rename_columns(
-        [f"{c} [{Trajectories.UNITS[c]}]" if Trajectories.UNITS.get(c) else c for c in table.column_names]
-    )
-    buf = io.BytesIO()
-    pacsv.write_csv(table, buf)
-    return buf.getvalue()
+    return b"".join(csv_chunks(TableRows(table)))
 
 
-async def _events(
-    svc: Service, key: str, frames: bool, static: bool, request: Request
-) -> AsyncIterator[ServerSentEvent]:
-    """The events of episode ``key`` (or ``"*"``).
+async def _events(svc: Service, key: str, frames: bool, static: bool) -> EventStreamResponse:
+    """The events of episode ``key`` (or ``"*"``), as server-sent events.
 
-    The stream ends at the episode's final status or after ``event_stream_s`` (EventSource
-    clients reconnect by themselves, after ``retry`` ms).
+    The subscription is taken here, before the answer starts, so that a cap on subscribers is
+    answered 429 (this key's) or 503 (the service's) with ``Retry-After``. Events go out as the hub
+    encoded them, once for every subscriber (:mod:`hptvsim.service.hub`). The stream ends at the
+    episode's final status, after ``event_stream_s``, or when the subscriber is dropped for not
+    reading (EventSource clients reconnect by themselves, after ``retry`` ms).
+
+    Raises:
+        ApiError: 429 or 503 over a cap on subscribers.
     """
+    kinds = {"status", "progress"} | ({"frame"} if frames else set()) | ({"static"} if static else set())
+    try:
+        sub = svc.hub.subscribe(key, kinds)
+    except SubscriberLimitError as exc:
+        headers = {"Retry-After": str(exc.retry_after_s)}
+        raise ApiError(exc.status, exc.detail, type="subscriber_limit", headers=headers) from None
     loop = asyncio.get_running_loop()
     end = loop.time() + svc.settings.event_stream_s
 
-    def wanted(kind: str) -> bool:
-        return (frames or kind != "frame") and (static or kind != "static")
-
-    q = svc.hub.subscribe(key)
-    try:
-        if key != "*":
+    async def chunks() -> AsyncGenerator[bytes, None]:
+        if key != ALL:
             row = await asyncio.to_thread(svc.store.get, key)
             if row is None:
                 return
-            status = {"status": row.status, "final": row.status in FINAL, "summary": row.summary}
-            yield ServerSentEvent(event="status", data={"episode": key, **status}, retry=2000)
+            status = {
+                "episode": key,
+                "status": row.status,
+                "final": row.status in FINAL,
+                "summary": row.summary,
+            }
+            yield format_sse_event(data_str=encode_json(status), event="status", retry=2000)
             if row.status in FINAL:
                 return
-            known = svc.hub.static(key)
+            known = svc.hub.static_event(key)
             if static and known is not None:
-                yield ServerSentEvent(event="static", data={"episode": key, **known})
-            for e in svc.hub.last(key):
-                if wanted(e["type"]):
-                    yield ServerSentEvent(event=e["type"], data={"episode": key, **e["data"]})
+                yield known.sse()
+            for latest in svc.hub.last_events(key):
+                if latest.type in kinds:
+                    yield latest.sse()
         else:
-            yield ServerSentEvent(comment="connected", retry=2000)
+            yield format_sse_event(comment="connected", retry=2000)
         while (left := end - loop.time()) > 0:
             try:
-                e = await asyncio.wait_for(q.get(), timeout=min(15.0, left))
-            except TimeoutError:
-                if await request.is_disconnected():
-                    return
-                yield ServerSentEvent(comment="keep-alive")
-                continue
-            if not wanted(e["type"]):
-                continue
-            yield ServerSentEvent(event=e["type"], data={"episode": e["episode"], **e["data"]})
-            if key != "*" and e["type"] == "status" and e["data"].get("final"):
+                e = await sub.get(timeout=min(15.0, left))  # s
+            except SubscriberDroppedError as exc:
+                yield format_sse_event(comment=f"dropped: {exc}")
                 return
-    finally:
-        svc.hub.unsubscribe(key, q)
+            if e is None:
+                yield KEEPALIVE
+                continue
+            yield e.sse()
+            if key != ALL and e.final:
+                return
+
+    return EventStreamResponse(chunks(), sub, deadline=end)
+
+
+SSE_OK: dict[int | str, dict[str, Any]] = {
+    200: {
+        "description": "Server-sent events",
+        "content": {
+            "text/event-stream": {
+                "itemSchema": {
+                    "type": "object",
+                    "properties": {
+                        "data": {"type": "string"},
+                        "event": {"type": "string"},
+                        "id": {"type": "string"},
+                        "retry": {"type": "integer", "minimum": 0},
+                    },
+                }
+            }
+        },
+    }
+}
+"""The OpenAPI answer of an event stream: each item a server-sent event (OpenAPI 3.2)."""
 
 
 def build_routers(settings: Settings) -> tuple[APIRouter, APIRouter]:
@@ -368,12 +385,20 @@ def build_routers(settings: Settings) -> tuple[APIRouter, APIRouter]:
                 "max_jobs": s.max_jobs,
                 "max_interactive": s.max_interactive,
                 "idle_timeout_s": s.idle_timeout_s,
+                "disk_quota_mb": s.disk_quota_mb,
+                "retention_days": s.retention_days,
             },
         }
 
     # --- episodes ------------------------------------------------------------------------------
 
-    @router.post("/episodes", status_code=201, response_model=EpisodeOut, tags=["episodes"])
+    @router.post(
+        "/episodes",
+        status_code=201,
+        response_model=EpisodeOut,
+        tags=["episodes"],
+        responses={507: {"model": ErrorBody, "description": "the disk quota of stored episodes is reached"}},
+    )
     async def create_episode(body: EpisodeCreateBody, svc: Svc) -> EpisodeOut:  # type: ignore[valid-type]
         """Create an episode: ``run`` queues it on the workers; ``interactive`` opens it for stepping."""
         row = await svc.create(body)
@@ -442,46 +467,84 @@ def build_routers(settings: Settings) -> tuple[APIRouter, APIRouter]:
     @router.get(
         "/episodes/{episode_id}/trajectory",
         tags=["results"],
+        response_class=Response,
         responses={
             200: {
-                "content": {"application/json": {}, "text/csv": {}, "application/vnd.apache.parquet": {}},
-                "description": "the trajectories: a row per step and agent (csv, parquet), per agent (json)",
-            }
+                "content": {
+                    "application/json": {},
+                    "application/x-ndjson": {},
+                    "text/csv": {},
+                    "application/vnd.apache.parquet": {},
+                },
+                "description": "the trajectories, streamed from the stored file: a row per step and agent "
+                "(csv, parquet), an object per step and agent (jsonl), per agent (json)",
+            },
+            206: {
+                "content": {"application/vnd.apache.parquet": {}},
+                "description": "the byte range of the Parquet file that the Range header asked for",
+            },
         },
     )
     def get_trajectory(
         episode_id: EpisodeId,
         svc: Svc,
         format: Annotated[
-            Literal["json", "csv", "parquet"], Query(description="json, csv or parquet")
+            Literal["json", "jsonl", "csv", "parquet"],
+            Query(
+                description="json: the frame schema's Trajectories (per agent, one array per column); "
+                "jsonl: JSON lines, one object per step and agent (the CSV's columns by name, ranges "
+                "last); csv: a row per step and agent, units in the header; parquet: the stored file "
+                "(Range requests answered 206)"
+            ),
         ] = "json",
     ) -> Response:
-        """Every agent's trajectory (pose, velocity, commands, rewards, distances per step)."""
+        """Every agent's trajectory (pose, velocity, commands, rewards, distances per step).
+
+        Every format streams from the stored Parquet file a bounded batch of rows at a time
+        (:mod:`hptvsim.service.downloads`), so no size limit applies: the service's memory does not
+        grow with the episode. Sonar ranges are rounded to centimetres in json, jsonl and csv. At
+        most a few json, jsonl and csv downloads stream at once (more: 503 with ``Retry-After``);
+        parquet is sent from disk without that limit.
+        """
+        from hptvsim.service import downloads
+
         row = _row(svc, episode_id)
-        table = _trajectory_table(svc, row)
-        if format == "json":
-            return JSONResponse(trajectory_json(table))
+        path = _trajectory_path(svc, row)
         name = f"{row.id}-trajectory"
-        if format == "csv":
-            return Response(
-                trajectory_csv(table),
-                media_type="text/csv",
-                headers={"Content-Disposition": f'attachment; filename="{name}.csv"'},
+        if format == "parquet":
+            return FileResponse(path, media_type=downloads.MEDIA_TYPES["parquet"], filename=f"{name}.parquet")
+        rows = downloads.ParquetRows(path)  # opened here: an unreadable file fails before the answer
+        write = {"json": downloads.json_chunks, "jsonl": downloads.jsonl_chunks, "csv": downloads.csv_chunks}
+        attachment = {"Content-Disposition": f'attachment; filename="{name}.{format}"'}
+        try:
+            return downloads.StreamedDownload(
+                write[format](rows),
+                media_type=downloads.MEDIA_TYPES[format],
+                headers=None if format == "json" else attachment,
             )
-        path = svc.episode_file(row, "trajectory")
-        assert path is not None
-        return FileResponse(path, media_type="application/vnd.apache.parquet", filename=f"{name}.parquet")
+        except downloads.BusyError as exc:
+            rows.close()
+            retry = {"Retry-After": str(downloads.RETRY_AFTER_S)}
+            raise ApiError(503, str(exc), "format", type="download_limit", headers=retry) from None
 
     @router.get(
         "/episodes/{episode_id}/recording",
         tags=["results"],
         response_class=Response,
         responses={
-            200: {"content": {"application/octet-stream": {}}, "description": "the rerun recording (.rrd)"}
+            200: {"content": {"application/octet-stream": {}}, "description": "the rerun recording (.rrd)"},
+            206: {
+                "content": {"application/octet-stream": {}},
+                "description": "the byte range of the recording that the Range header asked for",
+            },
         },
     )
     def get_recording(episode_id: EpisodeId, svc: Svc) -> Response:
-        """The episode's rerun recording (open with ``hptvsim replay FILE`` or the rerun viewer)."""
+        """The episode's rerun recording (open with ``hptvsim replay FILE`` or the rerun viewer).
+
+        Streamed from the stored file; a ``Range: bytes=...`` request is answered 206 with those
+        bytes (a resumed download), so no size limit applies.
+        """
         row = _row(svc, episode_id)
         if row.status in ACTIVE:
             raise ApiError(409, f"episode {row.id} is {row.status}; its recording is ready once it has ended")
@@ -514,41 +577,41 @@ def build_routers(settings: Settings) -> tuple[APIRouter, APIRouter]:
 
     @router.get(
         "/episodes/{episode_id}/events",
-        response_class=EventSourceResponse,
+        response_class=EventStreamResponse,
         tags=["events"],
-        responses=stream_errors,
+        responses={**stream_errors, **SSE_OK},
     )
     async def episode_events(
         episode_id: Annotated[str, Depends(existing_episode)],
-        request: Request,
         svc: Svc,
         frames: Annotated[bool, Query(description="include frame events (frame schema Frame)")] = True,
         static: Annotated[
             bool, Query(description="begin with the static event (frame schema EpisodeStatic)")
         ] = False,
-    ) -> AsyncIterator[ServerSentEvent]:
+    ) -> EventStreamResponse:
         """Server-sent events of one episode: ``status``, ``progress``, ``frame`` (and ``static``).
 
-        The stream ends after the final status, or after the service's longest stream life.
+        The stream ends after the final status, or after the service's longest stream life. Over
+        the cap on streams of one episode: 429; of the service: 503 (both with ``Retry-After``).
         """
-        async for e in _events(svc, episode_id, frames, static, request):
-            yield e
+        return await _events(svc, episode_id, frames, static)
 
-    @router.get("/events", response_class=EventSourceResponse, tags=["events"], responses=stream_errors)
+    @router.get(
+        "/events", response_class=EventStreamResponse, tags=["events"], responses={**stream_errors, **SSE_OK}
+    )
     async def all_events(
-        request: Request,
         svc: Svc,
         frames: Annotated[bool, Query(description="include frame events (frame schema Frame)")] = False,
         static: Annotated[
             bool, Query(description="include static events (frame schema EpisodeStatic)")
         ] = False,
-    ) -> AsyncIterator[ServerSentEvent]:
+    ) -> EventStreamResponse:
         """Server-sent events of every episode (status and progress; frames and static parts on request).
 
-        The stream ends after the service's longest stream life (EventSource reconnects).
+        The stream ends after the service's longest stream life (EventSource reconnects). Over the
+        cap on all-episodes streams: 429; on the service's: 503 (both with ``Retry-After``).
         """
-        async for e in _events(svc, "*", frames, static, request):
-            yield e
+        return await _events(svc, "*", frames, static)
 
     @ws_router.websocket("/episodes/{episode_id}/ws")
     async def episode_ws(websocket: WebSocket, episode_id: str) -> None:
@@ -557,23 +620,50 @@ def build_routers(settings: Settings) -> tuple[APIRouter, APIRouter]:
         Interactive episodes answer requests in order: ``{"op": "observe"}``,
         ``{"op": "step", "actions": {"pursuer_0": [v, omega]}}``, ``{"op": "cancel"}``; answers are
         ``{"type": "state" | "step" | "episode" | "error", ...}``. Run episodes send their events
-        (``status``, ``progress``, ``frame``) until the final status, then close. The API key goes in
-        the ``X-API-Key`` header or the ``api_key`` query parameter.
+        (``status``, ``progress``, ``frame``) until the final status, then close.
+
+        The API key goes in the ``X-API-Key`` header, the ``api_key`` query parameter (older
+        clients), or, from a browser (which cannot set headers on a WebSocket), as the
+        subprotocol ``hptvsim-key.<key>`` (offer ``hptvsim`` beside it: the server then answers
+        ``hptvsim`` rather than echo the key). A handshake without the key, or for an unknown
+        episode, is refused before it opens: an HTTP 401 or 404 with an ErrorBody.
         """
         svc: Service = websocket.app.state.service
-        given = websocket.headers.get("x-api-key") or websocket.query_params.get("api_key")
-        # accepted first, so that the client sees why it is closed (a close before the
-        # handshake is a bare HTTP 403)
-        await websocket.accept()
+        key_protocol = "hptvsim-key."
+        offered = [str(p) for p in websocket.scope.get("subprotocols") or []]
+        keyed = [p for p in offered if p.startswith(key_protocol)]
+        given = (
+            websocket.headers.get("x-api-key")
+            or websocket.query_params.get("api_key")
+            or (keyed[0][len(key_protocol) :] if keyed else None)
+        )
+
+        async def refuse(status: int, detail: str, field: str, kind: str) -> None:
+            """An HTTP answer instead of the handshake (a bare 403 where the server cannot)."""
+            errors = [{"field": field, "message": detail, "type": kind}]
+            if "websocket.http.response" in (websocket.scope.get("extensions") or {}):
+                body = {"status": status, "detail": detail, "errors": errors}
+                await websocket.send_denial_response(JSONResponse(body, status_code=status))
+            else:
+                await websocket.close(code=1008, reason=detail[:120])
+
         if not key_ok(svc.settings.api_key, given):
-            await websocket.close(code=4401, reason="missing or wrong API key")
+            await refuse(
+                401,
+                "missing or wrong API key; send it in the X-API-Key header or the hptvsim-key.<key> "
+                "subprotocol",
+                "X-API-Key",
+                "unauthorized",
+            )
             return
         row = None
         if len(episode_id) <= 32 and all(c in "0123456789abcdef" for c in episode_id):
             row = await asyncio.to_thread(svc.store.get, episode_id)
         if row is None:
-            await websocket.close(code=4404, reason=f"no episode {episode_id[:40]}")
+            await refuse(404, f"episode_id: no episode {episode_id[:40]}", "episode_id", "not_found")
             return
+        chosen = "hptvsim" if "hptvsim" in offered else (keyed[0] if keyed else None)
+        await websocket.accept(subprotocol=chosen)
         try:
             if row.mode == "interactive":
                 await _ws_interactive(websocket, svc, episode_id, StepBody)
@@ -586,36 +676,107 @@ def build_routers(settings: Settings) -> tuple[APIRouter, APIRouter]:
 
 
 async def _ws_stream(websocket: WebSocket, svc: Service, row: EpisodeRow) -> None:
-    q = svc.hub.subscribe(row.id)
+    """Send a run episode's events, as the hub encoded them once for everyone, until its final status.
+
+    Over a cap on subscribers the socket closes with 1013 (try again later) before anything is
+    sent. A subscriber that stops reading is dropped and closed with 1008: one that skipped
+    :data:`~hptvsim.service.hub.LAG_LIMIT` events in a row, or whose send waited longer than
+    :data:`~hptvsim.service.hub.SEND_TIMEOUT_S`. A client that leaves frees its slot at once.
+    """
     try:
+        sub = svc.hub.subscribe(row.id)
+    except SubscriberLimitError as exc:
+        if websocket.client_state == WebSocketState.CONNECTING:
+            await websocket.accept()
+        await websocket.close(code=1013, reason=exc.reason)
+        return
+    if websocket.client_state == WebSocketState.CONNECTING:
+        await websocket.accept()
+
+    async def send(text: str) -> None:
+        async with asyncio.timeout(SEND_TIMEOUT_S):
+            await websocket.send_text(text)
+
+    async def stream() -> None:
         fresh = await asyncio.to_thread(svc.store.get, row.id) or row
-        await websocket.send_json(
-            {
-                "type": "status",
-                "episode": row.id,
-                "data": {"status": fresh.status, "final": fresh.status in FINAL},
-            }
-        )
+        status = {"status": fresh.status, "final": fresh.status in FINAL}
+        await send(encode_json({"type": "status", "episode": row.id, "data": status}))
         if fresh.status in FINAL:
             await websocket.close()
             return
-        for e in svc.hub.last(row.id):
-            await websocket.send_json(e)
+        for latest in svc.hub.last_events(row.id):
+            await send(latest.ws_text())
         while True:
-            e = await q.get()
-            await websocket.send_json(e)
-            if e["type"] == "status" and e["data"].get("final"):
+            e = await sub.get()
+            assert e is not None  # no timeout
+            await send(e.ws_text())
+            if e.final:
                 await websocket.close()
                 return
+
+    async def client_gone() -> None:
+        while (await websocket.receive())["type"] != "websocket.disconnect":
+            pass  # a run episode's socket takes no messages: ignored
+
+    sender = asyncio.ensure_future(stream())
+    listener = asyncio.ensure_future(client_gone())
+    try:
+        await asyncio.wait({sender, listener}, return_when=asyncio.FIRST_COMPLETED)
+        if sender.done() and not sender.cancelled():
+            try:
+                sender.result()
+            except (SubscriberDroppedError, TimeoutError) as exc:
+                why = (
+                    str(exc)
+                    if isinstance(exc, SubscriberDroppedError)
+                    else f"a send waited > {SEND_TIMEOUT_S:g} s"
+                )
+                sub.drop(why)
+                with contextlib.suppress(Exception):
+                    async with asyncio.timeout(1.0):  # s; the client may not read this either
+                        await websocket.close(code=1008, reason=f"too slow, dropped: {why}"[:123])
     finally:
-        svc.hub.unsubscribe(row.id, q)
+        sub.close()
+        for task in (sender, listener):
+            task.cancel()
+        await asyncio.gather(sender, listener, return_exceptions=True)
 
 
 async def _ws_interactive(websocket: WebSocket, svc: Service, episode_id: str, step_model: Any) -> None:
+    """Answer an interactive episode's requests until the client leaves or cancels.
+
+    Every message gets an answer, and a bad one leaves the connection open: a message that is
+    not UTF-8 text or not JSON (a syntax error, nesting too deep, a number with too many
+    digits) an error with status 400, a request the API refuses its status (422, 404, 409, ...),
+    an internal failure 500 (the traceback goes to the log). Messages over the service's body
+    limit never reach here: the server closes with 1009 (``ws_max_size``).
+    """
+
+    async def error(status: int, detail: str, field: str | None = None) -> None:
+        await websocket.send_json({"type": "error", "status": status, "detail": detail, "field": field})
+
     while True:
-        text = await websocket.receive_text()
+        message = await websocket.receive()
+        if message["type"] == "websocket.disconnect":
+            return
         try:
+            text = message.get("text")
+            if text is None:
+                text = (message.get("bytes") or b"").decode("utf-8")
             msg = json.loads(text)
+        except UnicodeDecodeError:
+            await error(400, "message: not UTF-8 text; send a JSON object", "message")
+            continue
+        except RecursionError:
+            await error(400, "message: cannot be read as JSON (nesting too deep)", "message")
+            continue
+        except json.JSONDecodeError as exc:
+            await error(400, f"message: not JSON ({exc})", "message")
+            continue
+        except ValueError:  # Python's limit on the digits of an integer
+            await error(400, "message: cannot be read as JSON (a number with too many digits)", "message")
+            continue
+        try:
             if not isinstance(msg, dict):
                 raise ApiError(422, "message: expected a JSON object with an 'op'", "op")
             op = msg.get("op")
@@ -639,16 +800,19 @@ async def _ws_interactive(websocket: WebSocket, svc: Service, episode_id: str, s
                 await websocket.close()
                 return
             else:
-                raise ApiError(422, f"op: {op!r} is not an operation; valid: step, observe, cancel", "op")
+                raise ApiError(
+                    422, f"op: {str(op)[:60]!r} is not an operation; valid: step, observe, cancel", "op"
+                )
+        except WebSocketDisconnect:
+            raise
         except ApiError as exc:
-            await websocket.send_json(
-                {"type": "error", "status": exc.status, "detail": exc.detail, "field": exc.field}
-            )
+            await error(exc.status, exc.detail, exc.field)
         except ValidationError as exc:
             first = exc.errors()[0]
             field = ".".join(str(p) for p in first["loc"])
-            await websocket.send_json(
-                {"type": "error", "status": 422, "detail": f"{field}: {first['msg']}", "field": field}
-            )
-        except json.JSONDecodeError as exc:
-            await websocket.send_json({"type": "error", "status": 400, "detail": f"message: not JSON: {exc}"})
+            await error(422, f"{field}: {first['msg']}", field)
+        except Exception as exc:
+            import logging
+
+            logging.getLogger("hptvsim.service").exception("WebSocket of episode %s", episode_id)
+            await error(500, f"internal error: {type(exc).__name__}; the service logged the details")

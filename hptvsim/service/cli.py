@@ -154,7 +154,14 @@ def serve(
 @click.option(
     "--api-key", envvar="HPTVSIM_API_KEY", default=None, help="The service's API key (HPTVSIM_API_KEY)."
 )
-def viser_command(api_url: str, host: str, port: int, api_key: str | None) -> None:
+@click.option(
+    "--allowed-hosts",
+    envvar="HPTVSIM_VIEW_ALLOWED_HOSTS",
+    default=None,
+    help="Comma-separated Host names the view answers (HPTVSIM_VIEW_ALLOWED_HOSTS; default: "
+    "derived from --host, loopback names for a loopback bind).",
+)
+def viser_command(api_url: str, host: str, port: int, api_key: str | None, allowed_hosts: str | None) -> None:
     """Run the viser live view on its own, showing the episodes a service runs (its event stream)."""
     import time
 
@@ -163,8 +170,9 @@ def viser_command(api_url: str, host: str, port: int, api_key: str | None) -> No
     from hptvsim.client import Client, ServiceError
     from hptvsim.viz.viser_view import start_live_view
 
+    hosts = tuple(h.strip() for h in (allowed_hosts or "").split(",") if h.strip())
     try:
-        Settings(host=host, api_key=api_key or None)  # the same rule as the service's
+        settings = Settings(host=host, api_key=api_key or None, allowed_hosts=hosts)  # the service's rules
     except SettingsError as exc:
         raise click.ClickException(str(exc)) from None
     client = Client(api_url, api_key=api_key or None)
@@ -178,7 +186,13 @@ def viser_command(api_url: str, host: str, port: int, api_key: str | None) -> No
             raise ValueError(exc.detail) from None
         return str(episode["id"])
 
-    view = start_live_view(host=host, port=port, launcher=launcher, api_key=api_key or None)
+    view = start_live_view(
+        host=host,
+        port=port,
+        launcher=launcher,
+        api_key=api_key or None,
+        allowed_hosts=settings.hosts_allowed,
+    )
     click.echo(f"hptvsim live view: {view.url} (following {api_url})")
     sys.stdout.flush()
     try:
@@ -213,8 +227,17 @@ def register(main: click.Group, bench: click.Group) -> None:
         help="Workers of the service it starts.",
     )
     @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of tables.")
-    def bench_command(quick: bool, url: str | None, workers: int, as_json: bool) -> None:
-        """What the service costs: RemoteEnv steps and API episode runs against in-process floors."""
+    @click.option(
+        "--only",
+        type=click.Choice(["steps", "episodes", "create", "fanout", "interactive"]),
+        multiple=True,
+        help="Run only this benchmark (repeatable; default: all). fanout: /healthz under 200 subscribers; "
+        "interactive: light steps beside a heavy interactive creation.",
+    )
+    def bench_command(
+        quick: bool, url: str | None, workers: int, as_json: bool, only: tuple[str, ...]
+    ) -> None:
+        """What the service costs: RemoteEnv steps, API episode runs, creations, event fan-out."""
         import json
 
         import httpx
@@ -228,7 +251,7 @@ def register(main: click.Group, bench: click.Group) -> None:
                 raise click.BadParameter(
                     f"no hptvsim service answers at {url} ({exc})", param_hint="--url"
                 ) from None
-        results = bench_service(url=url, quick=quick, workers=workers)
+        results = bench_service(url=url, quick=quick, workers=workers, only=list(only) or None)
         if as_json:
             click.echo(json.dumps([r.as_dict() for r in results], indent=2))
         else:

@@ -14,6 +14,13 @@ PostgreSQL under a transaction-level advisory lock, SQLite under ``BEGIN IMMEDIA
 On startup :meth:`Store.recover` turns every ``queued`` or ``running`` row left by a previous
 process into ``interrupted`` (or ``finished``, when the episode's worker had completed and written
 its result file before the API went down), so a restart loses no finished episode.
+
+A database that fails is told apart from one that works: :meth:`Store.heartbeat` writes the one
+row of the ``heartbeat`` table (revision 0003), which ``/healthz`` uses to check that the database
+takes a write now; and a SQLite file deleted or replaced while the service runs (whose open
+connections would go on writing into the deleted file, and whose new connections would make an
+empty one) is noticed by comparing the path's device and inode with those of the file opened at
+start, before every use: the store then raises :class:`DatabaseUnavailableError` instead.
 """
 
 from __future__ import annotations
@@ -26,7 +33,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from sqlalchemy import JSON, Column, Index, event, func, inspect, make_url, text
+from sqlalchemy import JSON, Column, Index, delete, event, func, inspect, make_url, text, update
 from sqlalchemy.engine import Connection, Engine
 from sqlalchemy.pool import NullPool
 from sqlmodel import Field, Session, SQLModel, col, create_engine, select
@@ -39,7 +46,9 @@ __all__ = [
     "BASELINE_REVISION",
     "FINAL",
     "STATUSES",
+    "DatabaseUnavailableError",
     "EpisodeRow",
+    "HeartbeatRow",
     "Store",
     "migration_config",
     "upgrade_schema",
@@ -60,8 +69,17 @@ _BASELINE_COLUMNS = (
     "agents", "policies", "policy_list", "config", "versions", "summary", "steps", "error",
     "recording_path", "trajectory_path", "created_at", "started_at", "finished_at",
 )  # fmt: skip
+PG_CONNECT_TIMEOUT_S = 10
+"""Longest wait for a new PostgreSQL connection [s] (a server that does not answer fails, not hangs)."""
 _PG_LOCK_KEY = 0x68707476_73696D00  # "hptvsim\0": the advisory lock of schema upgrades
 _MIGRATING = threading.Lock()  # Alembic's ``context``/``op`` are module globals: one run per process
+
+
+class DatabaseUnavailableError(RuntimeError):
+    """The database cannot be used any more (its SQLite file was deleted or replaced).
+
+    The message is short and safe to show a client (no paths).
+    """
 
 
 def utcnow() -> datetime:
@@ -102,6 +120,15 @@ class EpisodeRow(SQLModel, table=True):
     finished_at: datetime | None = None
     # when the row last changed: set on insert, by every Store write, and by any other ORM update
     updated_at: datetime = Field(default_factory=utcnow, sa_column_kwargs={"onupdate": utcnow})
+
+
+class HeartbeatRow(SQLModel, table=True):
+    """The one row ``/healthz`` rewrites to check that the database takes a write (revision 0003)."""
+
+    __tablename__ = "heartbeat"
+
+    id: int = Field(primary_key=True)  # always 1
+    beat_at: datetime = Field(default_factory=utcnow)
 
 
 def _sqlite_pragmas(dbapi_connection: Any, connection_record: Any) -> None:
@@ -250,9 +277,14 @@ class Store:
         sqlite = parsed.get_backend_name() == "sqlite"
         if sqlite and parsed.database and not _in_memory(url):
             Path(parsed.database).parent.mkdir(parents=True, exist_ok=True)
+        connect_args: dict[str, Any] = {}
+        if sqlite:
+            connect_args = {"check_same_thread": False, "timeout": 30}
+        elif parsed.get_backend_name() == "postgresql":
+            connect_args = {"connect_timeout": PG_CONNECT_TIMEOUT_S}  # a dead server fails, not hangs
         self.engine: Engine = create_engine(
             url,
-            connect_args={"check_same_thread": False, "timeout": 30} if sqlite else {},
+            connect_args=connect_args,
             pool_pre_ping=not sqlite,
             json_serializer=lambda obj: json.dumps(obj, allow_nan=False, default=str),
         )
@@ -268,15 +300,48 @@ class Store:
             finally:
                 migrator.dispose()
         self._lock = threading.Lock()  # one writer at a time (SQLite's own rule, kept for all)
+        # the SQLite file this store opened: (path, (device, inode)); None for other databases
+        self._file: tuple[Path, tuple[int, int]] | None = None
+        self._lost: str | None = None  # why the database cannot be used any more
+        if sqlite and parsed.database and not _in_memory(url):
+            path = Path(parsed.database)
+            st = path.stat()
+            self._file = (path, (st.st_dev, st.st_ino))
 
     @staticmethod
     def policy_list(policies: dict[str, str]) -> str:
         """The ``policy_list`` column of a row with these policies."""
         return "," + ",".join(sorted(set(policies.values()))) + ","
 
+    def check(self) -> None:
+        """Raise :class:`DatabaseUnavailableError` when the SQLite file opened at start is gone.
+
+        A stat of the path (microseconds): a deleted file, or another file at its path, means
+        the open connections write where nobody will read again and a new connection would
+        start an empty database. Once lost, the store stays unusable (restart the service).
+        """
+        if self._lost is None and self._file is not None:
+            path, identity = self._file
+            try:
+                st = path.stat()
+            except FileNotFoundError:
+                self._lost = "its file was deleted while the service ran"
+            except OSError as exc:
+                self._lost = f"its file cannot be read ({exc.strerror or type(exc).__name__})"
+            else:
+                if (st.st_dev, st.st_ino) != identity:
+                    self._lost = "its file was replaced while the service ran"
+        if self._lost is not None:
+            raise DatabaseUnavailableError(f"the database is unavailable: {self._lost}; restart the service")
+
     @contextmanager
     def session(self) -> Iterator[Session]:
-        """A session that expires nothing on commit (rows stay readable after it)."""
+        """A session that expires nothing on commit (rows stay readable after it).
+
+        Raises:
+            DatabaseUnavailableError: The SQLite file was deleted or replaced (:meth:`check`).
+        """
+        self.check()
         with Session(self.engine, expire_on_commit=False) as s:
             yield s
 
@@ -334,10 +399,13 @@ class Store:
 
         Args:
             result_reader: ``f(row) -> dict | None``: the result a worker wrote for the episode
-                (its files), or None. Rows with a result become ``finished`` with it.
+                (its files), or None. Rows with a result become ``finished`` with it, or the
+                final status the result names in its ``status`` key (an outcome the service
+                could not store while it ran).
 
         Returns:
-            The ids marked ``finished`` and the ids marked ``interrupted``.
+            The ids given a result (``finished`` or the status it names) and the ids marked
+            ``interrupted``.
         """
         finished: list[str] = []
         interrupted: list[str] = []
@@ -347,8 +415,9 @@ class Store:
                 result = result_reader(row) if result_reader is not None else None
                 row.finished_at = row.updated_at = utcnow()
                 if result is not None:
-                    row.status = "finished"
-                    for key, value in result.items():
+                    values = dict(result)
+                    row.status = str(values.pop("status", "finished"))
+                    for key, value in values.items():
                         setattr(row, key, value)
                     finished.append(row.id)
                 else:
@@ -361,7 +430,55 @@ class Store:
             s.commit()
         return finished, interrupted
 
+    def heartbeat(self) -> None:
+        """Rewrite the heartbeat row: raises unless the database takes a write now."""
+        with self._lock, self.session() as s:
+            now = utcnow()
+            done = s.exec(update(HeartbeatRow).where(col(HeartbeatRow.id) == 1).values(beat_at=now))
+            if not done.rowcount:  # the row revision 0003 made is gone: make it again
+                s.add(HeartbeatRow(id=1, beat_at=now))
+            s.commit()
+
+    def delete_ended(self, ids: Sequence[str]) -> list[str]:
+        """Delete the rows of these episodes that are in a final status; returns the ids deleted.
+
+        An active row is never deleted (it may have started again since it was picked).
+        """
+        if not ids:
+            return []
+        with self._lock, self.session() as s:
+            picked = col(EpisodeRow.id).in_(list(ids))
+            final = col(EpisodeRow.status).in_(FINAL)
+            found = [str(i) for i in s.exec(select(EpisodeRow.id).where(picked, final)).all()]
+            if found:
+                s.exec(delete(EpisodeRow).where(col(EpisodeRow.id).in_(found), final))
+                s.commit()
+        return found
+
     # -- reads -------------------------------------------------------------------------------------
+
+    def ended_before(self, cutoff: datetime, limit: int = 500) -> list[str]:
+        """Ids of episodes in a final status that ended before ``cutoff``, oldest first.
+
+        An episode's end is its ``finished_at``, else (rows of old versions) its ``updated_at``.
+        """
+        ended = func.coalesce(col(EpisodeRow.finished_at), col(EpisodeRow.updated_at))
+        query = (
+            select(EpisodeRow.id)
+            .where(col(EpisodeRow.status).in_(FINAL), ended < cutoff)
+            .order_by(ended, col(EpisodeRow.id))
+            .limit(limit)
+        )
+        with self.session() as s:
+            return [str(i) for i in s.exec(query).all()]
+
+    def existing(self, ids: Sequence[str]) -> set[str]:
+        """Which of these episode ids have a row."""
+        if not ids:
+            return set()
+        with self.session() as s:
+            query = select(EpisodeRow.id).where(col(EpisodeRow.id).in_(list(ids)))
+            return {str(i) for i in s.exec(query).all()}
 
     def get(self, episode_id: str) -> EpisodeRow | None:
         """One episode, or None."""

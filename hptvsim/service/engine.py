@@ -137,7 +137,12 @@ class JobSpec:
 
 
 def versions() -> dict[str, str]:
-    """Versions of what produced an episode's numbers."""
+    """Versions of what produced an episode's numbers.
+
+    The packages' versions, Python's minor version and the processor architecture: what a
+    number depends on. Not the kernel, the C library or Python's patch level, which a client
+    (any key holder) could use to pick exploits and which change no result.
+    """
     from importlib.metadata import PackageNotFoundError, version
 
     import numpy as np
@@ -146,9 +151,9 @@ def versions() -> dict[str, str]:
 
     out = {
         "hptvsim": hptvsim.__version__,
-        "python": platform.python_version(),
+        "python": ".".join(platform.python_version_tuple()[:2]),
         "numpy": np.__version__,
-        "platform": platform.platform(terse=True),
+        "machine": platform.machine(),
     }
     for dist in ("rerun-sdk", "casadi", "fastapi"):
         with contextlib.suppress(PackageNotFoundError):  # all are dependencies of the service
@@ -218,6 +223,8 @@ def write_outputs(
     import pyarrow as pa
     import pyarrow.parquet as pq
 
+    from hptvsim.service.downloads import row_group_rows
+
     out_dir.mkdir(parents=True, exist_ok=True)
     _write_atomic(
         out_dir / STATIC_FILE, json.dumps(static if static is not None else result.static.to_dict())
@@ -233,7 +240,8 @@ def write_outputs(
     )
     traj = out_dir / TRAJECTORY_FILE
     tmp = out_dir / (TRAJECTORY_FILE + ".tmp")
-    pq.write_table(table, tmp)
+    # row groups of a few MB, so that a download reads any range of rows in bounded memory
+    pq.write_table(table, tmp, row_group_size=row_group_rows(table))
     os.replace(tmp, traj)
     recording = result.recording_path
     data = {

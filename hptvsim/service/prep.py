@@ -14,7 +14,7 @@ them without waiting.
 from __future__ import annotations
 
 import asyncio
-import contextlib
+import functools
 import json
 import logging
 import multiprocessing.connection
@@ -25,12 +25,9 @@ from typing import Any
 from hptvsim.service.validation import ApiError
 from hptvsim.service.workers import HostError, HostProcess
 
-__all__ = ["MEMORY_LIMIT_BYTES", "PrepPool"]
+__all__ = ["PrepPool"]
 
 log = logging.getLogger("hptvsim.service.prep")
-
-MEMORY_LIMIT_BYTES = 4 << 30
-"""Address space a preparation process may use (a scenario that needs more is refused)."""
 
 
 def _preview(name: str, path: str) -> str:
@@ -51,15 +48,20 @@ def _preview(name: str, path: str) -> str:
     return path
 
 
-def _prep_main(conn: multiprocessing.connection.Connection) -> None:
-    """A preparation process: answer ``resolve``, ``map`` and ``preview`` requests in order."""
+def _prep_main(conn: multiprocessing.connection.Connection, memory_mb: int | None = None) -> None:
+    """A preparation process: answer ``resolve``, ``map`` and ``preview`` requests in order.
+
+    Args:
+        conn: Its end of the pipe.
+        memory_mb: Memory it may hold [MiB] (:func:`hptvsim.service.limits.apply_process_limits`;
+            ``HPTVSIM_PROCESS_MEMORY_MB``): a scenario that needs more is refused. Its time is
+            limited by :class:`PrepPool`, which kills a request that overruns.
+    """
+    from hptvsim.service.limits import apply_process_limits
     from hptvsim.service.workers import _child_setup
 
     _child_setup(preload=False)
-    with contextlib.suppress(ValueError, OSError, ImportError):
-        import resource
-
-        resource.setrlimit(resource.RLIMIT_AS, (MEMORY_LIMIT_BYTES, MEMORY_LIMIT_BYTES))
+    apply_process_limits(memory_mb, None)
     from hptvsim.service.engine import client_message
     from hptvsim.service.schemas import EpisodeCreate
     from hptvsim.service.validation import resolve_request
@@ -109,12 +111,14 @@ class PrepPool:
         n: Processes.
         timeout_s: Time limit of one request [s] (waiting for a free process included).
         max_waiting: Requests that may wait for a process; more are refused (429).
+        memory_mb: Memory limit of each process [MiB] (``HPTVSIM_PROCESS_MEMORY_MB``; None: none).
     """
 
-    def __init__(self, n: int, timeout_s: float, max_waiting: int = 16) -> None:
+    def __init__(self, n: int, timeout_s: float, max_waiting: int = 16, memory_mb: int | None = None) -> None:
         self.n = n
         self.timeout_s = timeout_s
         self.max_waiting = max_waiting
+        self.memory_mb = memory_mb
         self._procs: list[HostProcess] = []
         self._free: asyncio.Queue[HostProcess] | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -123,7 +127,9 @@ class PrepPool:
 
     def _spawn(self, index: int) -> HostProcess:
         assert self._loop is not None
-        proc = HostProcess(index, target=_prep_main, name="hptvsim-prep")
+        proc = HostProcess(
+            index, target=functools.partial(_prep_main, memory_mb=self.memory_mb), name="hptvsim-prep"
+        )
         proc.start(self._loop)
         return proc
 

@@ -22,12 +22,16 @@ variable                       meaning (default)
 ``HPTVSIM_EXECUTOR``           ``local`` (worker processes) or ``ray`` (``local``)
 ``RAY_ADDRESS``                Ray cluster address for ``HPTVSIM_EXECUTOR=ray`` (a local Ray)
 ``HPTVSIM_WORKERS``            worker processes of the local executor (CPU count, at most 4)
-``HPTVSIM_HOSTS``              processes hosting interactive episodes (``1``)
+``HPTVSIM_HOSTS``              spare interactive host processes kept started; each interactive
+                               episode runs in a host of its own, taken from the spares (``2``:
+                               two creations in a row open at once; a third waits for a host to
+                               start, several seconds)
 ``HPTVSIM_MAX_STEPS``          largest ``max_steps`` a request may ask for (``20000``)
 ``HPTVSIM_MAX_AGENTS``         most vehicles in a scenario (``16``)
 ``HPTVSIM_MAX_BODY_BYTES``     largest request body (``1048576``)
 ``HPTVSIM_MAX_JOBS``           episodes queued or running at once (``256``)
-``HPTVSIM_MAX_INTERACTIVE``    interactive episodes open at once (``64``)
+``HPTVSIM_MAX_INTERACTIVE``    interactive episodes open at once, each a process of its own of
+                               about 250 MB before its episode (``16``)
 ``HPTVSIM_MAX_GRID_CELLS``     largest terrain grid of an inline scenario (``4000000``)
 ``HPTVSIM_IDLE_TIMEOUT_S``     an interactive episode idle this long is cancelled (``600``)
 ``HPTVSIM_JOB_TIMEOUT_S``      a run longer than this (wall clock) is cancelled (``3600``)
@@ -38,6 +42,22 @@ variable                       meaning (default)
 ``HPTVSIM_VISER``              start the viser live view (``1``; ``0`` to skip)
 ``HPTVSIM_VISER_PORT``         viser port (``8080``)
 ``HPTVSIM_VISER_URL``          address of a live view run as its own service (none)
+``HPTVSIM_ALLOWED_HOSTS``      comma-separated ``Host`` names the service answers (derived from
+                               the bind address: loopback names for a loopback bind; ``*``: any)
+``HPTVSIM_EPISODE_MEMORY_MB``  largest estimated memory of one episode, refused at admission (``2048``)
+``HPTVSIM_EPISODE_DISK_MB``    largest estimated disk use of one episode, refused at admission (``1024``)
+``HPTVSIM_EPISODE_CPU_S``      largest estimated CPU time of one episode, refused at admission,
+                               and the CPU-time limit a simulating process enforces (``3600``)
+``HPTVSIM_PROCESS_MEMORY_MB``  hard limit on the private writable memory (``RLIMIT_DATA``) of every
+                               simulating process: workers, interactive hosts, preparation (``4096``)
+``HPTVSIM_DISK_QUOTA_MB``      most disk the stored episodes may use; new episodes are refused
+                               beyond it (``10240``)
+``HPTVSIM_RETENTION_DAYS``     ended episodes older than this are deleted (``30``)
+``HPTVSIM_MAX_SUBSCRIBERS``    event streams and WebSockets open at once, in total (``256``)
+``HPTVSIM_MAX_SUBSCRIBERS_PER_EPISODE``
+                               event streams and WebSockets open at once on one episode, or on
+                               all episodes' stream (``64``)
+``HPTVSIM_HOST_CALL_TIMEOUT_S`` longest wait for one interactive call (open, step) (``120``)
 ``HPTVSIM_WEB_DIR``            dashboard files (the checkout's ``web/``)
 =============================  ===========================================================
 """
@@ -45,6 +65,7 @@ variable                       meaning (default)
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -83,7 +104,7 @@ class Settings:
         executor: ``"local"`` worker processes or ``"ray"`` tasks.
         ray_address: Ray cluster address (``None``: start or join a local Ray).
         workers: Worker processes of the local executor.
-        hosts: Processes hosting interactive episodes.
+        hosts: Spare interactive host processes kept started (one per interactive episode).
         max_steps: Largest ``max_steps`` of an episode.
         max_agents: Most vehicles in an episode's scenario.
         max_body_bytes: Largest request body [bytes].
@@ -100,6 +121,18 @@ class Settings:
         viser_port: Port of the viser live view.
         viser_url: Public address of a live view that runs as its own service (shown by the dashboard).
         web_dir: Folder of the dashboard's static files.
+        allowed_hosts: ``Host`` header names answered (empty: derived from ``host``; ``"*"``: any).
+        episode_memory_mb: Largest estimated memory of one episode [MiB] (admission).
+        episode_disk_mb: Largest estimated disk use of one episode [MiB] (admission).
+        episode_cpu_s: Largest estimated CPU time of one episode [s] (admission), also enforced.
+        process_memory_mb: Limit on the private writable memory (``RLIMIT_DATA``) of every
+            simulating process [MiB].
+        disk_quota_mb: Most disk the stored episodes may use [MiB].
+        retention_days: Ended episodes older than this are deleted [days].
+        max_subscribers: Event streams and WebSockets open at once, in total.
+        max_subscribers_per_episode: Event streams and WebSockets open at once per episode
+            (and on the all-episodes stream).
+        host_call_timeout_s: Longest wait for one interactive call [s].
     """
 
     host: str = "127.0.0.1"
@@ -112,12 +145,12 @@ class Settings:
     executor: Literal["local", "ray"] = "local"
     ray_address: str | None = None
     workers: int = field(default_factory=_default_workers)
-    hosts: int = 1
+    hosts: int = 2
     max_steps: int = 20000
     max_agents: int = 16
     max_body_bytes: int = 1 << 20
     max_jobs: int = 256
-    max_interactive: int = 64
+    max_interactive: int = 16
     max_grid_cells: int = 4_000_000
     idle_timeout_s: float = 600.0
     job_timeout_s: float = 3600.0
@@ -129,6 +162,16 @@ class Settings:
     viser_port: int = 8080
     viser_url: str | None = None
     web_dir: Path = field(default_factory=_default_web_dir)
+    allowed_hosts: tuple[str, ...] = ()
+    episode_memory_mb: int = 2048
+    episode_disk_mb: int = 1024
+    episode_cpu_s: float = 3600.0
+    process_memory_mb: int = 4096
+    disk_quota_mb: int = 10240
+    retention_days: float = 30.0
+    max_subscribers: int = 256
+    max_subscribers_per_episode: int = 64
+    host_call_timeout_s: float = 120.0
 
     def __post_init__(self) -> None:
         positive = (
@@ -146,10 +189,20 @@ class Settings:
             "event_stream_s",
             "prep_workers",
             "prep_timeout_s",
+            "episode_memory_mb",
+            "episode_disk_mb",
+            "episode_cpu_s",
+            "process_memory_mb",
+            "disk_quota_mb",
+            "retention_days",
+            "max_subscribers",
+            "max_subscribers_per_episode",
+            "host_call_timeout_s",
         )
         for name in positive:
-            if not getattr(self, name) > 0:
-                raise SettingsError(f"{name} = {getattr(self, name)!r} is invalid; valid: > 0")
+            value = getattr(self, name)
+            if not (value > 0 and math.isfinite(value)):
+                raise SettingsError(f"{name} = {value!r} is invalid; valid: a finite number > 0")
         for name in ("port", "viser_port"):
             if not 0 <= getattr(self, name) <= 65535:
                 raise SettingsError(f"{name} = {getattr(self, name)!r} is invalid; valid: 0..65535")
@@ -180,6 +233,21 @@ class Settings:
             return ipaddress.ip_address(self.host).is_loopback
         except ValueError:
             return False
+
+    @property
+    def hosts_allowed(self) -> frozenset[str]:
+        """The ``Host`` names (without port) the service answers; ``{"*"}`` means any.
+
+        ``allowed_hosts`` when set; otherwise derived from the bind address
+        (:func:`hptvsim.viz.gateway.hosts_for_bind`, the live view's gateway applies the same):
+        a loopback bind answers ``localhost``, ``127.0.0.1`` and ``::1`` only, so a page whose
+        own name was pointed at 127.0.0.1 (DNS rebinding) is refused.
+        """
+        if self.allowed_hosts:
+            return frozenset(h.strip().lower().strip("[]") for h in self.allowed_hosts)
+        from hptvsim.viz.gateway import hosts_for_bind
+
+        return hosts_for_bind(self.host)
 
     @property
     def db_url(self) -> str:
@@ -217,9 +285,12 @@ class Settings:
         def number(var: str, name: str) -> None:
             if var in e:
                 try:
-                    kw[name] = float(e[var])
+                    value = float(e[var])
                 except ValueError:
                     raise SettingsError(f"{var} = {e[var]!r} is invalid; valid: a number") from None
+                if not math.isfinite(value):  # inf would switch a limit off, nan compares false
+                    raise SettingsError(f"{var} = {e[var]!r} is invalid; valid: a finite number")
+                kw[name] = value
 
         def text(var: str, name: str) -> None:
             if e.get(var):
@@ -267,6 +338,17 @@ class Settings:
         text("HPTVSIM_VISER_URL", "viser_url")
         if e.get("HPTVSIM_WEB_DIR"):
             kw["web_dir"] = Path(e["HPTVSIM_WEB_DIR"])
+        if e.get("HPTVSIM_ALLOWED_HOSTS"):
+            kw["allowed_hosts"] = tuple(h.strip() for h in e["HPTVSIM_ALLOWED_HOSTS"].split(",") if h.strip())
+        integer("HPTVSIM_EPISODE_MEMORY_MB", "episode_memory_mb")
+        integer("HPTVSIM_EPISODE_DISK_MB", "episode_disk_mb")
+        number("HPTVSIM_EPISODE_CPU_S", "episode_cpu_s")
+        integer("HPTVSIM_PROCESS_MEMORY_MB", "process_memory_mb")
+        integer("HPTVSIM_DISK_QUOTA_MB", "disk_quota_mb")
+        number("HPTVSIM_RETENTION_DAYS", "retention_days")
+        integer("HPTVSIM_MAX_SUBSCRIBERS", "max_subscribers")
+        integer("HPTVSIM_MAX_SUBSCRIBERS_PER_EPISODE", "max_subscribers_per_episode")
+        number("HPTVSIM_HOST_CALL_TIMEOUT_S", "host_call_timeout_s")
         try:
             return cls(**kw)  # type: ignore[arg-type]  # values were converted above
         except SettingsError as exc:

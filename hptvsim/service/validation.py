@@ -19,7 +19,16 @@ from typing import Any
 from hptvsim.service.schemas import EpisodeCreate
 from hptvsim.service.settings import Settings
 
-__all__ = ["ApiError", "Resolved", "resolve_request", "scenario_summary", "screen_inline", "shipped_scenario"]
+__all__ = [
+    "ApiError",
+    "Resolved",
+    "check_episode_costs",
+    "check_policies_fit",
+    "resolve_request",
+    "scenario_summary",
+    "screen_inline",
+    "shipped_scenario",
+]
 
 MAX_BEAMS = 1024
 MAX_RECORD_SAMPLES = 200_000
@@ -33,14 +42,24 @@ class ApiError(Exception):
         status: HTTP status.
         detail: One line naming the field and what would be valid.
         field: The offending field's dotted path, if one.
+        type: The error's type in ``ErrorBody.errors``.
+        headers: Headers of the answer (e.g. ``Retry-After``), if any.
     """
 
-    def __init__(self, status: int, detail: str, field: str | None = None, type: str = "value_error") -> None:
+    def __init__(
+        self,
+        status: int,
+        detail: str,
+        field: str | None = None,
+        type: str = "value_error",
+        headers: dict[str, str] | None = None,
+    ) -> None:
         super().__init__(detail)
         self.status = status
         self.detail = detail
         self.field = field
         self.type = type
+        self.headers = headers
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -228,6 +247,107 @@ def _check_costs(scenario: Any, settings: Settings) -> None:
         )
 
 
+_LIMITS = {
+    # resource -> (what, setting, its environment variable, unit)
+    "memory": ("memory", "episode_memory_mb", "HPTVSIM_EPISODE_MEMORY_MB", "MiB"),
+    "disk": ("disk space", "episode_disk_mb", "HPTVSIM_EPISODE_DISK_MB", "MiB"),
+    "cpu": ("CPU time", "episode_cpu_s", "HPTVSIM_EPISODE_CPU_S", "s"),
+}
+
+
+def _amount(value: float, unit: str) -> str:
+    if unit == "s":
+        return f"{value:.3g} s"
+    gib = value / (1 << 30)
+    return f"{gib:.3g} GiB" if gib >= 1.0 else f"{value / (1 << 20):.3g} MiB"
+
+
+def check_episode_costs(
+    scenario: Any,
+    *,
+    max_steps: int,
+    record: bool,
+    sensor_fidelity: str | None,
+    policies: Mapping[str, str],
+    settings: Settings,
+) -> None:
+    """Refuse an episode whose estimated memory, CPU time or disk use exceeds this service's limits.
+
+    The estimate is :func:`hptvsim.service.costs.estimate_costs`; the limits are
+    ``episode_memory_mb``, ``episode_cpu_s`` and ``episode_disk_mb``.
+
+    Raises:
+        ApiError: 422 naming the field that drives the largest part of the cost (the message
+            names the others, the estimate, the limit, and the steps that would fit).
+    """
+    from hptvsim.service.costs import estimate_costs
+
+    costs = estimate_costs(
+        scenario, max_steps=max_steps, record=record, sensor_fidelity=sensor_fidelity, policies=policies
+    )
+    for resource, (what, setting, env, unit) in _LIMITS.items():
+        limit = float(getattr(settings, setting)) * (1.0 if unit == "s" else float(1 << 20))
+        total = costs.total(resource)  # type: ignore[arg-type]  # a key of _LIMITS
+        if total <= limit:
+            continue
+        drivers = costs.drivers(resource)  # type: ignore[arg-type]
+        field = drivers[0].fields[0]
+        parts = "; ".join(f"{t.what}: {_amount(t.amount, unit)} ({', '.join(t.fields)})" for t in drivers)
+        fits = costs.steps_within(resource, limit)  # type: ignore[arg-type]
+        hint = (
+            f"; at most {fits} steps would fit (max_steps)" if fits is not None and fits < max_steps else ""
+        )
+        raise ApiError(
+            422,
+            f"{field}: this episode would need about {_amount(total, unit)} of {what}, more than this "
+            f"service allows one episode ({getattr(settings, setting):g} {unit}, {env}); most of it: "
+            f"{parts}{hint}",
+            field,
+        )
+
+
+def check_policies_fit(
+    scenario: Any, policies: Mapping[str, str], req: EpisodeCreate, max_steps: int
+) -> None:
+    """Refuse a run whose trained policies do not fit its scenario (another beam count, say).
+
+    The check an interactive episode gets when its host opens it (the policies' loaders, through
+    :func:`hptvsim.zoo.check_policy_fits`, on the game built from the scenario), made at
+    admission: a run would otherwise be accepted and fail in its worker. Only trained policies
+    depend on the scenario's layout, so a run of scripted ones builds nothing here; the game is
+    built with the batched backend whatever the request's (the observation layout is the same,
+    and no FMU is loaded here).
+
+    Raises:
+        ApiError: 422 naming ``scenario`` and what does not fit.
+    """
+    if not any(not p.startswith("scripted:") for p in policies.values()):
+        return
+    from hptvsim.service.engine import client_message
+    from hptvsim.zoo import check_policy_fits
+
+    try:
+        if scenario.simulation.game == "3d":
+            from hptvsim.envs.game3d import Game3DCore
+
+            core: Any = Game3DCore(scenario, num_envs=1, max_steps=max_steps, seed=0, threads=1)
+        else:
+            from hptvsim.envs.core import GameCore
+
+            core = GameCore(
+                scenario,
+                num_envs=1,
+                sensor_fidelity=req.sensor_fidelity,
+                max_steps=max_steps,
+                seed=0,
+                threads=1,
+            )
+        for agent, spec in policies.items():
+            check_policy_fits(spec, core, agent)
+    except ValueError as exc:
+        raise ApiError(422, f"scenario: {client_message(exc)}", "scenario") from None
+
+
 def resolve_request(req: EpisodeCreate, settings: Settings) -> tuple[Resolved, Any]:
     """Validate a request against the scenario and the settings.
 
@@ -301,6 +421,16 @@ def resolve_request(req: EpisodeCreate, settings: Settings) -> tuple[Resolved, A
     for agent in agents:
         if agent not in control and agent not in policies:
             policies[agent] = default_policy(roles[agent], scenario.task.kind, scenario.simulation.game)
+    check_episode_costs(
+        scenario,
+        max_steps=int(max_steps),
+        record=bool(req.record),
+        sensor_fidelity=req.sensor_fidelity,
+        policies=policies,
+        settings=settings,
+    )
+    if req.mode == "run" and not isinstance(req.scenario, str):
+        check_policies_fit(scenario, policies, req, int(max_steps))
     return (
         Resolved(
             scenario_ref=ref,

@@ -20,7 +20,15 @@ from hptvsim.envs.game3d import Game3DCore
 from hptvsim.envs.task import EXTENDED_SIZE, fill_extended
 from hptvsim.zoo import Commands3D, register_loader
 
-__all__ = ["MODEL_CACHE_SIZE", "ExtendedObservation", "SB3Policy", "cached_sb3_model", "load_sb3_model"]
+__all__ = [
+    "MODEL_CACHE_SIZE",
+    "ExtendedObservation",
+    "SB3Policy",
+    "cached_sb3_model",
+    "check_observation",
+    "load_sb3_model",
+    "sb3_spaces",
+]
 
 MODEL_CACHE_SIZE = 16
 """SB3 models a process keeps open (:func:`cached_sb3_model`), the least recently used dropped."""
@@ -30,7 +38,11 @@ _models_lock = threading.Lock()
 
 
 def load_sb3_model(path: Path) -> Any:
-    """Open an SB3 SAC or PPO zip on the CPU.
+    """Open an SB3 SAC or PPO zip on the CPU, for inference.
+
+    A SAC model's replay buffer is made for one transition: the saved size (500 000 for the
+    shipped models) would reserve some 110 MiB per model that prediction never touches, but that
+    a process's memory limit counts (:mod:`hptvsim.service.limits`).
 
     Raises:
         ValueError: The file is neither (the message holds both loaders' errors).
@@ -38,9 +50,9 @@ def load_sb3_model(path: Path) -> Any:
     from stable_baselines3 import PPO, SAC
 
     errors = []
-    for cls in (SAC, PPO):
+    for cls, custom in ((SAC, {"buffer_size": 1}), (PPO, None)):
         try:
-            return cls.load(path, device="cpu")
+            return cls.load(path, device="cpu", custom_objects=custom)
         except Exception as exc:  # the other algorithm's file: try the next, report both
             errors.append(f"{cls.__name__}: {exc}")
     raise ValueError(f"{path} is not an SB3 SAC or PPO file ({'; '.join(errors)})")
@@ -134,14 +146,8 @@ class SB3Policy:
         self.low = np.asarray(model.action_space.low, dtype=np.float64)
         self.high = np.asarray(model.action_space.high, dtype=np.float64)
         self.extend = extend
-        shape = model.observation_space.shape
-        expected = None if obs_size is None else obs_size + (EXTENDED_SIZE if extend is not None else 0)
-        if expected is not None and shape != (expected,):
-            raise ValueError(
-                f"the model observes {shape} but the agent's observation has {obs_size} values; it was "
-                "trained on another layout (another beam count; a 3-D model plays on a scenario whose "
-                "[sensors.sonar3d] has its beams)"
-            )
+        if obs_size is not None:
+            check_observation(tuple(model.observation_space.shape), obs_size, extended=extend is not None)
 
     def act(self, obs: npt.ArrayLike, episode_start: npt.ArrayLike | None = None) -> npt.NDArray[np.float64]:
         """Actions for observations (deterministic)."""
@@ -155,22 +161,89 @@ class SB3Policy:
         return result
 
 
-def _load(path: Path, core: GameCore | Game3DCore, agent: str) -> SB3Policy | Commands3D:
-    model = cached_sb3_model(path)
+def check_observation(shape: tuple[int, ...], obs_size: int, *, extended: bool) -> None:
+    """The one check of a model's observation shape against an agent's observation.
+
+    Args:
+        shape: The model's observation shape.
+        obs_size: Values in the agent's observation (Eq. 14 layout).
+        extended: Whether the extended values are appended to it for the model.
+
+    Raises:
+        ValueError: The shapes differ (the model was trained on another layout).
+    """
+    expected = obs_size + (EXTENDED_SIZE if extended else 0)
+    if tuple(shape) != (expected,):
+        raise ValueError(
+            f"the model observes {tuple(shape)} but the agent's observation has {obs_size} values; it was "
+            "trained on another layout (another beam count; a 3-D model plays on a scenario whose "
+            "[sensors.sonar3d] has its beams)"
+        )
+
+
+def _fit(
+    path: Path, observation: tuple[int, ...], action: tuple[int, ...], core: GameCore | Game3DCore
+) -> bool:
+    """Check a model's spaces against the game; returns whether the extended values are appended.
+
+    Raises:
+        ValueError: The model was trained on another game or observation layout.
+    """
     if isinstance(core, Game3DCore):
         # a model of the 3-D envs (make_sb3_vec_env_3d, the UPEG3D ids): normalised actions
-        if model.action_space.shape != (3,):
+        if tuple(action) != (3,):
             raise ValueError(
-                f"{path}: the model acts in {model.action_space.shape}, the 3-D game takes 3 normalised "
+                f"{path}: the model acts in {tuple(action)}, the 3-D game takes 3 normalised "
                 "values [v, omega, w_z]; it was trained on another game"
             )
-        return Commands3D(SB3Policy(model, obs_size=core.layout.size), core, core.agents.index(agent))
+        check_observation(observation, core.layout.size, extended=False)
+        return False
     size = core.layout.size
-    wants = model.observation_space.shape[0]
-    extend = None
-    if not core.layout.extended and wants == size + EXTENDED_SIZE:
-        extend = ExtendedObservation(core, core.agents.index(agent))
-    return SB3Policy(model, obs_size=size, extend=extend)
+    extend = bool(observation) and not core.layout.extended and observation[0] == size + EXTENDED_SIZE
+    check_observation(observation, size, extended=extend)
+    return extend
 
 
-register_loader("sb3", _load)
+def sb3_spaces(path: Path) -> tuple[tuple[int, ...], tuple[int, ...]] | None:
+    """An SB3 zip's observation and action shapes, read from its ``data`` entry (no torch, no model).
+
+    Returns:
+        ``(observation shape, action shape)``, or None when the file does not state them.
+
+    Raises:
+        OSError: The file cannot be read.
+    """
+    import json
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(path) as z:
+            data = json.loads(z.read("data"))
+        obs = tuple(int(v) for v in data["observation_space"]["_shape"])
+        act = tuple(int(v) for v in data["action_space"]["_shape"])
+    except (zipfile.BadZipFile, KeyError, TypeError, ValueError):
+        return None
+    return obs, act
+
+
+def _load(path: Path, core: GameCore | Game3DCore, agent: str) -> SB3Policy | Commands3D:
+    model = cached_sb3_model(path)
+    extend = _fit(path, tuple(model.observation_space.shape), tuple(model.action_space.shape), core)
+    if isinstance(core, Game3DCore):
+        return Commands3D(SB3Policy(model, obs_size=core.layout.size), core, core.agents.index(agent))
+    index = core.agents.index(agent)
+    return SB3Policy(
+        model, obs_size=core.layout.size, extend=ExtendedObservation(core, index) if extend else None
+    )
+
+
+def _check(path: Path, core: GameCore | Game3DCore, agent: str) -> None:
+    """:func:`_load`'s checks, from the spaces the file states (else the model is loaded)."""
+    spaces = sb3_spaces(path)
+    if spaces is None:
+        _load(path, core, agent)
+    else:
+        _fit(path, *spaces, core)
+
+
+register_loader("sb3", _load, _check)

@@ -14,6 +14,13 @@ service starts a :class:`LiveView` on its own port in its lifespan, and may show
 episode's frames in it with :meth:`LiveView.follow` and :meth:`LiveView.push` (which pause the
 view's own simulation until :meth:`LiveView.unfollow`).
 
+**The one way in.** viser checks nothing (no key, ``Host`` or ``Origin``; dropdown values not
+against their options), so it listens on a Unix socket in a folder of its own (mode 0700, no TCP
+port) and browsers reach it only through the :class:`~hptvsim.viz.gateway.Gateway` on the
+view's port; viser's "share" tunnel (a public address forwarding to it) is switched off; and
+every value a control sends is checked here against what the view offered, as the view itself
+recorded it (:meth:`LiveView._offered_value`), not against what viser's state says.
+
 **Frames.** The scene is NED as everywhere in hptvsim (``x`` north, ``y`` east, ``z`` down);
 viser's up direction is set to ``-z``. In the planar game the vehicles move in the plane
 ``z = operating_depth`` and turn about ``z`` only; in the 3-D game (:attr:`EpisodeStatic.game`)
@@ -29,17 +36,21 @@ from __future__ import annotations
 
 import logging
 import math
+import os
+import shutil
+import stat
+import tempfile
 import threading
 import time
 from collections import OrderedDict, deque
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from hptvsim.catalog import MAX_SEED, Role
+from hptvsim.catalog import MAX_SEED, CatalogError, Role
 from hptvsim.palette import SONAR_HIT_COLOR
 from hptvsim.sensors.sonar3d import rotation_zyx
 from hptvsim.viz.frames import AgentState, EpisodeStatic, Frame, beam_directions, quaternion_zyx
@@ -347,6 +358,65 @@ Launcher = Callable[[str, dict[str, str], int], str]
 Raises ``ValueError`` with a short message when the episode is refused."""
 
 SPEED_RANGE = (0.5, 64.0)  # x real time, the speed slider's range
+UNIX_HOST = "unix:"  # a viser "host" of this form binds the Unix socket that follows
+MAX_SOCKET_PATH = 100  # bytes, a Unix socket's path (the kernel's limit is 107)
+
+
+class _Delegate:
+    """Attribute access to ``real``, but for the attributes given (a scoped substitute of a module)."""
+
+    def __init__(self, real: Any, **overrides: Any) -> None:
+        self._real = real
+        self.__dict__.update(overrides)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._real, name)
+
+
+def _serve(handler: Any, host: Any = None, port: Any = None, **kwargs: Any) -> Any:
+    """``websockets.asyncio.server.serve`` as viser calls it, binding a Unix socket for :data:`UNIX_HOST`."""
+    import websockets.asyncio.server
+
+    if isinstance(host, str) and host.startswith(UNIX_HOST):
+        return websockets.asyncio.server.serve(handler, unix=True, path=host[len(UNIX_HOST) :], **kwargs)
+    return websockets.asyncio.server.serve(handler, host, port, **kwargs)
+
+
+def viser_on_unix_socket(path: str, **kwargs: Any) -> Any:
+    """A ``viser.ViserServer`` listening on the Unix socket ``path`` only (no TCP port).
+
+    viser binds ``websockets.asyncio.server.serve(handler, host, port)`` and offers no way to
+    pass a socket; its infra module is given a ``websockets`` whose ``serve`` binds ``path``
+    when the host is ``unix:<path>`` (any other host binds as before). The socket is made
+    readable and writable by this user only.
+
+    Args:
+        path: Where to create the socket (its folder should be this user's alone).
+        **kwargs: Passed to ``viser.ViserServer`` (``label``, ``verbose``).
+
+    Raises:
+        RuntimeError: This viser builds its server some other way (the view then does not start:
+            it never falls back to a TCP port).
+    """
+    import inspect
+
+    import viser
+    from viser.infra import _infra
+
+    source = inspect.getsource(_infra.WebsockServer._background_worker)
+    if "websockets.asyncio.server.serve(" not in source:
+        raise RuntimeError(f"viser {viser.__version__} builds its server another way: no Unix socket for it")
+    if not isinstance(vars(_infra)["websockets"], _Delegate):
+        real = vars(_infra)["websockets"]
+        vars(_infra)["websockets"] = _Delegate(
+            real, asyncio=_Delegate(real.asyncio, server=_Delegate(real.asyncio.server, serve=_serve))
+        )
+    server = viser.ViserServer(host=UNIX_HOST + path, port=0, **kwargs)
+    if not (os.path.exists(path) and stat.S_ISSOCK(os.stat(path).st_mode)):
+        server.stop()
+        raise RuntimeError("viser did not bind its Unix socket")
+    os.chmod(path, 0o600)
+    return server
 
 
 class LiveView:
@@ -379,6 +449,9 @@ class LiveView:
             to its own episodes.
         launcher: Starts episodes on a service instead of here (see :data:`Launcher`).
         api_key: Require this key of every browser (see :class:`~hptvsim.viz.gateway.Gateway`).
+        allowed_hosts: ``Host`` names the view answers (``"*"``: any; default: those of the
+            bind address, :func:`~hptvsim.viz.gateway.hosts_for_bind`).
+        allowed_origins: Other sites' origins whose pages may open the view (CORS origins).
 
     Thread safety: GUI callbacks and the public methods only post requests; the simulation
     thread applies them between steps.
@@ -404,6 +477,8 @@ class LiveView:
         unfollow_delay: float = 3.0,
         launcher: Launcher | None = None,
         api_key: str | None = None,
+        allowed_hosts: Iterable[str] | None = None,
+        allowed_origins: Iterable[str] = (),
     ) -> None:
         from hptvsim.catalog import check_scenario, check_seed
 
@@ -418,6 +493,10 @@ class LiveView:
         self.max_steps = max_steps
         self.launcher = launcher
         self.api_key = api_key
+        self.allowed_hosts = tuple(allowed_hosts) if allowed_hosts is not None else None
+        self.allowed_origins = tuple(allowed_origins)
+        self._socket_dir: str | None = None  # the folder of viser's Unix socket
+        self._offered: dict[str, tuple[str, ...]] = {}  # picker -> the values the view offers
         self.playing = autoplay and launcher is None
         self.loop = loop and launcher is None
         self.render_hz = render_hz
@@ -460,21 +539,38 @@ class LiveView:
         return f"http://{host}:{self.port}"
 
     def start(self) -> LiveView:
-        """Start viser (on a private loopback port), its gateway, the first scene and the thread."""
-        import viser
+        """Start viser (on a private Unix socket), its gateway, the first scene and the thread.
 
+        Raises:
+            OSError: The view's port cannot be bound.
+            RuntimeError: viser cannot be bound to a Unix socket.
+        """
         from hptvsim.viz.episode import EpisodeStepper
         from hptvsim.viz.gateway import Gateway
 
-        self.server = viser.ViserServer(host="127.0.0.1", port=0, label="hptvsim live view", verbose=False)
+        self._socket_dir = tempfile.mkdtemp(prefix="hptvsim-view-")  # mode 0700: this user only
+        if len(os.fsencode(self._socket_dir)) > MAX_SOCKET_PATH - 12:  # a long TMPDIR
+            os.rmdir(self._socket_dir)
+            self._socket_dir = tempfile.mkdtemp(prefix="hptvsim-view-", dir="/tmp")
+        path = os.path.join(self._socket_dir, "viser.sock")
         try:
+            self.server = viser_on_unix_socket(path, label="hptvsim live view", verbose=False)
             self.gateway = Gateway(
-                int(self.server.get_port()), host=self.host, port=self._port, api_key=self.api_key
+                path,
+                host=self.host,
+                port=self._port,
+                api_key=self.api_key,
+                allowed_hosts=self.allowed_hosts,
+                allowed_origins=self.allowed_origins,
             ).start()
-        except OSError:
-            self.server.stop()
+        except BaseException:
+            self.stop()
             raise
-        self.server.gui.configure_theme(dark_mode=True, control_width="medium", show_logo=False)
+        # viser's "share" asks a public relay to forward to it: an address with no key
+        self.server.request_share_url = lambda *args, **kwargs: None
+        self.server.gui.configure_theme(
+            dark_mode=True, control_width="medium", show_logo=False, show_share_button=False
+        )
         self.renderer = SceneRenderer(self.server)
         policies = self.policies
         if self.launcher is not None:  # a scene to look at until an episode runs: never stepped,
@@ -512,6 +608,9 @@ class LiveView:
         if self.server is not None:
             self.server.stop()
             self.server = None
+        if self._socket_dir is not None:
+            shutil.rmtree(self._socket_dir, ignore_errors=True)
+            self._socket_dir = None
 
     def __enter__(self) -> LiveView:
         return self.start()
@@ -827,6 +926,11 @@ class LiveView:
             evader, evader_initial = self._policy_choices(self.scenario, "evader")
             g["pursuer_policy"] = gui.add_dropdown("Pursuers' policy", pursuer, initial_value=pursuer_initial)
             g["evader_policy"] = gui.add_dropdown("Evaders' policy", evader, initial_value=evader_initial)
+            self._offered = {
+                "scenario": tuple(scenario_names()),
+                "pursuer_policy": tuple(pursuer),
+                "evader_policy": tuple(evader),
+            }
             g["seed"] = gui.add_number("Seed", initial_value=self.seed, min=0, max=MAX_SEED, step=1)
             g["apply"] = gui.add_button("Start episode")
         with gui.add_folder("Display"):
@@ -887,40 +991,67 @@ class LiveView:
             slider.value = clamped
         self.set_speed(clamped)
 
+    def _offered_value(self, name: str, label: str) -> str:
+        """The value of the picker ``name`` if the view offered it.
+
+        viser takes any value a client sends; what counts is what this view offered, as it
+        recorded it (a refusal shows in the status line; the view's own state does not change).
+
+        Raises:
+            CatalogError: The value is not one of the offered ones (named in the message).
+        """
+        offered = self._offered.get(name, ())
+        value = self._gui[name].value
+        if isinstance(value, str) and value in offered:
+            return value
+        what = "scenario" if name == "scenario" else "policy"
+        raise CatalogError(
+            what, f"{label}: {str(value)[:60]!r} is not one of the offered choices", list(offered)
+        )
+
     def _on_scenario(self, _: Any) -> None:
-        """Offer the policies of the chosen scenario's game (a name not in the catalog: no change).
+        """Offer the policies of the chosen scenario's game (a value not offered: no change).
 
         The pickers change only when the offer does (another game): viser runs callbacks on a
         thread pool, so this one may run after a later change of a picker, which it must not undo.
         """
-        from hptvsim.catalog import CatalogError, check_scenario
+        from hptvsim.catalog import check_scenario
 
         try:
-            scenario = check_scenario(self._gui["scenario"].value)
+            scenario = check_scenario(self._offered_value("scenario", "Scenario"))
         except CatalogError:
             return  # "Start episode" refuses it and says why
         roles: tuple[Role, ...] = ("pursuer", "evader")
         for role in roles:
             names, initial = self._policy_choices(scenario, role)
-            picker = self._gui[f"{role}_policy"]
-            if list(picker.options) == names:
+            key = f"{role}_policy"
+            picker = self._gui[key]
+            if list(picker.options) == names and self._offered.get(key) == tuple(names):
                 continue
+            self._offered[key] = tuple(names)
             keep = picker.value if picker.value in names else initial
             if picker.value != keep:
                 picker.value = keep  # first: the new options are then the last thing sent
             picker.options = names
 
     def _on_apply(self, _: Any) -> None:
-        """Start an episode from the controls: values checked against the catalog, never paths."""
-        from hptvsim.catalog import CatalogError, check_policy, check_scenario, check_seed, shipped_scenario
+        """Start an episode from the controls: values the view offered, checked against the catalog.
+
+        A value the view did not offer is refused (a client can send any value, and rewrite a
+        picker's options); names only, never paths.
+        """
+        from hptvsim.catalog import check_policy, check_scenario, check_seed, shipped_scenario
 
         g = self._gui
-        try:
+        try:  # the catalog first (its refusals name the game), then the offer
             scenario = check_scenario(g["scenario"].value)
+            self._offered_value("scenario", "Scenario")
             sc = shipped_scenario(scenario)
             game = sc.simulation.game
             pursuer = check_policy(g["pursuer_policy"].value, "pursuer", game)
+            self._offered_value("pursuer_policy", "Pursuers' policy")
             evader = check_policy(g["evader_policy"].value, "evader", game)
+            self._offered_value("evader_policy", "Evaders' policy")
             seed = check_seed(g["seed"].value)
         except CatalogError as exc:
             self._refuse(str(exc))

@@ -30,6 +30,10 @@ ENV = {
     "HPTVSIM_WORKERS": "1",
     "HPTVSIM_PREP_TIMEOUT_S": "15",
     "HPTVSIM_IDLE_TIMEOUT_S": "30",
+    # spare interactive hosts: schemathesis opens interactive episodes back to back, and each
+    # takes a host process of its own; a creation that finds no spare waits for one to start
+    # (10-30 s on a loaded 2-core machine, past the response-time check's 10 s)
+    "HPTVSIM_HOSTS": "4",
 }
 
 

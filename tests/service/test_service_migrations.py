@@ -23,7 +23,7 @@ from service_helpers import ROOT
 
 from hptvsim.service.db import BASELINE_REVISION, EpisodeRow, Store, migration_config
 
-HEAD = "0002"
+HEAD = "0003"
 T0 = datetime(2026, 1, 2, 3, 4, 5, 678901, tzinfo=UTC)
 
 # the episodes table exactly as 0.1.0's SQLModel.metadata.create_all made it

@@ -106,7 +106,7 @@ def _open(browser: Any, url: str) -> tuple[Any, list[str]]:
     page.add_init_script(INK_JS + PROBE_JS + TEXT_JS + PROBE3D_JS)
     page.goto(url)
     page.wait_for_selector("body[data-ready=true]", timeout=60_000)
-    page.wait_for_function("_inkOf('scenario-canvas') > 0.3", timeout=60_000)  # the scenario preview
+    page.wait_for_function("() => _inkOf('scenario-canvas') > 0.3", timeout=60_000)  # the scenario preview
     return page, errors
 
 
@@ -223,7 +223,7 @@ def _start_dive_flat(page: Any, *, seed: int, max_steps: int, pursuers: str | No
     assert "3-D" not in shown["target"], shown
     page.select_option("#f-scenario", "dive_flat")
     page.wait_for_selector("#scenario-info .tag.game-3d", timeout=10_000)
-    page.wait_for_function("_inkOf('scenario-canvas') > 0.3", timeout=60_000)
+    page.wait_for_function("() => _inkOf('scenario-canvas') > 0.3", timeout=60_000)
     if pursuers is not None:
         page.select_option("#f-pursuer-policy", pursuers)
     page.fill("#f-seed", str(seed))
@@ -259,14 +259,14 @@ def test_dashboard_shows_a_3d_episode_live(browser: Any, service: str) -> None:
     # draws its stored ranges, not the stream's hits this test checks)
     _start_dive_flat(page, seed=5, max_steps=6000, pursuers="scripted:stationary")
     page.wait_for_function(
-        "document.querySelector('#live-status').textContent === 'running'"
+        "() => document.querySelector('#live-status').textContent === 'running'"
         " && window.hptvsim.framesSeen > 20 && (window.hptvsim.depthPlot?.points?.[0] || 0) > 20",
         timeout=120_000,
     )
     assert page.is_disabled("#scrub")  # still live: the plots grow from the stream
     # the episode table agrees with the live view without waiting for its next poll
     page.wait_for_function(
-        "document.querySelector(`#episode-table tr[data-id='${window.hptvsim.current.id}'] .badge`)"
+        "() => document.querySelector(`#episode-table tr[data-id='${window.hptvsim.current.id}'] .badge`)"
         "?.textContent === document.querySelector('#live-status').textContent",
         timeout=5_000,
     )
@@ -305,7 +305,7 @@ def test_dashboard_shows_a_3d_episode_live(browser: Any, service: str) -> None:
     assert page.is_disabled("#scrub")  # the probes above read live frames
     page.click("#cancel-button")
     page.wait_for_function(
-        "document.querySelector('#live-status').textContent === 'cancelled'", timeout=60_000
+        "() => document.querySelector('#live-status').textContent === 'cancelled'", timeout=60_000
     )
     assert page.evaluate("window.hptvsim.schemaErrors") == []
     assert not errors, errors
@@ -316,9 +316,9 @@ def test_dashboard_runs_scrubs_and_plots_depth_of_a_3d_episode(browser: Any, ser
     page, errors = _open(browser, service + "/")
     _start_dive_flat(page, seed=2, max_steps=160)
     page.wait_for_function(
-        "document.querySelector('#live-status').textContent === 'finished'", timeout=180_000
+        "() => document.querySelector('#live-status').textContent === 'finished'", timeout=180_000
     )
-    page.wait_for_function("window.hptvsim.current?.traj?.step?.length === 161", timeout=60_000)
+    page.wait_for_function("() => window.hptvsim.current?.traj?.step?.length === 161", timeout=60_000)
     assert page.evaluate("window.hptvsim.schemaErrors") == []
     ep = page.evaluate("window.hptvsim.current.id")
     static = _api(service, f"/api/v1/episodes/{ep}/static")
@@ -344,7 +344,7 @@ def test_dashboard_runs_scrubs_and_plots_depth_of_a_3d_episode(browser: Any, ser
     digests = {}
     for k in (40, 150):
         page.locator("#scrub").fill(str(k))
-        page.wait_for_function(f"window.hptvsim.map.step === {k}", timeout=10_000)
+        page.wait_for_function(f"() => window.hptvsim.map.step === {k}", timeout=10_000)
         assert f"t = {traj['time'][k]:.1f} s" in page.inner_text("#scrub-time")
         digests[k] = (_canvas_digest(page, "map-canvas"), _canvas_digest(page, "plot-depth"))
         _check_depth_plot(page, static["agents"], cursor=traj["time"][k])
@@ -388,7 +388,7 @@ def test_a_planar_episode_does_not_show_the_depth_plot(browser: Any, service: st
             time.sleep(0.3)
         assert _api(service, f"/api/v1/episodes/{i}")["status"] == "finished"
     page, errors = _open(browser, service + f"/#episode={ids['dive_goto']}")
-    page.wait_for_function("window.hptvsim.current?.traj?.step?.length === 61", timeout=60_000)
+    page.wait_for_function("() => window.hptvsim.current?.traj?.step?.length === 61", timeout=60_000)
     assert page.is_visible("#plot-depth")
     # goto: the goal's depth is marked on the depth plot
     goal = _api(service, f"/api/v1/episodes/{ids['dive_goto']}/static")["agents"][0]["goal"]
@@ -396,7 +396,7 @@ def test_a_planar_episode_does_not_show_the_depth_plot(browser: Any, service: st
     # a planar episode picked from the list hides it, and its plots are as before
     page.click(f"#episode-table tbody tr[data-id='{ids['target']}']")
     page.wait_for_function(
-        f"window.hptvsim.current?.id === '{ids['target']}'"
+        f"() => window.hptvsim.current?.id === '{ids['target']}'"
         " && window.hptvsim.current?.traj?.step?.length === 61",
         timeout=60_000,
     )
@@ -416,7 +416,7 @@ def test_the_3d_scenario_previews_label_each_spawn_depth(browser: Any, service: 
     page, errors = _open(browser, service + "/")
     page.select_option("#f-scenario", name)
     page.wait_for_function(
-        f"window.hptvsim.scenarios.length && document.querySelector('#f-scenario').value === '{name}'"
+        f"() => window.hptvsim.scenarios.length && document.querySelector('#f-scenario').value === '{name}'"
         " && (window._texts['scenario-canvas'] || []).some((t) => t.text.startsWith('z '))",
         timeout=60_000,
     )

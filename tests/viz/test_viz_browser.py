@@ -178,6 +178,8 @@ def _free_port() -> int:
 
 @pytest.fixture(scope="module")
 def browser() -> Iterator[Any]:
+    """Chromium. The dashboard's CSP forbids ``eval``: ``wait_for_function`` is given functions
+    (``"() => ..."``), which Playwright calls as such; a bare expression it would ``eval``."""
     sync_api = pytest.importorskip("playwright.sync_api")
     with sync_api.sync_playwright() as p:
         b = p.chromium.launch(executable_path=CHROMIUM, args=FLAGS)
@@ -235,7 +237,7 @@ def test_dashboard_creates_runs_and_shows_an_episode(browser: Any, service: str)
     page.select_option("#f-scenario", "target")
     # the preview is drawn in the page's style; the defaults are the shipped trained policies
     page.wait_for_function(
-        "window.hptvsim.scenarios.length > 0 && _inkOf('scenario-canvas') > 0.3", timeout=60_000
+        "() => window.hptvsim.scenarios.length > 0 && _inkOf('scenario-canvas') > 0.3", timeout=60_000
     )
     assert page.input_value("#f-pursuer-policy") == "maisac-pursuers"
     assert page.input_value("#f-evader-policy") == "maisac-evader"
@@ -245,11 +247,11 @@ def test_dashboard_creates_runs_and_shows_an_episode(browser: Any, service: str)
     page.fill("#f-label", "browser test")
     page.click("#run-button")
     page.wait_for_function(
-        "document.querySelector('#live-status').textContent === 'finished'", timeout=120_000
+        "() => document.querySelector('#live-status').textContent === 'finished'", timeout=120_000
     )
     page.wait_for_selector("#recording-link", timeout=30_000)
     # once it ended, the plots show the whole trajectory (301 rows), not only the streamed frames
-    page.wait_for_function("window.hptvsim.current?.series?.t?.length === 301", timeout=30_000)
+    page.wait_for_function("() => window.hptvsim.current?.series?.t?.length === 301", timeout=30_000)
     text = page.inner_text("#live-text")
     assert "finished" in text and "300 steps" in text
     st = page.evaluate(
@@ -263,7 +265,7 @@ def test_dashboard_creates_runs_and_shows_an_episode(browser: Any, service: str)
     assert row.count() == 1 and "browser test" in row.inner_text()
     page.select_option("#filter-status", "running")
     page.wait_for_function(
-        f"!document.querySelector(\"#episode-table tbody tr[data-id='{st['id']}']\")", timeout=10_000
+        f"() => !document.querySelector(\"#episode-table tbody tr[data-id='{st['id']}']\")", timeout=10_000
     )
     page.select_option("#filter-status", "")
     page.select_option("#filter-policy", "maisac-pursuers")
@@ -291,10 +293,12 @@ def test_dashboard_cancels_a_running_episode(browser: Any, service: str) -> None
     page.select_option("#f-backend", "fmu")  # slow enough to be running when we cancel
     page.select_option("#f-pursuer-policy", "scripted:stationary")  # no capture ends it first
     page.click("#run-button")
-    page.wait_for_function("document.querySelector('#live-status').textContent === 'running'", timeout=60_000)
+    page.wait_for_function(
+        "() => document.querySelector('#live-status').textContent === 'running'", timeout=60_000
+    )
     page.click("#cancel-button")
     page.wait_for_function(
-        "document.querySelector('#live-status').textContent === 'cancelled'", timeout=60_000
+        "() => document.querySelector('#live-status').textContent === 'cancelled'", timeout=60_000
     )
     page.close()
 
@@ -375,7 +379,7 @@ def _open(browser: Any, url: str) -> tuple[Any, list[str]]:
     page.add_init_script(INK_JS + PROBE_JS)
     page.goto(url)
     page.wait_for_selector("body[data-ready=true]", timeout=60_000)
-    page.wait_for_function("_inkOf('scenario-canvas') > 0.3", timeout=60_000)  # the scenario preview
+    page.wait_for_function("() => _inkOf('scenario-canvas') > 0.3", timeout=60_000)  # the scenario preview
     return page, errors
 
 
@@ -387,7 +391,8 @@ def test_dashboard_shows_sonar_fans_live(browser: Any, service: str) -> None:
     page.select_option("#f-pursuer-policy", "scripted:stationary")  # no capture ends it first
     page.click("#run-button")
     page.wait_for_function(
-        "document.querySelector('#live-status').textContent === 'running' && window.hptvsim.framesSeen > 5",
+        "() => document.querySelector('#live-status').textContent === 'running'"
+        " && window.hptvsim.framesSeen > 5",
         timeout=120_000,
     )
     assert page.is_disabled("#scrub")  # a running episode follows the stream
@@ -403,7 +408,7 @@ def test_dashboard_shows_sonar_fans_live(browser: Any, service: str) -> None:
     page.screenshot(path=str(SHOTS / "dashboard_live_sonar.png"), full_page=True)
     page.click("#cancel-button")
     page.wait_for_function(
-        "document.querySelector('#live-status').textContent === 'cancelled'", timeout=60_000
+        "() => document.querySelector('#live-status').textContent === 'cancelled'", timeout=60_000
     )
     assert not errors, errors
     page.close()
@@ -413,12 +418,12 @@ def test_dashboard_scrubs_a_finished_episode(browser: Any, service: str, two_epi
     ep = two_episodes[0]
     traj = _api(service, f"/api/v1/episodes/{ep}/trajectory?format=json")
     page, errors = _open(browser, service + f"/#episode={ep}")
-    page.wait_for_function("window.hptvsim.current?.traj?.step?.length === 401", timeout=60_000)
+    page.wait_for_function("() => window.hptvsim.current?.traj?.step?.length === 401", timeout=60_000)
     assert page.input_value("#scrub") == "400"  # a finished episode opens at its end
     seen = {}
     for k in (100, 300):
         page.locator("#scrub").fill(str(k))
-        page.wait_for_function(f"window.hptvsim.map.step === {k}", timeout=10_000)
+        page.wait_for_function(f"() => window.hptvsim.map.step === {k}", timeout=10_000)
         assert f"t = {traj['time'][k]:.1f} s" in page.inner_text("#scrub-time")
         probes = page.evaluate("_agentProbe(window.hptvsim.map)")
         # the markers sit where the stored trajectory puts each agent at step k, in its colour
@@ -444,7 +449,7 @@ def test_dashboard_scrubs_a_finished_episode(browser: Any, service: str, two_epi
     # the play button runs the timeline forward
     page.locator("#scrub").fill("0")
     page.click("#play-button")
-    page.wait_for_function("Number(document.querySelector('#scrub').value) > 20", timeout=20_000)
+    page.wait_for_function("() => Number(document.querySelector('#scrub').value) > 20", timeout=20_000)
     page.click("#play-button")
     assert not errors, errors
     page.close()
@@ -459,10 +464,12 @@ def test_dashboard_compares_two_episodes_on_one_timeline(
     for i in two_episodes:
         page.check(f"#episode-table tbody tr[data-id='{i}'] input.pick")
     page.click("#compare-button")
-    page.wait_for_function("window.hptvsim.compare?.items?.length === 2", timeout=60_000)
+    page.wait_for_function("() => window.hptvsim.compare?.items?.length === 2", timeout=60_000)
     k = 160  # t = 40 s
     page.locator("#compare-scrub").fill(str(k))
-    page.wait_for_function(f"window.hptvsim.compare.items.every((it) => it.map.step === {k})", timeout=10_000)
+    page.wait_for_function(
+        f"() => window.hptvsim.compare.items.every((it) => it.map.step === {k})", timeout=10_000
+    )
     assert "t = 40.0 s" in page.inner_text("#compare-time")
     positions = []
     for n, traj in enumerate(trajs):
@@ -486,7 +493,7 @@ def test_dashboard_compares_two_episodes_on_one_timeline(
     assert "#compare=" in url
     page.goto("about:blank")
     page.goto(url)
-    page.wait_for_function("window.hptvsim.compare?.items?.length === 2", timeout=60_000)
+    page.wait_for_function("() => window.hptvsim.compare?.items?.length === 2", timeout=60_000)
     assert not errors, errors
     page.close()
 

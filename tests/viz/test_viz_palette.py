@@ -58,7 +58,9 @@ async def _get(app: Any, path: str) -> Any:
     import httpx
 
     transport = httpx.ASGITransport(app=app)
-    async with httpx.AsyncClient(transport=transport, base_url="http://test") as client:
+    async with httpx.AsyncClient(
+        transport=transport, base_url="http://127.0.0.1"
+    ) as client:  # a Host it answers
         return await client.get(path)
 
 

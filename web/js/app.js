@@ -27,22 +27,106 @@ window.hptvsim = state;
 
 // --- the API ----------------------------------------------------------------------------------
 
-function apiKey() {
-  return localStorage.getItem("hptvsim-api-key") || "";
+// The API key lives in this tab's session storage (gone when the tab closes, never shared with
+// other tabs or written to disk by the browser's local storage) and travels only in the X-API-Key
+// header: never in an address, where browser history, proxies and access logs would keep it.
+const KEY_NAME = "hptvsim-api-key";
+if (localStorage.getItem(KEY_NAME) !== null) {
+  // an earlier dashboard kept the key in local storage: move it to this session, and forget it there
+  sessionStorage.setItem(KEY_NAME, localStorage.getItem(KEY_NAME));
+  localStorage.removeItem(KEY_NAME);
 }
 
-/** A URL with the API key as a query parameter (for EventSource, links and images). */
-function withKey(url) {
+function apiKey() {
+  return sessionStorage.getItem(KEY_NAME) || "";
+}
+
+function keyHeaders(extra = {}) {
   const key = apiKey();
-  if (!key) return url;
-  return url + (url.includes("?") ? "&" : "?") + "api_key=" + encodeURIComponent(key);
+  return key ? { ...extra, "X-API-Key": key } : { ...extra };
+}
+
+/**
+ * Server-sent events read with fetch, so the key goes in a header (EventSource cannot send one).
+ * Like EventSource it reconnects after the server's `retry` when a stream ends, and it waits the
+ * server's Retry-After when the service is busy (429/503). `addEventListener(name, fn)` sets the
+ * function of `{data}` an event calls; `onClosed(reason)` is called once it stops for good (an
+ * HTTP error such as a wrong key).
+ */
+function openEvents(url, onClosed) {
+  const abort = new AbortController();
+  const handlers = {};
+  const stream = {
+    closed: false,
+    close() { this.closed = true; abort.abort(); },
+    addEventListener(name, fn) { handlers[name] = fn; },
+  };
+  const dispatch = (block) => {
+    let event = "message";
+    const data = [];
+    for (const line of block.split(/\r?\n/)) {
+      if (!line || line.startsWith(":")) continue;
+      const at = line.indexOf(":");
+      const field = at < 0 ? line : line.slice(0, at);
+      const value = at < 0 ? "" : line.slice(at + 1).replace(/^ /, "");
+      if (field === "event") event = value;
+      else if (field === "data") data.push(value);
+      else if (field === "retry" && /^\d+$/.test(value)) retry = Number(value);
+    }
+    if (data.length && handlers[event] && !stream.closed) handlers[event]({ data: data.join("\n") });
+  };
+  let retry = 2000;
+  (async () => {
+    while (!stream.closed) {
+      let wait = retry;
+      try {
+        const res = await fetch(url, { headers: keyHeaders({ Accept: "text/event-stream" }), signal: abort.signal, cache: "no-store" });
+        if (res.status === 429 || res.status === 503) {
+          wait = 1000 * Math.max(1, Number(res.headers.get("Retry-After")) || 2);
+        } else if (!res.ok) {
+          stream.closed = true;
+          if (onClosed) onClosed(`HTTP ${res.status}`);
+          return;
+        } else {
+          const reader = res.body.pipeThrough(new TextDecoderStream()).getReader();
+          let buf = "";
+          for (;;) {
+            const { value, done } = await reader.read();
+            if (done) break;
+            buf += value;
+            for (let m = buf.match(/\r?\n\r?\n/); m; m = buf.match(/\r?\n\r?\n/)) {
+              dispatch(buf.slice(0, m.index));
+              buf = buf.slice(m.index + m[0].length);
+            }
+          }
+        }
+      } catch (err) {
+        if (stream.closed) return;
+      }
+      if (stream.closed) return;
+      await new Promise((ok) => setTimeout(ok, wait));
+    }
+  })();
+  return stream;
+}
+
+/** Save a file the API serves, sending the key in its header (a plain link could not). */
+async function download(url, name) {
+  const res = await fetch(url, { headers: keyHeaders() });
+  if (!res.ok) throw new Error(`${name}: HTTP ${res.status}`);
+  const blobUrl = URL.createObjectURL(await res.blob());
+  const a = document.createElement("a");
+  a.href = blobUrl;
+  a.download = name;
+  document.body.append(a);
+  a.click();
+  a.remove();
+  setTimeout(() => URL.revokeObjectURL(blobUrl), 60_000);
 }
 
 async function api(path, options = {}) {
-  const headers = { Accept: "application/json", ...(options.headers || {}) };
+  const headers = keyHeaders({ Accept: "application/json", ...(options.headers || {}) });
   if (options.body !== undefined) headers["Content-Type"] = "application/json";
-  const key = apiKey();
-  if (key) headers["X-API-Key"] = key;
   const res = await fetch(API + path, {
     ...options,
     headers,
@@ -92,7 +176,7 @@ async function loadConfig() {
     $("service-state").className = "pill ok";
     $("key-box").hidden = !state.config.auth;
     if (state.config.viser_url) {
-      $("link-viser").href = withKey(state.config.viser_url); // the live view asks for the key too
+      $("link-viser").href = state.config.viser_url; // the live view asks for the key itself
       $("link-viser").hidden = false;
     }
     if (state.config.limits?.max_steps) $("f-max-steps").max = state.config.limits.max_steps;
@@ -397,7 +481,9 @@ function watch(ep) {
     showFinished(ep.id);
     return;
   }
-  const es = new EventSource(withKey(`${API}/episodes/${ep.id}/events?static=true&frames=true`));
+  const es = openEvents(`${API}/episodes/${ep.id}/events?static=true&frames=true`, (why) => {
+    if (mine()) $("live-text").textContent += ` (stream closed: ${why})`;
+  });
   state.current.es = es;
   const mine = () => state.current && state.current.es === es;
   es.addEventListener("status", (e) => {
@@ -443,9 +529,6 @@ function watch(ep) {
       });
     }
   });
-  es.onerror = () => {
-    if (mine() && es.readyState === EventSource.CLOSED) $("live-text").textContent += " (stream closed)";
-  };
 }
 
 async function showFinished(id) {
@@ -563,10 +646,18 @@ function showMetrics(sum) {
   }
 }
 
-function link(href, text) {
+/** A download link of the API's; with a key, a click fetches it with the key in a header. */
+function link(href, text, name) {
   const a = document.createElement("a");
-  a.href = withKey(href);
+  a.href = href;
   a.textContent = text;
+  a.addEventListener("click", (ev) => {
+    if (!apiKey()) return; // no key: the plain link works
+    ev.preventDefault();
+    download(href, name || a.download || href.split("/").pop()).catch((err) => {
+      $("live-text").textContent += ` (${err.message})`;
+    });
+  });
   return a;
 }
 
@@ -580,13 +671,17 @@ function showLinks(ep) {
     box.append(a);
   }
   if (ep.has_trajectory) {
-    box.append(link(`${API}/episodes/${ep.id}/trajectory?format=csv`, "trajectory (CSV)"));
-    box.append(link(`${API}/episodes/${ep.id}/trajectory?format=parquet`, "trajectory (Parquet)"));
-    box.append(link(`${API}/episodes/${ep.id}/trajectory?format=json`, "trajectory (JSON)"));
+    const base = `${API}/episodes/${ep.id}/trajectory?format=`;
+    box.append(link(`${base}csv`, "trajectory (CSV)", `${ep.id}-trajectory.csv`));
+    box.append(link(`${base}parquet`, "trajectory (Parquet)", `${ep.id}-trajectory.parquet`));
+    box.append(link(`${base}json`, "trajectory (JSON)", `${ep.id}-trajectory.json`));
   }
   if (state.config?.viser_url) {
-    const a = link(withKey(state.config.viser_url), "live 3D view");
+    const a = document.createElement("a"); // the live view asks for the key itself
+    a.href = state.config.viser_url;
+    a.textContent = "live 3D view";
     a.target = "_blank";
+    a.rel = "noopener";
     box.append(a);
   }
 }
@@ -850,7 +945,7 @@ function pollList() {
 async function start() {
   $("api-key").value = apiKey();
   $("api-key").addEventListener("change", () => {
-    localStorage.setItem("hptvsim-api-key", $("api-key").value);
+    sessionStorage.setItem(KEY_NAME, $("api-key").value);
     location.reload();
   });
   $("schema-version").textContent = VERSION;

@@ -1,0 +1,149 @@
+"""The disk the episodes' folders use: a running total, for the quota and ``/healthz``.
+
+The folders of all episodes are measured once when the service starts (:meth:`DiskUsage.recompute`);
+after that no request walks the tree. An episode being created or running counts with the disk
+its admission estimated (:meth:`DiskUsage.admit`); once it has ended its folder is measured once,
+the next time the total is asked for (:meth:`DiskUsage.settle`), and a deleted episode's size
+leaves the total (:meth:`DiskUsage.forget`). Sizes are the blocks the files take on disk (what
+``du`` counts), so sparse or tiny files count as the file system stores them.
+"""
+
+from __future__ import annotations
+
+import os
+import stat
+import threading
+from collections.abc import Callable
+from pathlib import Path
+
+__all__ = ["MIB", "DiskUsage", "QuotaExceededError", "folder_bytes"]
+
+MIB = 1024 * 1024
+"""Bytes in a MiB (the unit of the ``*_mb`` settings)."""
+
+
+class QuotaExceededError(Exception):
+    """A new episode would take the stored episodes over the disk quota.
+
+    Attributes:
+        used: Bytes the stored and running episodes use (running ones: their estimate) [B].
+        needed: The new episode's estimated disk use [B].
+        quota: The quota [B].
+    """
+
+    def __init__(self, used: int, needed: int, quota: int) -> None:
+        super().__init__(f"{used} + {needed} B exceeds the quota of {quota} B")
+        self.used = used
+        self.needed = needed
+        self.quota = quota
+
+
+def folder_bytes(folder: Path) -> int:
+    """The disk a folder and everything in it take [B] (allocated blocks; 0 if it does not exist)."""
+    total = 0
+    stack = [str(folder)]
+    while stack:
+        path = stack.pop()
+        try:
+            st = os.lstat(path)
+        except OSError:
+            continue
+        total += st.st_blocks * 512  # st_blocks counts 512-byte units on every POSIX system
+        if stat.S_ISDIR(st.st_mode):  # lstat: a link to a folder is not followed
+            try:
+                with os.scandir(path) as entries:
+                    stack.extend(e.path for e in entries)
+            except OSError:
+                continue
+    return total
+
+
+class DiskUsage:
+    """The running total of the disk the episodes' folders use (see the module docstring).
+
+    Thread-safe: the API's threads and the workers' monitor thread may call it at once.
+
+    Args:
+        root: The folder holding one sub-folder per episode.
+    """
+
+    def __init__(self, root: Path) -> None:
+        self.root = root
+        self._lock = threading.Lock()
+        self._measured: dict[str, int] = {}  # ended episodes (and folders found at start) [B]
+        self._estimated: dict[str, int] = {}  # episodes being created or running: estimate [B]
+        self._measured_total = 0
+        self._estimated_total = 0
+
+    def recompute(self) -> int:
+        """Measure every folder under the root (at start); returns the total [B]."""
+        sizes: dict[str, int] = {}
+        try:
+            with os.scandir(self.root) as entries:
+                for entry in entries:
+                    if entry.is_dir(follow_symlinks=False):
+                        sizes[entry.name] = folder_bytes(Path(entry.path))
+        except FileNotFoundError:
+            pass
+        with self._lock:
+            for name in self._estimated:  # active ones keep their estimate until they end
+                sizes.pop(name, None)
+            self._measured = sizes
+            self._measured_total = sum(sizes.values())
+            return self._measured_total + self._estimated_total
+
+    def settle(self, active: Callable[[str], bool]) -> None:
+        """Measure the folders of the estimated episodes that have ended since the last call.
+
+        Args:
+            active: Whether an episode is still being created or running.
+        """
+        with self._lock:
+            self._settle(active)
+
+    def _settle(self, active: Callable[[str], bool]) -> None:
+        for episode_id in [i for i in self._estimated if not active(i)]:
+            self._estimated_total -= self._estimated.pop(episode_id)
+            size = folder_bytes(self.root / episode_id)
+            self._measured_total += size - self._measured.get(episode_id, 0)
+            self._measured[episode_id] = size
+
+    def admit(self, episode_id: str, estimate: int, quota: int, active: Callable[[str], bool]) -> None:
+        """Count a new episode with its estimated disk use, unless that exceeds the quota.
+
+        Checking and counting happen under one lock, so concurrent admissions cannot pass the
+        quota together.
+
+        Args:
+            episode_id: The new episode.
+            estimate: Its estimated disk use [B].
+            quota: The quota [B].
+            active: Whether an episode is still being created or running (see :meth:`settle`).
+
+        Raises:
+            QuotaExceededError: The total and the estimate exceed the quota.
+        """
+        with self._lock:
+            self._settle(active)
+            used = self._measured_total + self._estimated_total
+            if used + estimate > quota:
+                raise QuotaExceededError(used, estimate, quota)
+            self._estimated[episode_id] = estimate
+            self._estimated_total += estimate
+
+    def forget(self, episode_id: str) -> None:
+        """An episode's folder was deleted: its size leaves the total."""
+        with self._lock:
+            self._measured_total -= self._measured.pop(episode_id, 0)
+            self._estimated_total -= self._estimated.pop(episode_id, 0)
+
+    def total(self, active: Callable[[str], bool]) -> int:
+        """Bytes used: ended episodes as measured, active ones as estimated [B]."""
+        with self._lock:
+            self._settle(active)
+            return self._measured_total + self._estimated_total
+
+    def folders(self) -> list[str]:
+        """The names of the folders counted (measured or estimated)."""
+        with self._lock:
+            return [*self._measured, *self._estimated]
