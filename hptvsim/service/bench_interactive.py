@@ -18,17 +18,15 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import os
-import re
 import statistics
-import subprocess
 import sys
-import tempfile
 import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
+
+from hptvsim.service.serving import running_service
 
 __all__ = ["bench_interactive_isolation", "heavy_request"]
 
@@ -74,40 +72,9 @@ def heavy_request(tables: dict[str, Any], *, beams: int = 128, max_range: float 
 
 @contextlib.contextmanager
 def _service(timeout: float = 180.0) -> Iterator[str]:
-    """Start ``hptvsim serve`` on a free port with a temporary data folder; yields its URL."""
-    import httpx
-
-    with tempfile.TemporaryDirectory(prefix="hptvsim-bench-") as tmp:
-        env = {**os.environ, **SERVICE_ENV, "HPTVSIM_DATA_DIR": tmp}
-        log = Path(tmp) / "server.log"
-        with log.open("w") as fh:
-            proc = subprocess.Popen(
-                [sys.executable, "-m", "hptvsim.service", "--port", "0", "--log-level", "warning"],
-                cwd=tmp,
-                env=env,
-                stdout=fh,
-                stderr=subprocess.STDOUT,
-            )
-            try:
-                deadline = time.monotonic() + timeout
-                url = None
-                while url is None:
-                    if proc.poll() is not None or time.monotonic() > deadline:
-                        raise RuntimeError(f"the service did not start:\n{log.read_text()}")
-                    m = re.search(r"health:\s+(http://\S+)/healthz", log.read_text())
-                    if m:
-                        candidate = m.group(1).replace("localhost", "127.0.0.1")
-                        with contextlib.suppress(httpx.HTTPError):
-                            if httpx.get(f"{candidate}/healthz", timeout=2.0).status_code == 200:
-                                url = candidate
-                    time.sleep(0.1)
-                yield url
-            finally:
-                proc.terminate()
-                try:
-                    proc.wait(30)
-                except subprocess.TimeoutExpired:
-                    proc.kill()
+    """Start ``hptvsim serve`` (one worker, :data:`SERVICE_ENV`) with a temporary data folder."""
+    with running_service(1, timeout, extra_env=SERVICE_ENV) as url:
+        yield url
 
 
 def _percentiles(samples: list[float]) -> dict[str, float]:
