@@ -12,6 +12,8 @@ import os
 import sys
 from pathlib import Path
 
+import pytest
+
 for _sub in (
     "offline",
     "security",
@@ -30,3 +32,18 @@ try:  # torch is an optional extra; tests that need it import it themselves
     torch.set_num_threads(1)
 except ImportError:  # pragma: no cover - the dev install always has torch
     pass
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """A heavy test marked ``one_database`` runs on PostgreSQL (what docker-compose deploys) in
+    the default suite; its SQLite variant is marked ``slow`` (``make test-slow`` runs both).
+
+    Runs before pytest's own ``-m`` selection (``tryfirst``), so the added mark deselects.
+    """
+    del config
+    for item in items:
+        callspec = getattr(item, "callspec", None)
+        on_sqlite = callspec is not None and callspec.params.get("database_url") == "sqlite"
+        if on_sqlite and item.get_closest_marker("one_database"):
+            item.add_marker(pytest.mark.slow)

@@ -163,6 +163,7 @@ def test_the_ridge_is_a_wall_at_the_operating_depth_and_passable_above() -> None
     assert around > 1.25 * over, (over, around)
 
 
+@pytest.mark.slow
 def test_going_over_the_ridge_pays() -> None:
     """ridge_3d: pure pursuit that climbs over the ridge captures; held level, it is stuck before it."""
     times = {}

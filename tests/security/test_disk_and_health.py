@@ -103,6 +103,7 @@ def _server(data: Path, env: dict[str, str]) -> Iterator[Server]:
 # --- 9. quota and retention -------------------------------------------------------------------------
 
 
+@pytest.mark.one_database
 def test_the_quota_refuses_new_episodes_and_the_stored_ones_stay_readable(
     tmp_path: Path, database_url: str
 ) -> None:
@@ -161,6 +162,7 @@ def _age(database_url: str, episode_id: str, when: datetime) -> None:
         engine.dispose()
 
 
+@pytest.mark.one_database
 def test_retention_deletes_old_ended_episodes_rows_and_folders(tmp_path: Path, database_url: str) -> None:
     data = tmp_path / "data"
     env = {"DATABASE_URL": database_url}
@@ -233,6 +235,7 @@ def _fill(folder: Path) -> Path:
     return filler
 
 
+@pytest.mark.one_database
 def test_an_episode_that_fills_the_disk_fails_cleanly_and_a_full_disk_refuses_new_ones(
     small_disk: Path, database_url: str
 ) -> None:
@@ -311,6 +314,7 @@ def _immutable(files: list[Path], on: bool) -> None:
         subprocess.run(["chattr", "+i" if on else "-i", str(f)], check=True, capture_output=True)
 
 
+@pytest.mark.slow
 def test_an_episode_ending_while_the_database_is_read_only_is_stored_later_or_at_restart(
     tmp_path: Path,
 ) -> None:

@@ -87,6 +87,7 @@ def test_interactive_3d_steps_take_a_vertical_speed(server: Server, api: httpx.C
         assert evader["z"][-1] > evader["z"][0] + 1.0  # it dived
 
 
+@pytest.mark.slow
 @pytest.mark.filterwarnings("ignore:.*symmetric and normalized space")  # the Eq. 15 box is not symmetric
 def test_remote_env_of_a_3d_scenario_matches_the_local_episode(server: Server) -> None:
     from gymnasium.utils.env_checker import check_env

@@ -76,6 +76,7 @@ def _load(url: str, n: int, max_steps: int) -> dict[str, float]:
     return stats
 
 
+@pytest.mark.one_database
 def test_50_concurrent_runs_all_complete_and_healthz_stays_responsive(
     tmp_path: Path, database_url: str
 ) -> None:

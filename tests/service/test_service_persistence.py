@@ -9,6 +9,7 @@ import time
 from pathlib import Path
 
 import httpx
+import pytest
 from service_helpers import start_server, wait_final
 
 
@@ -36,6 +37,7 @@ def _alive(pid: int) -> bool:
     return state != "Z"
 
 
+@pytest.mark.one_database
 def test_killed_service_restarts_with_finished_episodes_and_marks_the_rest_interrupted(
     tmp_path: Path, database_url: str
 ) -> None:

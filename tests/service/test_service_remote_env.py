@@ -63,6 +63,7 @@ def test_remote_env_over_http_and_its_errors(server: Server) -> None:
         RemoteEnv(server.url, scenario="atlantis")
 
 
+@pytest.mark.slow
 def test_sac_trains_against_a_live_service(server: Server) -> None:
     from stable_baselines3 import SAC
 

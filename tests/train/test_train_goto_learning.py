@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
 from train_helpers import toy_config
 
 from hptvsim.train.envs import EnvSpec, make_env_factory
@@ -20,6 +21,7 @@ SUCCESS = 0.9  # goal reached in >= 90 % of 20 evaluation episodes
 ENV = {"kind": "hptvsim", "scenario": "goto_tiny", "task": "goto", "options": {"extended_obs": True}}
 
 
+@pytest.mark.slow
 def test_maisac_learns_the_tiny_goto_scenario(tmp_path: Path) -> None:
     cfg = toy_config(
         sac={
