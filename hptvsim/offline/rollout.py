@@ -249,7 +249,7 @@ def episode_metrics(ep: Episode, dt: float) -> Any:
     pursuer after that step; its minimum over the episode and its last value; the time to
     capture is the first capture step x ``dt``; ``seed`` is the episode's batch seed.
     """
-    from hptvsim.train.evaluate import EpisodeMetrics
+    from hptvsim.envs.metrics import EpisodeMetrics
 
     p = ep.pursuer if ep.pursuer.any() else np.ones_like(ep.pursuer)
     d = ep.distance[1 : ep.length + 1][:, p].min(axis=1) if ep.length else np.zeros(0)

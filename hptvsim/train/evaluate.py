@@ -25,14 +25,14 @@ Policies come from specs (``policy_from_spec``):
 from __future__ import annotations
 
 import json
-import math
 from collections.abc import Callable, Collection, Mapping, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from hptvsim.envs.metrics import EpisodeMetrics, agent_role, mean_std, summarize
 from hptvsim.train.envs import EnvFactory
 
 __all__ = [
@@ -53,22 +53,6 @@ EVAL_SEED_OFFSET = 10_000_019  # evaluation seeds never coincide with training r
 
 
 @dataclass(frozen=True)
-class EpisodeMetrics:
-    """What one evaluation episode measured."""
-
-    seed: int
-    length: int
-    captured: bool
-    time_to_capture_steps: int | None
-    time_to_capture_s: float | None
-    collision: bool
-    min_distance: float | None
-    final_distance: float | None
-    success_rate: float | None
-    returns: dict[str, float] = field(default_factory=dict)
-
-
-@dataclass(frozen=True)
 class EvalResult:
     """Episodes of one policy set and their summary."""
 
@@ -79,46 +63,6 @@ class EvalResult:
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready form."""
         return {"label": self.label, "summary": self.summary, "episodes": [asdict(e) for e in self.episodes]}
-
-
-def _role(agent: str) -> str:
-    return agent.split("_")[0]
-
-
-def _stats(values: Sequence[float]) -> dict[str, float | None]:
-    vals = [v for v in values if v is not None and math.isfinite(v)]
-    if not vals:
-        return {"mean": None, "std": None, "n": 0}
-    arr = np.asarray(vals, dtype=float)
-    return {"mean": float(arr.mean()), "std": float(arr.std()), "n": len(vals)}
-
-
-def summarize(episodes: Sequence[EpisodeMetrics]) -> dict[str, dict[str, float | None]]:
-    """Mean ± std (and count) of every metric over episodes; time to capture over captures only."""
-    out: dict[str, dict[str, float | None]] = {
-        "capture_rate": _stats([float(e.captured) for e in episodes]),
-        "time_to_capture_s": _stats(
-            [e.time_to_capture_s for e in episodes if e.time_to_capture_s is not None]
-        ),
-        "time_to_capture_steps": _stats(
-            [float(e.time_to_capture_steps) for e in episodes if e.time_to_capture_steps is not None]
-        ),
-        "collision_rate": _stats([float(e.collision) for e in episodes]),
-        "min_distance": _stats([e.min_distance for e in episodes if e.min_distance is not None]),
-        "final_distance": _stats([e.final_distance for e in episodes if e.final_distance is not None]),
-        "success_rate": _stats([e.success_rate for e in episodes if e.success_rate is not None]),
-        "length": _stats([float(e.length) for e in episodes]),
-    }
-    roles: dict[str, list[float]] = {}
-    for e in episodes:
-        per_role: dict[str, list[float]] = {}
-        for agent, r in e.returns.items():
-            per_role.setdefault(_role(agent), []).append(r)
-        for role, rs in per_role.items():
-            roles.setdefault(role, []).append(float(np.mean(rs)))
-    for role, rs in sorted(roles.items()):
-        out[f"return_{role}"] = _stats(rs)
-    return out
 
 
 def _is_goto(env: Any) -> bool:
@@ -151,7 +95,7 @@ def run_episode(env: Any, policies: Mapping[str, Policy], seed: int) -> EpisodeM
         if captured_at is None and any(bool(i.get("captured", False)) for i in infos.values()):
             captured_at = t
         collision = collision or any(bool(i.get("collision", False)) for i in infos.values())
-        d = [float(i["distance"]) for a, i in infos.items() if "distance" in i and _role(a) == "pursuer"]
+        d = [float(i["distance"]) for a, i in infos.items() if "distance" in i and agent_role(a) == "pursuer"]
         if not d:
             d = [float(i["distance"]) for i in infos.values() if "distance" in i]
         if d:
@@ -308,7 +252,7 @@ def policy_from_spec(spec: str, env: Any, agent: str) -> Policy:
     if kind == "toy" and rest == "greedy":
         from hptvsim.train.toy import greedy_action
 
-        flee = _role(agent) == "evader"
+        flee = agent_role(agent) == "evader"
         return lambda obs: greedy_action(obs, space, flee=flee)
     if kind == "run":
         path, _, stage = rest.partition("@")
@@ -361,7 +305,7 @@ def policies_from_specs(
     over = dict(overrides or {})
 
     def build(env: Any) -> dict[str, Policy]:
-        names = {*env.possible_agents, *(_role(a) for a in env.possible_agents)}
+        names = {*env.possible_agents, *(agent_role(a) for a in env.possible_agents)}
         unknown = sorted(set(required) - names)
         if unknown:
             raise ValueError(
@@ -369,7 +313,7 @@ def policies_from_specs(
             )
         out = {}
         for agent in env.possible_agents:
-            spec = over.get(agent) or over.get(_role(agent)) or default
+            spec = over.get(agent) or over.get(agent_role(agent)) or default
             out[agent] = policy_from_spec(spec, env, agent)
         return out
 
@@ -402,7 +346,7 @@ def across_seeds(results: Sequence[EvalResult]) -> dict[str, dict[str, float | N
     out = {}
     for k in keys:
         means = [r.summary[k]["mean"] for r in results if k in r.summary]
-        out[k] = _stats([m for m in means if m is not None])
+        out[k] = mean_std([m for m in means if m is not None])
     return out
 
 

@@ -38,7 +38,7 @@ from hptvsim.cosim.fmi2 import FmuError
 from hptvsim.cosim.orchestrator import SimulationFailedError
 from hptvsim.envs.core import Backend, GameCore, StepResult
 from hptvsim.envs.game3d import Game3DCore, Step3D
-from hptvsim.train.evaluate import EpisodeMetrics
+from hptvsim.envs.metrics import EpisodeMetrics
 from hptvsim.viz.frames import (
     AgentInfo,
     AgentState,

@@ -52,8 +52,8 @@ from typing import Any, ClassVar, Final, Literal, Self, TypeVar, get_args, get_o
 import numpy as np
 import numpy.typing as npt
 
+from hptvsim.envs.metrics import EpisodeMetrics
 from hptvsim.palette import agent_color, display_constants  # the one palette of every view
-from hptvsim.train.evaluate import EpisodeMetrics
 
 __all__ = [
     "SCHEMA_VERSION",
