@@ -15,7 +15,9 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	# torch first and exactly: a looser spec anywhere would pull several GB of CUDA wheels
 	$(BIN)/python -m pip install --quiet "torch==2.13.0"
-	$(BIN)/python -m pip install --quiet -e ".[all,dev]"
+	# ...and named again beside the extras, so that nothing torch-based (torchrl, benchmarl,
+	# torchvision) can move it
+	$(BIN)/python -m pip install --quiet "torch==2.13.0" -e ".[all,dev]"
 	touch $(STAMP)
 
 setup: $(STAMP)

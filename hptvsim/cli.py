@@ -1,9 +1,11 @@
-"""The ``hptvsim`` command line.
+"""The ``hptvsim`` command line: the top layer, which registers every layer's commands.
 
-Each command imports what it needs when it runs, so ``hptvsim --help`` stays fast. Packages
-add their commands through a module listed in :data:`COMMAND_MODULES`: each such module
-defines ``register(main: click.Group, bench: click.Group) -> None`` and adds its commands to
-the top-level group and, for benchmarks, to ``hptvsim bench``.
+Each command imports what it needs when it runs, so ``hptvsim --help`` stays fast. A package
+adds its commands through its ``cli`` module's ``register(main)`` (the co-simulation, world,
+sensors and visualisation layers; the experiments, which hold the training and offline-RL
+commands that start from the policy zoo's names; the service), imported here; the benchmarks,
+each of which measures a lower layer, are registered from the top as well
+(:mod:`hptvsim.bench.cli`), and the service adds ``hptvsim bench service``.
 
 A user error (an unknown name, a missing file, a bad number) ends a command with one line,
 ``Error: ...``, naming the bad value and the valid ones, never a traceback: each command turns
@@ -12,28 +14,21 @@ the errors its inputs can cause into click errors.
 
 from __future__ import annotations
 
-import importlib
-import json
 import os
 import sys
 from pathlib import Path
-from typing import Any
 
 import click
 
 from hptvsim import __version__
-
-COMMAND_MODULES: tuple[str, ...] = (
-    "hptvsim.cosim.cli",
-    "hptvsim.world.cli",
-    "hptvsim.train.cli",
-    "hptvsim.sensors.cli",
-    "hptvsim.envs.cli",
-    "hptvsim.viz.cli",
-    "hptvsim.offline.cli",
-    "hptvsim.service.cli",  # the top layer: only the CLI imports it
-)
-"""Modules whose ``register(main, bench)`` adds commands (one line per package)."""
+from hptvsim._output import check_choice
+from hptvsim.bench import cli as bench_cli
+from hptvsim.cosim import cli as cosim_cli
+from hptvsim.experiments import cli as experiments_cli
+from hptvsim.sensors import cli as sensors_cli
+from hptvsim.service import cli as service_cli
+from hptvsim.viz import cli as viz_cli
+from hptvsim.world import cli as world_cli
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -118,10 +113,7 @@ def fmu_build(
 def _check_vehicle_type(vehicle_type: str) -> None:
     from hptvsim.dynamics import VEHICLE_TYPES
 
-    if vehicle_type not in VEHICLE_TYPES:
-        raise click.BadParameter(
-            f"unknown vehicle type {vehicle_type!r}; valid: {', '.join(VEHICLE_TYPES)}", param_hint="--type"
-        )
+    check_choice(vehicle_type, VEHICLE_TYPES, what="vehicle type", param_hint="--type")
 
 
 @fmu.command("check")
@@ -168,34 +160,6 @@ def fmu_check(fmu_folder: Path | None) -> None:
         sys.exit(1)
 
 
-# --- bench ------------------------------------------------------------------------------------
-
-
-@main.group()
-def bench() -> None:
-    """Benchmarks: each prints costs and ratios to a floor or peer measured in the same run."""
-
-
-def emit(result: Any, as_json: bool) -> None:
-    """Print a benchmark result (anything with ``table()`` and ``as_dict()``)."""
-    if as_json:
-        click.echo(json.dumps(result.as_dict(), indent=2))
-    else:
-        click.echo(result.table())
-
-
-@bench.command("dynamics")
-@click.option("--quick", is_flag=True, help="Seconds instead of a minute.")
-@click.option("--type", "vehicle_type", default="work_class", show_default=True)
-@click.option("--json", "as_json", is_flag=True, help="Print JSON instead of a table.")
-def bench_dynamics_cmd(quick: bool, vehicle_type: str, as_json: bool) -> None:
-    """µs per vehicle-step: FMPy high-level calls, the lean hot path, the compiled C floor."""
-    from hptvsim.bench.dynamics import bench_dynamics
-
-    _check_vehicle_type(vehicle_type)
-    emit(bench_dynamics(quick=quick, vehicle_type=vehicle_type), as_json)
-
-
 # --- demo -------------------------------------------------------------------------------------
 
 
@@ -239,8 +203,13 @@ def demo(out_dir: Path, duration: float, no_episode: bool, scenario: str) -> Non
 
 
 def _register() -> None:
-    for name in COMMAND_MODULES:
-        importlib.import_module(name).register(main, bench)
+    cosim_cli.register(main)
+    world_cli.register(main)
+    experiments_cli.register(main)
+    sensors_cli.register(main)
+    viz_cli.register(main)
+    bench = bench_cli.register(main)
+    service_cli.register(main, bench)  # the layer above the benchmarks adds its own
 
 
 _register()

@@ -32,7 +32,7 @@ from hptvsim.fmu.build import DEFAULT_STEP
 from hptvsim.palette import agent_color
 
 if TYPE_CHECKING:
-    from hptvsim.viz.episode import EpisodeResult
+    from hptvsim.episodes.stepper import EpisodeResult
     from hptvsim.world.scenario import World
 
 __all__ = [
@@ -235,7 +235,7 @@ def plot_episode(
     Returns:
         The figure's path.
     """
-    from hptvsim.viz.episode import run_episode
+    from hptvsim.episodes.runner import run_episode
 
     frames: list[Any] = []
     result = run_episode(scenario, {}, seed=seed, max_steps=max_steps, backend="fmu", on_frame=frames.append)

@@ -1,28 +1,35 @@
 """The policy zoo: every policy by name, whatever made it (scripted, SB3, Decision Transformer).
 
-A policy is anything with ``act(obs, episode_start=None) -> (..., 2)`` actions ``[v, omega]``
-in SI units (:class:`hptvsim.envs.policies.Policy`); in the 3-D game (:mod:`hptvsim.envs.game3d`)
-``(..., 3)`` actions ``[v, omega, w_z]`` in SI units. The zoo names them so the environments'
-single-agent views, ``hptvsim evaluate``, the service and the dashboard can all use the same
-ones:
+A policy is anything with ``act(obs, episode_start=None) -> (..., C)`` commands in SI units
+(:class:`hptvsim.envs.policies.Policy`): the game's
+:attr:`~hptvsim.envs.protocol.Game.command_fields`, ``[v, omega]`` in the planar game,
+``[v, omega, w_z]`` in the 3-D game. The zoo names them so the environments' single-agent
+views, ``hptvsim evaluate``, the episode engine, the service and the dashboard can all use the
+same ones, in any game (:class:`~hptvsim.envs.protocol.Game`), without asking which:
 
-* ``scripted:<name>``: :data:`hptvsim.envs.policies.POLICY_NAMES` (always available; those of
-  :data:`hptvsim.envs.policies3d.POLICY_NAMES_3D` in the 3-D game as well);
+* ``scripted:<name>``: the game's scripted policies
+  (:attr:`~hptvsim.envs.protocol.Game.policy_roles`, built by
+  :meth:`~hptvsim.envs.protocol.Game.scripted_policy`): :data:`hptvsim.envs.policies.POLICY_NAMES`
+  in the planar game, :data:`hptvsim.envs.policies3d.POLICY_NAMES_3D` in the 3-D game;
 * shipped trained policies listed in ``policies/index.toml`` (the repository's ``policies/``
   folder, or the copy in an installed wheel): each entry names its kind (``sb3`` or ``dt``),
   file, roles and the command, config and seed that made it;
 * a path to a checkpoint: ``sb3:path/to/model.zip`` or ``dt:path/to/model.pt``.
 
-Loaders per kind are registered by the layers that know them (:func:`register_loader`); this
-module imports them lazily (downward: training and offline RL sit below it) the first time a
-kind is needed.
+A policy that acts in its game's action space where that is not the commands (the 3-D game's
+normalised actions) is wrapped in :class:`GameCommands`, which maps its actions to commands with
+the game's :meth:`~hptvsim.envs.protocol.Game.commands`.
+
+Checkpoints load with the loader of their kind: ``sb3`` from :mod:`hptvsim.train.policy`, ``dt``
+from :mod:`hptvsim.offline.policy` (both below this module; the latter, which needs torch, is
+imported when a DT is first loaded); :func:`register_loader` adds other kinds.
 """
 
 from __future__ import annotations
 
-import importlib
+import dataclasses
 import tomllib
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final
@@ -31,22 +38,26 @@ import numpy as np
 import numpy.typing as npt
 
 from hptvsim._paths import shipped_dir
-from hptvsim.envs.core import GameCore
-from hptvsim.envs.game3d import Game3DCore
-from hptvsim.envs.policies import POLICY_NAMES, POLICY_ROLES, Limits, Policy, make_policy
-from hptvsim.envs.policies3d import POLICY_NAMES_3D, make_policy_3d
+from hptvsim.envs.policies import POLICY_NAMES, POLICY_ROLES, Policy
+from hptvsim.envs.policies3d import POLICY_NAMES_3D
+from hptvsim.envs.protocol import Game
+from hptvsim.train.policy import check_sb3, load_sb3  # SB3 itself is imported with the first model
 
 __all__ = [
     "CHECKPOINT_GAMES",
     "GAMES",
     "Commands3D",
+    "GameCommands",
     "PolicyChecker",
     "PolicyInfo",
     "PolicyLoader",
     "UnknownPolicyError",
+    "acts_in_commands",
     "check_policy_fits",
     "check_policy_spec",
     "default_policy",
+    "default_policy_of",
+    "in_commands",
     "list_policies",
     "load_policy",
     "policy_dir",
@@ -56,23 +67,27 @@ __all__ = [
 GAMES: Final = ("planar", "3d")
 """The games a policy may play (:attr:`hptvsim.world.scenario.Simulation.game`)."""
 
-PolicyLoader = Callable[[Path, "GameCore | Game3DCore", str], Policy]
-"""Builds a policy for agent ``agent`` of ``core`` from a checkpoint file."""
+PolicyLoader = Callable[[Path, Game, str], Policy]
+"""Builds a policy for agent ``agent`` of a game from a checkpoint file (acting in its action space)."""
 
-PolicyChecker = Callable[[Path, "GameCore | Game3DCore", str], None]
+PolicyChecker = Callable[[Path, Game, str], None]
 """Raises :class:`ValueError` where the loader would, without building the policy (quick)."""
 
 CHECKPOINT_GAMES: Final[dict[str, tuple[str, ...]]] = {"sb3": GAMES, "dt": ("planar",)}
 """The games each checkpoint kind can play: an SB3 model observes either game's layout; the
 Decision Transformer is trained on the planar game's datasets only."""
 
-_LOADERS: dict[str, PolicyLoader] = {}
-_CHECKERS: dict[str, PolicyChecker] = {}
-_LOADER_MODULES: dict[str, str] = {
-    # kind -> module whose import registers its loader
-    "sb3": "hptvsim.train.policy",
-    "dt": "hptvsim.offline.policy",
-}
+
+def _load_dt(path: Path, game: Game, agent: str) -> Policy:
+    from hptvsim.offline.policy import load_dt  # torch: imported with the first model
+
+    return load_dt(path, game, agent)
+
+
+_LOADERS: dict[str, PolicyLoader] = {"sb3": load_sb3, "dt": _load_dt}
+"""Checkpoint kind -> loader (the shipped kinds, then :func:`register_loader`'s)."""
+
+_CHECKERS: dict[str, PolicyChecker] = {"sb3": check_sb3}
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -119,11 +134,9 @@ def register_loader(kind: str, loader: PolicyLoader, checker: PolicyChecker | No
 
 
 def _loader(kind: str) -> PolicyLoader:
-    if kind not in _LOADERS and kind in _LOADER_MODULES:
-        importlib.import_module(_LOADER_MODULES[kind])
     if kind not in _LOADERS:
         raise ValueError(
-            f"no loader for policies of kind {kind!r}; known kinds: scripted, {', '.join(_LOADER_MODULES)}"
+            f"no loader for policies of kind {kind!r}; known kinds: scripted, {', '.join(_LOADERS)}"
         )
     return _LOADERS[kind]
 
@@ -172,32 +185,81 @@ def list_policies(folder: Path | None = None) -> list[PolicyInfo]:
     return out
 
 
+def _trained_default(role: str, task: str, game: str) -> str | None:
+    """The shipped trained policy of ``game`` whose ``default_for`` lists ``task``, for ``role``."""
+    for p in list_policies():
+        if p.kind != "scripted" and task in p.default_for and role in p.roles and game in p.games:
+            return p.name
+    return None
+
+
 def default_policy(role: str, task: str, game: str = "planar") -> str:
     """The policy an agent of ``role`` follows in ``task`` of ``game`` when none is named.
 
     A shipped trained policy of the game whose ``default_for`` lists the task
     (``policies/index.toml``), else the scripted baseline: pure pursuit for pursuers (and for
-    everyone in goto), the potential field for evaders. The demo, the episode runner, the service
-    and the dashboard all ask here.
+    everyone in goto), the potential field for evaders. The demo, the service and the dashboard
+    ask here; with the game at hand, :func:`default_policy_of` asks the game for its baseline.
     """
-    for p in list_policies():
-        if p.kind != "scripted" and task in p.default_for and role in p.roles and game in p.games:
-            return p.name
+    trained = _trained_default(role, task, game)
+    if trained is not None:
+        return trained
     if task == "goto" or role == "pursuer":
         return "scripted:pure_pursuit"
     return "scripted:potential_field"
 
 
-def _role(core: GameCore | Game3DCore, agent: str) -> str:
-    return "pursuer" if core.pursuer[core.agents.index(agent)] else "evader"
+def default_policy_of(game: Game, agent: str) -> str:
+    """The policy ``agent`` of ``game`` follows when none is named (the episode engine's default).
+
+    A shipped trained policy of the game (:attr:`~hptvsim.envs.protocol.Game.kind`) whose
+    ``default_for`` lists the task, else the game's own scripted baseline
+    (:meth:`~hptvsim.envs.protocol.Game.default_policy`).
+    """
+    trained = _trained_default(_role(game, agent), "goto" if game.goto else "pursuit", game.kind)
+    return trained if trained is not None else f"scripted:{game.default_policy(agent)}"
+
+
+def _role(game: Game, agent: str) -> str:
+    return "pursuer" if game.pursuer[game.agents.index(agent)] else "evader"
 
 
 class UnknownPolicyError(ValueError):
     """A policy spec names no policy of the zoo (the message lists the valid names)."""
 
 
+def _policies_of(game: str, scripted: Mapping[str, tuple[str, ...]] | None) -> list[PolicyInfo]:
+    """:func:`list_policies`, with the scripted policies of a game at hand marked as its own."""
+    infos = list_policies()
+    if not scripted:
+        return infos
+    out = []
+    for p in infos:
+        name = p.name.removeprefix("scripted:")
+        if p.kind == "scripted" and name in scripted:
+            games = p.games if game in p.games else (*p.games, game)
+            p = dataclasses.replace(p, roles=tuple(scripted[name]), games=games)
+        out.append(p)
+    known = {p.name for p in infos}
+    extra = [
+        PolicyInfo(
+            name=f"scripted:{n}", kind="scripted", roles=tuple(r), description=f"scripted {n}", games=(game,)
+        )
+        for n, r in scripted.items()
+        if f"scripted:{n}" not in known
+    ]
+    scripted_end = max((k + 1 for k, p in enumerate(out) if p.kind == "scripted"), default=0)
+    return out[:scripted_end] + extra + out[scripted_end:]
+
+
 def check_policy_spec(
-    spec: str, role: str, *, allow_paths: bool = False, agent: str | None = None, game: str = "planar"
+    spec: str,
+    role: str,
+    *,
+    allow_paths: bool = False,
+    agent: str | None = None,
+    game: str = "planar",
+    scripted: Mapping[str, tuple[str, ...]] | None = None,
 ) -> None:
     """Check, without loading anything, that ``spec`` names a policy that drives ``role``.
 
@@ -210,7 +272,9 @@ def check_policy_spec(
         role: ``"pursuer"`` or ``"evader"``.
         allow_paths: Accept ``<kind>:<path>`` checkpoint files.
         agent: The agent's name, for the message.
-        game: The game it will play (:data:`GAMES`).
+        game: The game it will play (its :attr:`~hptvsim.envs.protocol.Game.kind`: :data:`GAMES`).
+        scripted: The game's own scripted policies and their roles
+            (:attr:`~hptvsim.envs.protocol.Game.policy_roles`), where the game is at hand.
 
     Raises:
         UnknownPolicyError: Not a name of the zoo, nor (with ``allow_paths``) a checkpoint spec;
@@ -219,13 +283,13 @@ def check_policy_spec(
             checkpoint file that does not exist (or a kind of checkpoint the game cannot play:
             :data:`CHECKPOINT_GAMES`).
     """
-    infos = list_policies()
+    infos = _policies_of(game, scripted)
     valid = [p.name for p in infos if role in p.roles and game in p.games]
     who = f"{agent} ({'an' if role == 'evader' else 'a'} {role})" if agent else f"a {role}"
     name = spec.removeprefix("scripted:")
     info = next((p for p in infos if p.name == spec), None)
-    if info is None and name in POLICY_NAMES:
-        info = next(p for p in infos if p.name == f"scripted:{name}")
+    if info is None:
+        info = next((p for p in infos if p.kind == "scripted" and p.name == f"scripted:{name}"), None)
     if info is not None:
         if role not in info.roles:
             raise ValueError(
@@ -238,7 +302,7 @@ def check_policy_spec(
             )
         return
     kind, sep, path = spec.partition(":")
-    if sep and kind in _LOADER_MODULES:
+    if sep and kind in _LOADERS:
         if game not in CHECKPOINT_GAMES.get(kind, ("planar",)):
             kinds = [k for k, games in CHECKPOINT_GAMES.items() if game in games]
             raise ValueError(
@@ -254,40 +318,70 @@ def check_policy_spec(
         if not Path(path).is_file():
             raise ValueError(f"policy file not found: {path} (policy {spec!r})")
         return
-    files = f", or <kind>:<checkpoint> with kind in {', '.join(_LOADER_MODULES)}" if allow_paths else ""
+    files = f", or <kind>:<checkpoint> with kind in {', '.join(_LOADERS)}" if allow_paths else ""
     raise UnknownPolicyError(f"unknown policy {spec!r}; valid for {who}: {', '.join(valid)}{files}")
 
 
-class Commands3D:
-    """A 3-D policy of normalised actions with SI actions ``[v, omega, w_z]`` (the zoo's convention).
+def acts_in_commands(game: Game, agent: int) -> bool:
+    """Whether an agent's actions are its commands (its action box is its command box).
 
-    The policy is scripted, or a model trained on the 3-D envs; :meth:`Game3DCore.commands_of`
-    maps its actions.
+    True in the planar game (actions ``[v, omega]``, Eqs. 15-16); False where actions are mapped
+    to commands (the 3-D game's normalised actions), so that its policies are wrapped in
+    :class:`GameCommands`.
+    """
+    low, high = game.action_bounds
+    scene = game.scene(0)
+    return bool(
+        np.array_equal(low[agent], scene.command_low[agent])
+        and np.array_equal(high[agent], scene.command_high[agent])
+    )
+
+
+class GameCommands:
+    """A policy acting in its game's action space, as a zoo policy: actions mapped to SI commands.
+
+    The policy is scripted (:meth:`~hptvsim.envs.protocol.Game.scripted_policy`) or a model
+    trained on the game's envs; the game's :meth:`~hptvsim.envs.protocol.Game.commands` maps its
+    actions (the 3-D game's normalised ``[a_v, a_omega, a_w]`` to ``[v, omega, w_z]``).
+
+    Args:
+        policy: The policy, acting in the agent's action space.
+        game: The game.
+        index: The agent's index.
     """
 
-    def __init__(self, policy: Policy, core: Game3DCore, index: int) -> None:
+    def __init__(self, policy: Policy, game: Game, index: int) -> None:
         self.policy = policy
-        self.core = core
+        self.game = game
         self.index = index
 
     def act(self, obs: npt.ArrayLike, episode_start: npt.ArrayLike | None = None) -> npt.NDArray[np.float64]:
-        """``(..., 3)`` commands ``[v, omega, w_z]`` [m/s, rad/s, m/s]."""
+        """``(..., C)`` commands (e.g. ``[v, omega, w_z]`` [m/s, rad/s, m/s])."""
         a = np.asarray(self.policy.act(obs, episode_start), dtype=np.float64)
-        return self.core.commands_of(a, self.index)
+        return self.game.commands(a, self.index)
+
+
+Commands3D = GameCommands
+"""The earlier name of :class:`GameCommands` (the 3-D game's policies are the ones it wraps)."""
+
+
+def in_commands(policy: Policy, game: Game, agent: str) -> Policy:
+    """``policy`` (acting in ``agent``'s action space) as a zoo policy: commanding in SI units."""
+    i = game.agents.index(agent)
+    return policy if acts_in_commands(game, i) else GameCommands(policy, game, i)
 
 
 def load_policy(
-    spec: str, core: GameCore | Game3DCore, agent: str, *, seed: int | None = None, allow_paths: bool = False
+    spec: str, core: Game, agent: str, *, seed: int | None = None, allow_paths: bool = False
 ) -> Policy:
     """Build the policy ``spec`` for ``agent`` of the game ``core``.
 
     Args:
         spec: A zoo name (:func:`list_policies`), ``scripted:<name>`` (or just ``<name>`` of a
             scripted policy), or, with ``allow_paths``, ``<kind>:<path>`` for a checkpoint file.
-        core: The game the policy will play (observation layout, limits, beams): planar, or
-            the 3-D game (scripted policies of :data:`~hptvsim.envs.policies3d.POLICY_NAMES_3D`
-            and SB3 models trained on the 3-D envs; their actions ``[v, omega, w_z]`` in SI
-            units).
+        core: The game the policy will play (:class:`~hptvsim.envs.protocol.Game`: its
+            observations, limits, beams); the policy commands in SI units (its
+            :attr:`~hptvsim.envs.protocol.Game.command_fields`).
         agent: The agent it drives.
         seed: Seed of stochastic policies (``random``).
         allow_paths: Also load a checkpoint file the spec names. A checkpoint is code (SB3 zips
@@ -297,28 +391,24 @@ def load_policy(
     Raises:
         UnknownPolicyError: Unknown name or kind (the message lists the valid names).
         ValueError: Unknown agent, a path while paths are not allowed, a missing checkpoint
-            file, or a policy made for another role (:func:`check_policy_spec`).
+            file, or a policy made for another role or game (:func:`check_policy_spec`).
     """
-    if agent not in core.agents:
-        raise ValueError(f"unknown agent {agent!r}; agents: {', '.join(core.agents)}")
-    game = "3d" if isinstance(core, Game3DCore) else "planar"
-    check_policy_spec(spec, _role(core, agent), allow_paths=allow_paths, agent=agent, game=game)
+    game = core
+    if agent not in game.agents:
+        raise ValueError(f"unknown agent {agent!r}; agents: {', '.join(game.agents)}")
+    check_policy_spec(
+        spec,
+        _role(game, agent),
+        allow_paths=allow_paths,
+        agent=agent,
+        game=game.kind,
+        scripted=game.policy_roles,
+    )
     name = spec.removeprefix("scripted:")
-    if isinstance(core, Game3DCore) and name in POLICY_NAMES_3D:
-        return Commands3D(make_policy_3d(name, core.layout), core, core.agents.index(agent))
-    if name in POLICY_NAMES and isinstance(core, GameCore):
-        i = core.agents.index(agent)
-        v_min, v_max, om = core.robots.limits[i]
-        return make_policy(
-            name,
-            layout=core.layout,
-            limits=Limits(v_min=v_min, v_max=v_max, omega_max=om),
-            beam_angles=core.robots.beam_angles,
-            dt=core.dt,
-            seed=seed,
-        )
+    if name in game.policy_roles:
+        return in_commands(game.scripted_policy(name, agent, seed=seed), game, agent)
     kind, file = _checkpoint(spec, agent)
-    return _loader(kind)(file, core, agent)
+    return in_commands(_loader(kind)(file, game, agent), game, agent)
 
 
 def _checkpoint(spec: str, agent: str) -> tuple[str, Path]:
@@ -333,32 +423,42 @@ def _checkpoint(spec: str, agent: str) -> tuple[str, Path]:
     return kind, Path(path)
 
 
-def check_policy_fits(
-    spec: str, core: GameCore | Game3DCore, agent: str, *, allow_paths: bool = False
-) -> None:
+def check_policy_fits(spec: str, core: Game, agent: str, *, allow_paths: bool = False) -> None:
     """Check that ``spec`` can drive ``agent`` of ``core``: the checks of :func:`load_policy`, quickly.
 
     Scripted policies are built (that is cheap); a checkpoint is checked by its kind's checker
-    where one is registered (an SB3 model's observation and action spaces are read from its
-    file, without torch), else loaded.
+    where there is one (an SB3 model's observation and action spaces are read from its file,
+    without torch), else loaded.
 
     Raises:
         UnknownPolicyError: As :func:`load_policy`.
         ValueError: As :func:`load_policy`: unknown agent, a policy for another role or game, or
             a model whose observation does not fit the agent's (another beam count).
     """
-    if agent not in core.agents:
-        raise ValueError(f"unknown agent {agent!r}; agents: {', '.join(core.agents)}")
+    game = core
+    if agent not in game.agents:
+        raise ValueError(f"unknown agent {agent!r}; agents: {', '.join(game.agents)}")
     name = spec.removeprefix("scripted:")
-    if spec.startswith("scripted:") or name in POLICY_NAMES or name in POLICY_NAMES_3D:
-        load_policy(spec, core, agent, allow_paths=allow_paths)
+    if (
+        spec.startswith("scripted:")
+        or name in POLICY_NAMES
+        or name in POLICY_NAMES_3D
+        or name in game.policy_roles
+    ):
+        load_policy(spec, game, agent, allow_paths=allow_paths)
         return
-    game = "3d" if isinstance(core, Game3DCore) else "planar"
-    check_policy_spec(spec, _role(core, agent), allow_paths=allow_paths, agent=agent, game=game)
+    check_policy_spec(
+        spec,
+        _role(game, agent),
+        allow_paths=allow_paths,
+        agent=agent,
+        game=game.kind,
+        scripted=game.policy_roles,
+    )
     kind, file = _checkpoint(spec, agent)
-    loader = _loader(kind)  # importing the kind's module registers its checker too
+    loader = _loader(kind)
     checker = _CHECKERS.get(kind)
     if checker is not None:
-        checker(file, core, agent)
+        checker(file, game, agent)
     else:
-        loader(file, core, agent)
+        loader(file, game, agent)

@@ -211,6 +211,7 @@ CASES: dict[str, tuple[list[str], tuple[str, ...]]] = {
     "bench-episode": (["bench", "episode", "--scenario", "nosuch"], ("nosuch", "target")),
     "bench-world": (["bench", "world", "--nosuch"], ("--nosuch", "No such option")),
     "bench-train": (["bench", "train", "--env", "nosuch"], ("nosuch", "hptvsim")),
+    "bench-learn": (["bench", "learn", "--trainer", "nosuch"], ("nosuch", "fast ippo")),
     "bench-env-3d": (
         ["bench", "env", "--quick", "--scenario", "ridge_3d"],
         ("ridge_3d", "3d game", "planar"),

@@ -20,8 +20,8 @@ from hptvsim.demo import (
     simulate_manoeuvre,
     trajectories_figure,
 )
+from hptvsim.episodes import EpisodeResult, run_episode
 from hptvsim.palette import agent_color, color_of, hex_rgb
-from hptvsim.viz.episode import EpisodeResult, run_episode
 
 matplotlib.use("Agg")
 

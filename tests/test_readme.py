@@ -173,6 +173,22 @@ COMMANDS: dict[str, tuple[Run | Help, ...]] = {
             r"ruff check[\s\S]*mypy[\s\S]*pytest -n",
         ),
     ),
+    "hptvsim train fast": (
+        Run(
+            "hptvsim train fast --out {tmp}/fast --no-progress --set ppo.num_envs=8 --set ppo.n_steps=8"
+            " --set stage.0.budget_steps=128 --set eval.episodes=4",
+            r"capture \d\.\d\d of 4 fixed episodes[\s\S]*128 game steps per seed",
+            ("{tmp}/fast/seed0/models/pursuer_0.zip", "{tmp}/fast/seed0/curve.csv"),
+        ),
+    ),
+    "hptvsim train fast --seeds 0-9": (
+        Run(
+            "hptvsim train fast --seeds 0-1 --out {tmp}/fast --no-progress --set ppo.num_envs=8"
+            " --set ppo.n_steps=8 --set stage.0.budget_steps=64 --set eval.episodes=2",
+            r"seed0: capture[\s\S]*seed1: capture",
+            ("{tmp}/fast/seed0/eval.json", "{tmp}/fast/seed1/eval.json"),
+        ),
+    ),
     "hptvsim train quick": (
         Run(
             f"hptvsim train quick --out {{shared}}/run {QUICK}",

@@ -8,17 +8,16 @@ Timing assertions never go into tests; they live here.
 from __future__ import annotations
 
 import json
-import os
-import platform
 import subprocess
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from hptvsim._output import machine_summary
 from hptvsim.native import compile_c
 
-__all__ = ["BenchResult", "Row", "best_of", "compile_floor", "machine_summary", "run_floor"]
+__all__ = ["BenchResult", "Row", "best_of", "compile_floor", "run_floor"]
 
 
 @dataclass
@@ -88,19 +87,6 @@ class BenchResult:
         }
 
 
-def machine_summary() -> str:
-    """One line naming the CPU and core count."""
-    cpu = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}"
-
-
 def best_of(fn: Callable[[], None], *, repeats: int, units: int) -> float:
     """Run ``fn`` ``repeats`` times; return the best seconds per unit (``units`` per run)."""
     best = float("inf")
@@ -117,7 +103,7 @@ def compile_floor() -> Path:
 
     include = Path(fmpy.__file__).parent / "c-code"
     return compile_c(
-        "hptvsim.bench", "floor.c", flags=("-O2", "-std=c99"), libs=("-ldl",),
+        Path(__file__).with_name("floor.c"), flags=("-O2", "-std=c99"), libs=("-ldl",),
         include_dirs=(include,), executable=True, what="the dynamics benchmark's C floor",
     )  # fmt: skip
 

@@ -42,7 +42,7 @@ def _compile_floor() -> Path:
 
     include = Path(fmpy.__file__).parent / "c-code"
     return compile_c(
-        "hptvsim.bench", "cosim_floor.c", flags=("-O2", "-std=c99"), libs=("-ldl",),
+        Path(__file__).with_name("cosim_floor.c"), flags=("-O2", "-std=c99"), libs=("-ldl",),
         include_dirs=(include,), executable=True, what="the co-simulation benchmark's C floor",
     )  # fmt: skip
 
@@ -50,7 +50,7 @@ def _compile_floor() -> Path:
 def _run_floor(*, steps: int, dt: float, h_max: float, counts: dict[str, int]) -> dict[str, float]:
     import fmpy
 
-    from hptvsim.cosim.fmi2 import load_model
+    from hptvsim.cosim.fmu_model import load_model
     from hptvsim.dynamics import INPUT_NAMES, MODEL_PARAMETER_NAMES, OUTPUT_NAMES
     from hptvsim.fmu import fmu_path
 
@@ -86,8 +86,9 @@ def bench_cosim(*, quick: bool = False, h_max: float = 0.05) -> BenchResult:
     from fmpy.fmi2 import FMU2Slave
 
     from hptvsim.cosim.batched import BatchedVehicleSystem
-    from hptvsim.cosim.fmi2 import load_model
-    from hptvsim.cosim.system import FmuVehicleSystem, SystemSpec, VehicleSpec
+    from hptvsim.cosim.fmu_model import load_model
+    from hptvsim.cosim.interface import SystemSpec, VehicleSpec
+    from hptvsim.cosim.system import FmuVehicleSystem
     from hptvsim.dynamics import INPUT_NAMES, OUTPUT_NAMES
     from hptvsim.fmu import fmu_path
 

@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hptvsim.bench.common import machine_summary
+from hptvsim._output import machine_summary
 
 __all__ = ["EnvBenchResult", "bench_env"]
 

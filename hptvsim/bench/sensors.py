@@ -23,7 +23,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hptvsim.bench.common import BenchResult, Row, best_of, machine_summary
+from hptvsim._output import machine_summary
+from hptvsim.bench.common import BenchResult, Row, best_of
 
 __all__ = ["SensorsBench", "bench_sensors"]
 
@@ -60,9 +61,9 @@ def bench_sonar(*, quick: bool = False) -> BenchResult:
     Every call casts a fresh batch of poses (from a pool of 4096 environments, 1024 in quick
     mode), so the CPU's branch predictors cannot learn one batch by heart.
     """
-    from hptvsim.sensors.config import SonarConfig
     from hptvsim.sensors.sonar import GeometricSonar, vehicle_radii
     from hptvsim.world.scenario import load_scenario
+    from hptvsim.world.sensor_config import SonarConfig
 
     grid = load_scenario("target").build_world().obstacles
     cfg = SonarConfig()
@@ -125,13 +126,13 @@ def bench_matched_filter(*, quick: bool = False) -> BenchResult:
     """Range estimates per second of the matched filter (see the module docstring)."""
     from scipy import fft as sp_fft
 
-    from hptvsim.sensors.config import SonarConfig
     from hptvsim.sensors.signal import (
         estimate_delay,
         matched_filter_direct,
         synthesize_echoes,
         transmit_pulse,
     )
+    from hptvsim.world.sensor_config import SonarConfig
 
     cfg = SonarConfig(snr_db=10.0)
     pulse = transmit_pulse(cfg)

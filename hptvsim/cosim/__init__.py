@@ -1,12 +1,16 @@
 """Co-simulation: FMI 2.0 and 3.0 CS FMUs wired by a graph, the vehicle composition, a batched backend.
 
-* :mod:`hptvsim.cosim.fmi2`: lean, checked FMI 2.0 calls on preallocated buffers; the model
-  description of FMI 2.0 and 3.0 FMUs, value types and units;
+* :mod:`hptvsim.cosim.fmi`: what FMI 2.0 and 3.0 instances share: variables, value types and
+  units, the FMI errors;
+* :mod:`hptvsim.cosim.fmi2`: lean, checked FMI 2.0 calls on preallocated buffers;
 * :mod:`hptvsim.cosim.fmi3`: FMI 3.0 instances with the same interface;
+* :mod:`hptvsim.cosim.fmu_model`: an FMU loaded once (model description, extraction), which
+  makes instances of either version;
 * :mod:`hptvsim.cosim.graph`: the graph description (dataclasses; TOML/JSON files);
 * :mod:`hptvsim.cosim.orchestrator`: the master (fixed macro steps, Jacobi or Gauss-Seidel);
+* :mod:`hptvsim.cosim.interface`: the vehicle system's spec, array layouts and interface;
 * :mod:`hptvsim.cosim.system`: B sub-environments x N vehicles (reset, pause, resume,
-  snapshot, restore) on the FMU path;
+  snapshot, restore) on the FMU path, and :func:`make_system` for either backend;
 * :mod:`hptvsim.cosim.batched`: the same system, bit for bit, through the FMU binaries'
   batch entry points, for training speed.
 """
@@ -19,7 +23,9 @@ from hptvsim._lazy import lazy_getattr
 
 if TYPE_CHECKING:
     from hptvsim.cosim.batched import BatchedSnapshot, BatchedVehicleSystem, NonFiniteStateError
-    from hptvsim.cosim.fmi2 import Fmu2Instance, FmuError, FmuModel, FmuVariableError, Variable, load_model
+    from hptvsim.cosim.fmi import FmuError, FmuVariableError, Variable
+    from hptvsim.cosim.fmi2 import Fmu2Instance
+    from hptvsim.cosim.fmu_model import FmuModel, load_model
     from hptvsim.cosim.graph import (
         Component,
         Connection,
@@ -31,21 +37,14 @@ if TYPE_CHECKING:
         load_graph,
         save_graph,
     )
+    from hptvsim.cosim.interface import SystemSpec, VehicleSpec, VehicleSystem
     from hptvsim.cosim.orchestrator import (
         Orchestrator,
         SimulationFailedError,
         SimulationPausedError,
         Snapshot,
     )
-    from hptvsim.cosim.system import (
-        FmuSystemSnapshot,
-        FmuVehicleSystem,
-        SystemSpec,
-        VehicleSpec,
-        VehicleSystem,
-        make_system,
-        vehicle_graph,
-    )
+    from hptvsim.cosim.system import FmuSystemSnapshot, FmuVehicleSystem, make_system, vehicle_graph
 
 __all__ = [
     "BatchedSnapshot",
@@ -87,10 +86,10 @@ _WHERE = {
     "ExternalInput": "hptvsim.cosim.graph",
     "ExternalOutput": "hptvsim.cosim.graph",
     "Fmu2Instance": "hptvsim.cosim.fmi2",
-    "FmuError": "hptvsim.cosim.fmi2",
-    "FmuModel": "hptvsim.cosim.fmi2",
+    "FmuError": "hptvsim.cosim.fmi",
+    "FmuModel": "hptvsim.cosim.fmu_model",
     "FmuSystemSnapshot": "hptvsim.cosim.system",
-    "FmuVariableError": "hptvsim.cosim.fmi2",
+    "FmuVariableError": "hptvsim.cosim.fmi",
     "FmuVehicleSystem": "hptvsim.cosim.system",
     "Graph": "hptvsim.cosim.graph",
     "GraphError": "hptvsim.cosim.graph",
@@ -100,12 +99,12 @@ _WHERE = {
     "SimulationFailedError": "hptvsim.cosim.orchestrator",
     "SimulationPausedError": "hptvsim.cosim.orchestrator",
     "Snapshot": "hptvsim.cosim.orchestrator",
-    "SystemSpec": "hptvsim.cosim.system",
-    "Variable": "hptvsim.cosim.fmi2",
-    "VehicleSpec": "hptvsim.cosim.system",
-    "VehicleSystem": "hptvsim.cosim.system",
+    "SystemSpec": "hptvsim.cosim.interface",
+    "Variable": "hptvsim.cosim.fmi",
+    "VehicleSpec": "hptvsim.cosim.interface",
+    "VehicleSystem": "hptvsim.cosim.interface",
     "load_graph": "hptvsim.cosim.graph",
-    "load_model": "hptvsim.cosim.fmi2",
+    "load_model": "hptvsim.cosim.fmu_model",
     "make_system": "hptvsim.cosim.system",
     "save_graph": "hptvsim.cosim.graph",
     "vehicle_graph": "hptvsim.cosim.system",

@@ -10,8 +10,8 @@ without one FMI call per vehicle. Vehicles are grouped by type: one call per typ
 
 Layout: per type, row-major arrays ``x (B, n, 8)``, ``w (B, n, 7)``, ``p (B, n, 35)``,
 ``y (B, n, 9)`` with ``n`` the vehicles of that type per sub-environment. With one vehicle
-type the caller's :attr:`~hptvsim.cosim.system.VehicleSystem.inputs` and
-:attr:`~hptvsim.cosim.system.VehicleSystem.outputs` *are* ``w`` and ``y`` (no copies);
+type the caller's :attr:`~hptvsim.cosim.interface.VehicleSystem.inputs` and
+:attr:`~hptvsim.cosim.interface.VehicleSystem.outputs` *are* ``w`` and ``y`` (no copies);
 with several types one gather and one scatter per type and step move the values.
 
 Threads: big batches are split into row ranges stepped in parallel (``ctypes`` releases the
@@ -47,9 +47,10 @@ from typing import Any, ClassVar, Final
 import numpy as np
 import numpy.typing as npt
 
-from hptvsim.cosim.fmi2 import F64Array, FmuModel, load_model
+from hptvsim.cosim.fmi import F64Array
+from hptvsim.cosim.fmu_model import FmuModel, load_model
+from hptvsim.cosim.interface import PLANAR_LAYOUT, Layout, SystemSpec, VehicleSystem
 from hptvsim.cosim.orchestrator import SimulationFailedError
-from hptvsim.cosim.system import PLANAR_LAYOUT, Layout, SystemSpec, VehicleSystem
 from hptvsim.cosim.vehicles import ExternalVehicleType
 from hptvsim.dynamics import ParameterError, VehicleType
 

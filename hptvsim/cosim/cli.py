@@ -1,4 +1,4 @@
-"""Command line of the co-simulation layer: ``hptvsim cosim run`` and ``hptvsim bench cosim``."""
+"""Command line of the co-simulation layer: ``hptvsim cosim run`` and ``hptvsim cosim export-ssp``."""
 
 from __future__ import annotations
 
@@ -64,8 +64,8 @@ def _write(
     tmp.replace(target)
 
 
-def register(main: click.Group, bench: click.Group) -> None:
-    """Add ``hptvsim cosim ...`` to ``main`` and ``hptvsim bench cosim`` to ``bench``."""
+def register(main: click.Group) -> None:
+    """Add ``hptvsim cosim ...`` to ``main``."""
 
     @main.group("cosim")
     def cosim() -> None:
@@ -112,7 +112,7 @@ def register(main: click.Group, bench: click.Group) -> None:
 
         from tqdm import tqdm
 
-        from hptvsim.cosim.fmi2 import FmuError
+        from hptvsim.cosim.fmi import FmuError
         from hptvsim.cosim.graph import GraphError, load_graph
         from hptvsim.cosim.orchestrator import Orchestrator, SimulationFailedError, SimulationTerminated
 
@@ -212,20 +212,3 @@ def register(main: click.Group, bench: click.Group) -> None:
         except GraphError as exc:
             raise click.ClickException(str(exc)) from None
         click.echo(f"wrote {target.resolve()}")
-
-    @bench.command("cosim")
-    @click.option("--quick", is_flag=True, help="About a second instead of several.")
-    @click.option(
-        "--h-max",
-        type=click.FloatRange(min=0.0, min_open=True),
-        default=0.05,
-        show_default=True,
-        help="Largest internal RK4 step [s] for every row (the FMUs default to 0.01).",
-    )
-    @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of a table.")
-    def bench_cosim_cmd(quick: bool, h_max: float, as_json: bool) -> None:
-        """Vehicle-steps/s: FMPy, the orchestrator, the batched backend (B = 1, 64, 1024), the C floor."""
-        from hptvsim.bench.cosim import bench_cosim
-        from hptvsim.cli import emit
-
-        emit(bench_cosim(quick=quick, h_max=h_max), as_json)

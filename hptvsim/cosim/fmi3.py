@@ -14,7 +14,7 @@ Lifecycle (FMI 3.0, section 4): instantiate (``fmi3InstantiateCoSimulation``, no
 early return), start values, ``fmi3EnterInitializationMode(startTime)``, inputs and outputs,
 ``fmi3ExitInitializationMode`` (into step mode), ``fmi3DoStep``, ``fmi3Terminate``,
 ``fmi3FreeInstance``. A ``fmi3DoStep`` that sets ``terminateSimulation`` ends the run:
-:class:`~hptvsim.cosim.fmi2.FmuDiscardError` with ``terminated``, the time set to the FMU's
+:class:`~hptvsim.cosim.fmi.FmuDiscardError` with ``terminated``, the time set to the FMU's
 ``lastSuccessfulTime``. A step returning ``fmi3Discard`` is redone in halved steps from the FMU
 state saved before it when :attr:`Fmu3Instance.keep_state` is set and the FMU can handle variable
 communication steps, as for FMI 2.0.
@@ -25,26 +25,26 @@ from __future__ import annotations
 import ctypes
 from collections import deque
 from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING, Any, ClassVar, Final
+from typing import Any, ClassVar, Final
 
 import numpy as np
 import numpy.typing as npt
 from fmpy.fmi3 import FMU3Slave, fmi3LogMessageCallback
 
-from hptvsim.cosim.fmi2 import (
+from hptvsim.cosim.fmi import (
     FMI2_DISCARD,
     FMI2_WARNING,
     F64Array,
     FmuDiscardError,
     FmuError,
+    LoadedFmu,
     Value,
     Variable,
     _Lifecycle,
+    _own_or_check,
+    _require_numeric,
     coerce_value,
 )
-
-if TYPE_CHECKING:
-    from hptvsim.cosim.fmi2 import FmuModel
 
 __all__ = ["FMI3_CTYPES", "Fmu3Instance"]
 
@@ -105,7 +105,7 @@ class Fmu3Instance(_Lifecycle):
     _PREFIX: ClassVar[str] = "fmi3"
     _FREE_STATE: ClassVar[str] = "fmi3FreeFMUState"
 
-    def __init__(self, model: FmuModel, name: str, *, logging_on: bool = False) -> None:
+    def __init__(self, model: LoadedFmu, name: str, *, logging_on: bool = False) -> None:
         self.model = model
         self.name = name
         self.log: deque[str] = deque(maxlen=200)
@@ -206,8 +206,6 @@ class Fmu3Instance(_Lifecycle):
     def _bind(
         self, names: Sequence[str], causality: tuple[str, ...] | None, buffer: F64Array | None
     ) -> tuple[F64Array, _Groups | None]:
-        from hptvsim.cosim.fmi2 import _own_or_check, _require_numeric
-
         vars_ = [self.model.variable(n, causality=causality) for n in names]
         _require_numeric(self.model, vars_)
         for v in vars_:

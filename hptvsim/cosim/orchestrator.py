@@ -19,7 +19,7 @@ Types
     float64 signal array (integers and booleans exactly); Strings travel by name, outside the
     hot path. A connection must join variables of one type (Enumerations of one declared type)
     and compatible units (declared types' units included, see
-    :func:`~hptvsim.cosim.fmi2.units_compatible`).
+    :func:`~hptvsim.cosim.fmi.units_compatible`).
 
 Initialisation
     :meth:`Orchestrator.reset` follows FMI 2.0's order for every component: ``fmi2Reset`` (no
@@ -65,17 +65,17 @@ from typing import Final
 import numpy as np
 import numpy.typing as npt
 
-from hptvsim.cosim.fmi2 import (
+from hptvsim.cosim.fmi import (
     F64Array,
-    Fmu2Instance,
     FmuDiscardError,
     FmuError,
     Value,
     Variable,
     coerce_value,
-    load_model,
     units_compatible,
 )
+from hptvsim.cosim.fmi2 import Fmu2Instance
+from hptvsim.cosim.fmu_model import load_model
 from hptvsim.cosim.graph import Graph, GraphError, Port
 
 __all__ = [
@@ -633,7 +633,7 @@ class Orchestrator:
     def set_input(self, name: str, value: Value) -> None:
         """Set an external input by name, in its targets' type; the hot path writes :attr:`inputs`.
 
-        Text is parsed (see :func:`~hptvsim.cosim.fmi2.coerce_value`).
+        Text is parsed (see :func:`~hptvsim.cosim.fmi.coerce_value`).
 
         Raises:
             KeyError: No such input (the message lists them).

@@ -1,4 +1,10 @@
-"""Environments: the underwater pursuit-evasion game (UPEG) for PettingZoo, Gymnasium and SB3.
+"""Environments: the underwater pursuit-evasion games (UPEG) for PettingZoo, Gymnasium and SB3.
+
+Every game implements one protocol, :class:`~hptvsim.envs.protocol.Game`, and :func:`make_game`
+(:mod:`hptvsim.envs.games`, with :func:`register_game` for a new game) builds the one a scenario
+is made for; the views below are written once against the protocol and play any game
+(:class:`GameParallelEnv`, :class:`GameSingleAgentEnv`, :class:`GameVectorEnv`,
+:class:`UPEGBatchEnv`). Under their earlier names:
 
 * :func:`parallel_env` / :class:`UPEGParallelEnv`: the PettingZoo ParallelEnv (every agent);
 * :class:`UPEGSingleAgentEnv`: one agent learns, the others follow policies; registered with
@@ -7,9 +13,9 @@
   batched :class:`UPEGVectorEnv`);
 * :func:`make_sb3_vec_env`: the batch as a stable-baselines3 ``VecEnv``;
 * :class:`UPEGBatchEnv`: B environments x N agents as arrays, for multi-agent training;
-* :class:`GameCore`: the engine under all of them; :mod:`hptvsim.envs.policies`: scripted
-  policies;
-* the 3-D game (diving 6-DOF vehicles, issue 15): :mod:`hptvsim.envs.game3d`
+* :class:`GameCore`: the planar game; :mod:`hptvsim.envs.policies`: its scripted policies;
+* the 3-D game (diving 6-DOF vehicles, issue 15): :class:`Game3DCore` (:mod:`hptvsim.envs.core3d`),
+  its views under their earlier names in :mod:`hptvsim.envs.game3d`
   (:class:`~hptvsim.envs.game3d.UPEG3DParallelEnv`, the Gymnasium ids
   ``hptvsim/UPEG3D-Pursuer-v0``, ``hptvsim/UPEG3D-Evader-v0``, ``hptvsim/UPEG3D-Goto-v0``) and
   :mod:`hptvsim.envs.policies3d`.
@@ -27,18 +33,38 @@ from hptvsim.envs.ids import ENV_IDS, ENV_IDS_3D
 if TYPE_CHECKING:
     from hptvsim.envs.batch import UPEGBatchEnv
     from hptvsim.envs.core import GameCore
-    from hptvsim.envs.parallel import UPEGParallelEnv, parallel_env
-    from hptvsim.envs.single import UPEGSingleAgentEnv, UPEGVectorEnv, make_sb3_vec_env
+    from hptvsim.envs.core3d import Game3DCore
+    from hptvsim.envs.games import make_game, register_game
+    from hptvsim.envs.parallel import GameParallelEnv, UPEGParallelEnv, parallel_env
+    from hptvsim.envs.protocol import Game, StepResult
+    from hptvsim.envs.single import (
+        GameSingleAgentEnv,
+        GameVectorEnv,
+        UPEGSingleAgentEnv,
+        UPEGVectorEnv,
+        make_sb3_vec_env,
+    )
+    from hptvsim.envs.torchrl_env import make_torchrl_env
 
 __all__ = [
     "ENV_IDS",
+    "ENV_IDS_3D",
+    "Game",
+    "Game3DCore",
     "GameCore",
+    "GameParallelEnv",
+    "GameSingleAgentEnv",
+    "GameVectorEnv",
+    "StepResult",
     "UPEGBatchEnv",
     "UPEGParallelEnv",
     "UPEGSingleAgentEnv",
     "UPEGVectorEnv",
+    "make_game",
     "make_sb3_vec_env",
+    "make_torchrl_env",
     "parallel_env",
+    "register_game",
 ]
 
 __getattr__ = lazy_getattr(
@@ -46,34 +72,36 @@ __getattr__ = lazy_getattr(
     {
         "UPEGBatchEnv": "hptvsim.envs.batch",
         "GameCore": "hptvsim.envs.core",
+        "Game3DCore": "hptvsim.envs.core3d",
+        "make_game": "hptvsim.envs.games",
+        "register_game": "hptvsim.envs.games",
+        "Game": "hptvsim.envs.protocol",
+        "StepResult": "hptvsim.envs.protocol",
+        "GameParallelEnv": "hptvsim.envs.parallel",
         "UPEGParallelEnv": "hptvsim.envs.parallel",
         "parallel_env": "hptvsim.envs.parallel",
+        "GameSingleAgentEnv": "hptvsim.envs.single",
+        "GameVectorEnv": "hptvsim.envs.single",
         "UPEGSingleAgentEnv": "hptvsim.envs.single",
         "UPEGVectorEnv": "hptvsim.envs.single",
         "make_sb3_vec_env": "hptvsim.envs.single",
+        "make_torchrl_env": "hptvsim.envs.torchrl_env",  # the optional extra 'torchrl'
     },
 )
 
 
 def _register() -> None:
-    for env_id, kwargs in ENV_IDS.items():
-        if env_id not in gymnasium.registry:
-            gymnasium.register(
-                id=env_id,
-                entry_point="hptvsim.envs.single:UPEGSingleAgentEnv",
-                vector_entry_point="hptvsim.envs.single:UPEGVectorEnv",
-                kwargs=dict(kwargs),
-                disable_env_checker=False,
-            )
-    for env_id, kwargs in ENV_IDS_3D.items():
-        if env_id not in gymnasium.registry:
-            gymnasium.register(
-                id=env_id,
-                entry_point="hptvsim.envs.game3d:UPEG3DSingleAgentEnv",
-                vector_entry_point="hptvsim.envs.game3d:UPEG3DVectorEnv",
-                kwargs=dict(kwargs),
-                disable_env_checker=False,
-            )
+    """The Gymnasium ids: the shared views, each id playing its game (a scenario of the other game too)."""
+    for game, ids in (("planar", ENV_IDS), ("3d", ENV_IDS_3D)):
+        for env_id, kwargs in ids.items():
+            if env_id not in gymnasium.registry:
+                gymnasium.register(
+                    id=env_id,
+                    entry_point="hptvsim.envs.single:GameSingleAgentEnv",
+                    vector_entry_point="hptvsim.envs.single:GameVectorEnv",
+                    kwargs={**kwargs, "game": game},
+                    disable_env_checker=False,
+                )
 
 
 _register()

@@ -13,10 +13,17 @@ reward, end). Here:
 * **task layer**: :mod:`hptvsim.envs.task`: observation (Eq. 14), reward (Eqs. 17-20) and the
   end rules.
 
-:class:`GameCore` composes them. Every public view (the PettingZoo
-:class:`~hptvsim.envs.parallel.UPEGParallelEnv`, the Gymnasium single-agent views, the vector
-environments) drives a :class:`GameCore`; the FMU backend and the batched backend give the same
-numbers for the same seed because they run the same generated C on the same inputs.
+:class:`GameCore` composes them and implements the game protocol
+(:class:`~hptvsim.envs.protocol.Game`, kind ``"planar"``), which every view (the PettingZoo
+:class:`~hptvsim.envs.parallel.GameParallelEnv`, the Gymnasium single-agent views, the vector and
+batch environments) drives; the FMU backend and the batched backend give the same numbers for the
+same seed because they run the same generated C on the same inputs.
+
+**Depth in the protocol's terms.** Every vehicle keeps the site's operating depth: its pose
+(:attr:`GameCore.poses`) has ``z`` = ``site.operating_depth`` and ``phi = theta = 0``, its
+velocity no heave, roll or pitch rate, its altitude is the seabed's depth under it less the
+operating depth (negative inside an obstacle), and a collision's causes are not told apart
+(``StepResult.causes`` is empty: ``seabed`` and ``surface`` are always False in the info).
 
 **The site's fence.** By default (``fence=True``) the outermost ring of cells of the obstacle
 map is solid: the sonar sees the edge of the site like a wall, so learners can avoid it, and
@@ -29,17 +36,30 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from types import MappingProxyType
+from typing import Any, Final, Literal
 
+import gymnasium
 import numpy as np
 import numpy.typing as npt
 
 from hptvsim.cosim.system import SystemSpec, VehicleSpec, VehicleSystem, make_system
-from hptvsim.envs.task import EndFlags, ObsLayout, RewardTerms
+from hptvsim.envs.policies import POLICY_ROLES, Limits, Policy, make_policy
+from hptvsim.envs.protocol import Scene, StepResult
+from hptvsim.envs.shared import action_box, agent_infos, check_actions, common_overrides, scenario_argument
+from hptvsim.envs.task import ObsLayout
 from hptvsim.world.grid import OccupancyGrid
-from hptvsim.world.scenario import Scenario, Task, World, load_scenario
+from hptvsim.world.scenario import Scenario, Task, World
 
-__all__ = ["Backend", "GameCore", "Robots", "StepResult"]
+__all__ = [
+    "Backend",
+    "GameCore",
+    "Robots",
+    "StepResult",
+    "common_overrides",
+    "planar_scenario",
+    "scenario_argument",
+]
 
 F64 = npt.NDArray[np.float64]
 F32 = npt.NDArray[np.float32]
@@ -56,30 +76,11 @@ def _fenced(grid: OccupancyGrid) -> OccupancyGrid:
     return OccupancyGrid(geometry=grid.geometry, occupied=occ)
 
 
-@dataclass
-class StepResult:
-    """What one step of every environment produced (arrays over ``B`` x ``N``).
+_NO_CAUSES: Mapping[str, Bool] = MappingProxyType({})
+"""The planar game does not tell a collision's causes apart."""
 
-    Attributes:
-        obs: ``(B, N, obs_size)`` observations after the step (Eq. 14).
-        reward: ``(B, N)`` rewards (Eq. 20); 0 for agents already done.
-        terminated: ``(B, N)`` agents whose episode ended by a task rule this step.
-        truncated: ``(B, N)`` agents whose episode hit the step limit this step.
-        terms: The reward terms (Eqs. 17-19).
-        flags: Why episodes ended.
-        done: ``(B,)`` environments whose episode ended this step (no agent left active).
-
-    The arrays are the core's buffers: valid until the next :meth:`GameCore.step` or
-    :meth:`GameCore.reset`; copy what you keep.
-    """
-
-    obs: F32
-    reward: F64
-    terminated: Bool
-    truncated: Bool
-    terms: RewardTerms
-    flags: EndFlags
-    done: Bool
+_SCALAR_POINTS: Final = 16
+"""Up to this many vehicles in all, :attr:`GameCore.altitude` interpolates point by point."""
 
 
 class Robots:
@@ -232,6 +233,10 @@ class _State:
 class GameCore:
     """B environments of one scenario: reset, step, observations, rewards, end rules.
 
+    Implements :class:`~hptvsim.envs.protocol.Game` (kind ``"planar"``): actions ``[v, omega]``
+    [m/s, rad/s] (Eqs. 15-16), observations Eq. 14 (:class:`~hptvsim.envs.task.ObsLayout`); the
+    module docstring says what depth means here.
+
     Args:
         scenario: A :class:`~hptvsim.world.scenario.Scenario`, or a shipped scenario's name
             or a scenario file's path.
@@ -254,6 +259,11 @@ class GameCore:
             not the weights of Eq. 20, so these are a training choice; capture and collision
             rules do not depend on them.
     """
+
+    kind: str = "planar"
+    command_fields: Final = ("v", "omega")
+    policy_roles: Final = POLICY_ROLES
+    render_modes: Final[tuple[str, ...]] = ("rgb_array",)
 
     def __init__(
         self,
@@ -383,6 +393,27 @@ class GameCore:
         st.distance = self.kernel.out.distance
         self._actions = np.zeros((b, n, 2))
         self._pose_buf = np.zeros((b, n, 3))
+        self.depth = float(sc.site.operating_depth)  # m, every vehicle's depth
+        lim = self.robots.limits
+        self._action_bounds = (
+            np.stack([lim[:, 0], -lim[:, 2]], axis=1),
+            np.stack([lim[:, 1], lim[:, 2]], axis=1),
+        )
+        hm = self.world.heightmap
+        cells = hm.geometry
+        self._seabed = (
+            hm.depth,
+            cells.shape[0],
+            cells.shape[1],
+            cells.origin[0],
+            cells.origin[1],
+            1.0 / cells.resolution,
+        )
+        self._poses6 = np.zeros((b, n, 6))
+        self._poses6[..., 2] = self.depth
+        self._velocity6 = np.zeros((b, n, 6))
+        self._spaces: dict[tuple[str, str], gymnasium.spaces.Box] = {}
+        self._renderer: Any = None
         self._terms = self.kernel.out.terms()
         self._flags = self.kernel.out.flags()
         self._terminated = self.kernel.out.terminated_agent.view(np.bool_)
@@ -481,6 +512,8 @@ class GameCore:
         s.ranges[envs] = ranges[envs]
         np.copyto(s.prev_distance, s.distance)
         self._evaluate(bookkeeping=False)
+        if self._renderer is not None:
+            self._renderer.reset()
         return s.obs
 
     def step(self, actions: npt.ArrayLike) -> StepResult:
@@ -493,16 +526,7 @@ class GameCore:
             actions: ``(B, N, 2)`` ``[v, omega]`` per agent [m/s, rad/s] (Eq. 16); clipped to
                 each vehicle's limits (Eq. 15).
         """
-        a = self._actions
-        b, n = self.num_envs, self.num_agents
-        if np.shape(actions) != (b, n, 2):
-            raise ValueError(f"actions must have shape (B, N, 2) = ({b}, {n}, 2); got {np.shape(actions)}")
-        np.copyto(a, actions)
-        if not np.isfinite(a.sum()):  # one reduction; find the culprit only on failure
-            e, i = (int(j[0]) for j in np.nonzero(~np.isfinite(a).all(axis=-1)))
-            raise ValueError(
-                f"the action of {self.agents[i]} in environment {e} is not finite: {a[e, i].tolist()}"
-            )
+        a = check_actions(self, actions, out=self._actions)
         s = self.state
         any_done = bool(s.done.any())
         running = ~s.done
@@ -532,24 +556,217 @@ class GameCore:
             terms=self._terms,
             flags=self._flags,
             done=self._newly_done,
+            causes=_NO_CAUSES,
+        )
+
+    # -- the rest of the game protocol ----------------------------------------------------------------
+
+    @property
+    def obs(self) -> F32:
+        """``(B, N, obs_size)`` the latest observations (Eq. 14)."""
+        return self.state.obs
+
+    @property
+    def active(self) -> Bool:
+        """``(B, N)`` agents still acting in their episode."""
+        return self.state.active
+
+    @property
+    def done(self) -> Bool:
+        """``(B,)`` environments whose episode is over."""
+        return self.state.done
+
+    @property
+    def steps(self) -> I64:
+        """``(B,)`` steps taken in each environment's episode."""
+        return self.state.steps
+
+    @property
+    def episode_return(self) -> F64:
+        """``(B, N)`` each agent's undiscounted return so far."""
+        return self.state.episode_return
+
+    @property
+    def distance(self) -> F64:
+        """``(B, N)`` true distance to each agent's target [m]."""
+        return self.state.distance
+
+    @property
+    def ranges(self) -> F64:
+        """``(B, N, K)`` the measured sonar ranges [m]."""
+        return self.state.ranges
+
+    @property
+    def poses(self) -> F64:
+        """``(B, N, 6)`` ``[x, y, z, 0, 0, psi]``, ``z`` the operating depth (a buffer refreshed here)."""
+        p = self._poses6
+        p[..., 0:2] = self.state.positions
+        p[..., 5] = self.state.yaw
+        return p
+
+    @property
+    def velocity(self) -> F64:
+        """``(B, N, 6)`` ``[u, v, 0, 0, 0, r]`` [m/s, rad/s] (a buffer refreshed here)."""
+        nu = self._velocity6
+        v = self.state.velocity
+        nu[..., 0:2] = v[..., 0:2]
+        nu[..., 5] = v[..., 2]
+        return nu
+
+    @property
+    def altitude(self) -> F64:
+        """``(B, N)`` the seabed's depth under each vehicle less the operating depth [m].
+
+        The seabed's depth is :meth:`~hptvsim.world.terrain.HeightMap.depth_at` (bilinear); for a
+        few vehicles (the single-environment views) it is evaluated point by point, with the
+        same arithmetic, because numpy's per-call cost would dominate the step.
+        """
+        positions = self.state.positions
+        b, n = positions.shape[:2]
+        if b * n > _SCALAR_POINTS:
+            altitude: F64 = self.world.heightmap.depth_at(positions) - self.depth
+            return altitude
+        d, nx, ny, ox, oy, inv = self._seabed
+        i_max, j_max, z = max(nx - 2, 0), max(ny - 2, 0), self.depth
+        out = []
+        for x, y in positions.reshape(-1, 2).tolist():  # terrain.bilinear, unrolled
+            fi = min(max((x - ox) * inv, 0.0), nx - 1.0)
+            fj = min(max((y - oy) * inv, 0.0), ny - 1.0)
+            i0, j0 = min(int(fi), i_max), min(int(fj), j_max)
+            i1, j1 = min(i0 + 1, nx - 1), min(j0 + 1, ny - 1)
+            ti, tj = fi - i0, fj - j0
+            v00, v01, v10, v11 = d.item(i0, j0), d.item(i0, j1), d.item(i1, j0), d.item(i1, j1)
+            top = v00 + (v01 - v00) * tj
+            bottom = v10 + (v11 - v10) * tj
+            out.append(top + (bottom - top) * ti - z)
+        return np.array(out).reshape(b, n)
+
+    @property
+    def action_bounds(self) -> tuple[F64, F64]:
+        """``(N, 2)`` ``[v_min, -omega_max]`` and ``[v_max, omega_max]`` of each agent (Eq. 15)."""
+        return self._action_bounds
+
+    def _agent(self, agent: str) -> int:
+        try:
+            return self.agents.index(agent)
+        except ValueError:
+            raise ValueError(f"unknown agent {agent!r}; agents: {', '.join(self.agents)}") from None
+
+    def observation_space(self, agent: str) -> gymnasium.spaces.Box:
+        """An agent's observation space (Eq. 14; one object per agent)."""
+        key = ("obs", agent)
+        if key not in self._spaces:
+            self._agent(agent)
+            self._spaces[key] = action_box(*self.layout.bounds())
+        return self._spaces[key]
+
+    def action_space(self, agent: str) -> gymnasium.spaces.Box:
+        """An agent's action space ``[v_min, v_max] x [-omega_max, omega_max]`` (Eqs. 15-16)."""
+        key = ("act", agent)
+        if key not in self._spaces:
+            i = self._agent(agent)
+            self._spaces[key] = action_box(self._action_bounds[0][i], self._action_bounds[1][i])
+        return self._spaces[key]
+
+    def info(self, result: StepResult | None, env: int, agent: int) -> dict[str, Any]:
+        """One agent's info (:data:`~hptvsim.envs.protocol.INFO_KEYS`)."""
+        return agent_infos(self, result, env)[agent]
+
+    def infos(self, result: StepResult | None, env: int) -> list[dict[str, Any]]:
+        """Every agent's info in one environment (:data:`~hptvsim.envs.protocol.INFO_KEYS`)."""
+        return agent_infos(self, result, env)
+
+    def global_state(self, env: int) -> F64:
+        """``x, y, psi, u, v, r`` of every vehicle, flattened (N * 6)."""
+        s = self.state
+        return np.concatenate([s.positions[env], s.yaw[env, :, None], s.velocity[env]], axis=1).ravel()
+
+    def commands(self, actions: npt.ArrayLike, agent: int | None = None) -> F64:
+        """Actions ``[v, omega]`` are the commands: clipped to the limits (Eq. 15).
+
+        Args:
+            actions: ``(..., N, 2)``, or, with ``agent``, ``(..., 2)`` of that agent.
+            agent: The agent's index, when ``actions`` are one agent's.
+        """
+        a = np.asarray(actions, dtype=np.float64)
+        if agent is None:
+            return self.robots.clip(a)
+        low, high = self._action_bounds
+        clipped: F64 = np.clip(a, low[agent], high[agent])
+        return clipped
+
+    def to_actions(self, commands: npt.ArrayLike, agent: int | None = None) -> F64:
+        """The inverse of :meth:`commands`: the commands, clipped to the limits."""
+        return self.commands(commands, agent)
+
+    def scripted_policy(self, name: str, agent: str, *, seed: int | None = None) -> Policy:
+        """A scripted policy (:data:`~hptvsim.envs.policies.POLICY_NAMES`) driving ``agent``."""
+        i = self._agent(agent)
+        v_min, v_max, om = self.robots.limits[i]
+        return make_policy(
+            name,
+            layout=self.layout,
+            limits=Limits(v_min=v_min, v_max=v_max, omega_max=om),
+            beam_angles=self.robots.beam_angles,
+            dt=self.dt,
+            seed=seed,
+        )
+
+    def default_policy(self, agent: str) -> str:
+        """Pursuers, and every agent in goto, ``pure_pursuit``; evaders ``potential_field``."""
+        i = self._agent(agent)
+        return "pure_pursuit" if self.goto or self.pursuer[i] else "potential_field"
+
+    def render(self, env: int = 0) -> npt.NDArray[np.uint8]:
+        """A top-down RGB image of environment ``env`` (:class:`~hptvsim.envs.render.TopDownRenderer`).
+
+        The renderer is made on the first call; its trails restart at every :meth:`reset`.
+        """
+        if self._renderer is None:
+            from hptvsim.envs.render import TopDownRenderer
+
+            self._renderer = TopDownRenderer(
+                site=self.site,
+                depth=np.asarray(self.world.heightmap.depth),
+                occupied=np.asarray(self.grid.occupied),
+                extent=self.grid.geometry.extent,
+                pursuer=self.pursuer,
+                beam_angles=self.robots.beam_angles,
+            )
+        s = self.state
+        image: npt.NDArray[np.uint8] = self._renderer.render(
+            positions=s.positions[env],
+            yaw=s.yaw[env],
+            ranges=s.ranges[env],
+            radii=self.robots.radii,
+            goals=None if s.goals is None else s.goals[env],
+            active=s.active[env],
+        )
+        return image
+
+    def scene(self, env: int = 0) -> Scene:
+        """The static scene of environment ``env`` (goals at the operating depth)."""
+        s = self.state
+        goals = None
+        if s.goals is not None:
+            goals = np.concatenate([s.goals[env], np.full((self.num_agents, 1), self.depth)], axis=1)
+        return Scene(
+            vertical=False,
+            radii=self.robots.radii.copy(),
+            command_low=self._action_bounds[0].copy(),
+            command_high=self._action_bounds[1].copy(),
+            beam_azimuth=self.robots.beam_angles.copy(),
+            beam_elevation=None,
+            max_range=float(self.robots.max_range),
+            obstacles=self.world.obstacles,
+            fence=self.fence,
+            goals=goals,
+            goal_radius=self.goal_radius.copy() if self.goto else None,
         )
 
     def close(self) -> None:
         """Release the simulation's native resources."""
         self.system.close()
-
-
-def scenario_argument(scenario: Scenario | str) -> Scenario:
-    """A game's ``scenario`` argument as a Scenario (a shipped name or a path is loaded).
-
-    Raises:
-        TypeError: Neither a Scenario nor a string.
-        ScenarioError: No such scenario, or an invalid one.
-    """
-    sc = load_scenario(scenario) if isinstance(scenario, str) else scenario
-    if not isinstance(sc, Scenario):
-        raise TypeError(f"scenario must be a Scenario, a shipped scenario's name or a path; got {scenario!r}")
-    return sc
 
 
 def planar_scenario(scenario: Scenario | str, who: str) -> Scenario:
@@ -577,32 +794,6 @@ def planar_scenario(scenario: Scenario | str, who: str) -> Scenario:
             "hptvsim/UPEG3D-* Gymnasium ids)"
         )
     return sc
-
-
-def common_overrides(
-    sc: Scenario,
-    *,
-    task: str | None = None,
-    max_steps: int | None = None,
-    reward: Mapping[str, float] | None = None,
-) -> dict[str, Any]:
-    """The scenario changes that the planar and the 3-D game's ``task``, ``max_steps`` and ``reward`` ask.
-
-    Raises:
-        ValueError: An invalid task or step limit (the message says what is valid).
-    """
-    overrides: dict[str, Any] = {}
-    if task is not None and task != sc.task.kind:
-        if task not in ("pursuit", "goto"):
-            raise ValueError(f"task = {task!r} is invalid; valid: 'pursuit', 'goto'")
-        overrides["task"] = {"kind": task}
-    if max_steps is not None:
-        if isinstance(max_steps, bool) or not float(max_steps).is_integer() or max_steps < 1:
-            raise ValueError(f"max_steps = {max_steps!r} is invalid; valid: an integer >= 1")
-        overrides["simulation"] = {"max_steps": int(max_steps)}
-    if reward:
-        overrides.setdefault("task", {})["reward"] = {k: float(v) for k, v in reward.items()}
-    return overrides
 
 
 def _overrides(agent: Any) -> dict[str, float]:

@@ -12,14 +12,12 @@ from __future__ import annotations
 
 import ctypes
 import dataclasses
-import threading
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
 from hptvsim.envs.task import EndFlags, ObsLayout, RewardTerms
-from hptvsim.native import compile_c
 from hptvsim.world.grid import OccupancyGrid
 from hptvsim.world.scenario import Task
 
@@ -31,23 +29,22 @@ U8 = npt.NDArray[np.uint8]
 I64 = npt.NDArray[np.int64]
 
 _FLAGS = ("-O2", "-std=c99", "-fPIC", "-shared", "-ffp-contract=off", "-fno-fast-math")
-_lock = threading.Lock()
-_lib: ctypes.CDLL | None = None
 
 
 def _library() -> ctypes.CDLL:
-    global _lib
-    with _lock:
-        if _lib is None:
-            lib = ctypes.CDLL(
-                str(compile_c("hptvsim.envs", "task_kernel.c", flags=_FLAGS, what="the task-layer kernel"))
-            )
-            lib.hptv_task_eval.restype = ctypes.c_int
-            lib.hptv_task_eval.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int64, ctypes.c_int64]
-            lib.hptv_task_commands.restype = None
-            lib.hptv_task_commands.argtypes = [ctypes.c_void_p] * 4 + [ctypes.c_int64] * 3
-            _lib = lib
-        return _lib
+    """``task_kernel.c``, compiled, loaded and typed once (:func:`hptvsim.native.load_library`)."""
+    from pathlib import Path
+
+    from hptvsim.native import load_library
+
+    def declare(lib: ctypes.CDLL) -> None:
+        lib.hptv_task_eval.restype = ctypes.c_int
+        lib.hptv_task_eval.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int64, ctypes.c_int64]
+        lib.hptv_task_commands.restype = None
+        lib.hptv_task_commands.argtypes = [ctypes.c_void_p] * 4 + [ctypes.c_int64] * 3
+
+    source = Path(__file__).with_name("task_kernel.c")
+    return load_library(source, flags=_FLAGS, declare=declare, what="the task-layer kernel")
 
 
 class _Task(ctypes.Structure):

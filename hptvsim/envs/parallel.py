@@ -1,20 +1,32 @@
-"""The underwater pursuit-evasion game (UPEG) as a PettingZoo ParallelEnv."""
+"""Every game as a PettingZoo ParallelEnv, written once against :class:`~hptvsim.envs.protocol.Game`."""
 
 from __future__ import annotations
 
 import functools
 from collections.abc import Mapping
-from typing import Any, ClassVar, Literal
+from typing import Any, ClassVar
 
 import gymnasium
 import numpy as np
 import numpy.typing as npt
 from pettingzoo import ParallelEnv
 
-from hptvsim.envs.core import Backend, GameCore
+from hptvsim.envs.games import make_game
+from hptvsim.envs.protocol import Game
+from hptvsim.envs.shared import check_agent_action
 from hptvsim.world.scenario import Scenario
 
-__all__ = ["UPEGParallelEnv", "make_renderer", "parallel_env", "render_core"]
+__all__ = [
+    "AgentSpaces",
+    "GameParallelEnv",
+    "UPEGParallelEnv",
+    "make_renderer",
+    "parallel_env",
+    "render_core",
+]
+
+F32 = npt.NDArray[np.float32]
+F64 = npt.NDArray[np.float64]
 
 
 class AgentSpaces:
@@ -45,8 +57,181 @@ class AgentSpaces:
         return agent
 
 
-class UPEGParallelEnv(AgentSpaces, ParallelEnv[str, npt.NDArray[np.float32], npt.NDArray[np.float32]]):  # type: ignore[misc]  # pettingzoo is untyped here
-    """UPEG: work-class UUVs pursue a spherical robot over seabed terrain (paper section IV-A).
+class GameParallelEnv(AgentSpaces, ParallelEnv[str, F32, F32]):  # type: ignore[misc]  # pettingzoo is untyped here
+    """Any game (:class:`~hptvsim.envs.protocol.Game`) as a PettingZoo ParallelEnv: every agent acts.
+
+    ## Description
+    One environment of the game the scenario is made for (``[simulation] game``, or ``game``):
+    the planar UPEG of the paper (section IV-A; :class:`~hptvsim.envs.core.GameCore`), the 3-D
+    game of diving vehicles (:class:`~hptvsim.envs.core3d.Game3DCore`) or any registered game
+    (:mod:`hptvsim.envs.games`). The agents are the game's (``pursuer_0..``, ``evader_0..``).
+
+    ## Action Space
+    The game's per agent (``Game.action_space``): planar ``[v, omega]`` [m/s, rad/s] within the
+    vehicle's limits (Eqs. 15-16); 3-D the normalised ``[a_v, a_omega, a_w]`` in ``[-1, 1]^3``.
+    Out-of-range values are clipped to the box; a non-finite value, a wrong shape, an unknown or
+    a finished agent raises ``ValueError``. Agents absent from ``step``'s actions command zero
+    (``Game.to_actions`` of zero commands: no speed, no turn, clipped to the limits).
+
+    ## Observation Space
+    The game's per agent (planar: Eq. 14, :mod:`hptvsim.envs.task`; 3-D:
+    :class:`~hptvsim.envs.obs3d.Obs3DLayout`).
+
+    ## Rewards
+    Eqs. 17-20 with the scenario's weights (the game's rules).
+
+    ## Starting State
+    The game's spawn rules, seeded by ``reset(seed=...)``.
+
+    ## Episode End
+    The game's rules: capture, collision and leaving the site end it for every agent, a goal
+    reached (goto) for that agent; the step limit truncates.
+
+    ``info`` of every agent has the keys of :data:`~hptvsim.envs.protocol.INFO_KEYS` in every
+    game (after a reset, those up to ``step``); :meth:`state` is the game's global state.
+
+    ## Arguments
+    ``scenario`` (name, path or :class:`~hptvsim.world.scenario.Scenario`), ``game`` (play this
+    game instead of the scenario's), ``render_mode`` (one of the game's ``render_modes``: the
+    planar game's ``"rgb_array"``), and the game's options (:func:`hptvsim.envs.games.game_options`:
+    ``backend``, ``task``, ``max_steps``, ``seed``, ``reward``, ...), passed through to
+    :func:`~hptvsim.envs.games.make_game`.
+
+    ## Version History
+    * v0: first release.
+    """
+
+    metadata: dict[str, Any] = {  # noqa: RUF012 - PettingZoo's attribute
+        "name": "hptvsim_game_v0",
+        "render_modes": [],
+        "render_fps": 4,
+        "is_parallelizable": True,
+    }
+    default_scenario: ClassVar[str] = "source"
+    """The scenario when none is given."""
+    default_game: ClassVar[str | None] = None
+    """The game when none is given (None: the scenario's)."""
+
+    def __init__(
+        self,
+        scenario: Scenario | str | None = None,
+        *,
+        game: str | None = None,
+        render_mode: str | None = None,
+        **options: Any,
+    ) -> None:
+        core = make_game(
+            self.default_scenario if scenario is None else scenario,
+            num_envs=1,
+            game=self.default_game if game is None else game,
+            defaults={"threads": 1},
+            **options,
+        )
+        if render_mode is not None and render_mode not in core.render_modes:
+            core.close()
+            valid = ", ".join(["None", *map(repr, core.render_modes)])
+            raise ValueError(f"render_mode = {render_mode!r} is invalid; valid: {valid}")
+        self.game: Game = core
+        self.metadata = {**type(self).metadata, "render_modes": list(core.render_modes)}
+        self.render_mode = render_mode
+        self.possible_agents = list(core.agents)
+        self.agents: list[str] = []
+        self._index = {name: i for i, name in enumerate(self.possible_agents)}
+        self._obs_space = {a: core.observation_space(a) for a in self.possible_agents}
+        self._act_space = {a: core.action_space(a) for a in self.possible_agents}
+        n, k = len(self.possible_agents), core.action_bounds[0].shape[-1]
+        self._idle = core.to_actions(np.zeros((n, len(core.command_fields))))  # (N, A): zero commands
+        self._actions = np.zeros((1, n, k))
+        self.max_cycles = core.max_steps
+
+    @property
+    def core(self) -> Any:
+        """The game (:attr:`game`), under its earlier name (typed loosely: any game's own attributes)."""
+        return self.game
+
+    # -- the API -----------------------------------------------------------------------------------
+
+    def reset(
+        self, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, F32], dict[str, dict[str, Any]]]:
+        """Start an episode; ``seed`` seeds spawn poses and sensor noise."""
+        obs = self.game.reset(seed=seed)[0]
+        self.agents = list(self.possible_agents)
+        infos = self.game.infos(None, 0)
+        return (
+            {a: obs[i].copy() for a, i in self._index.items()},
+            {a: infos[i] for a, i in self._index.items()},
+        )
+
+    def step(
+        self, actions: Mapping[str, npt.ArrayLike]
+    ) -> tuple[dict[str, F32], dict[str, float], dict[str, bool], dict[str, bool], dict[str, dict[str, Any]]]:
+        """Advance one control step; every agent still in :attr:`agents` may act.
+
+        Agents absent from ``actions`` command zero (see the class docstring). Actions are
+        clipped to the action space.
+
+        Raises:
+            ValueError: An unknown or finished agent, a wrong shape or a non-finite value.
+            RuntimeError: ``step`` after the episode ended (call ``reset``).
+        """
+        if not self.agents:
+            raise RuntimeError("the episode is over; call reset() before step()")
+        game = self.game
+        act = self._actions
+        act[0] = self._idle
+        index = self._index
+        live = self.agents
+        for agent, a in actions.items():
+            i = index.get(agent)
+            if i is None:
+                raise ValueError(f"unknown agent {agent!r}; agents: {', '.join(self.possible_agents)}")
+            if agent not in live:
+                raise ValueError(f"{agent} has finished its episode and cannot act")
+            check_agent_action(game, i, a)
+            act[0, i] = a
+        result = game.step(act)
+        obs_all = result.obs[0].copy()
+        rew_l = result.reward[0].tolist()
+        term_l = result.terminated[0].tolist()
+        trunc_l = result.truncated[0].tolist()
+        infos_l = game.infos(result, 0)
+        obs: dict[str, F32] = {}
+        rew: dict[str, float] = {}
+        term: dict[str, bool] = {}
+        trunc: dict[str, bool] = {}
+        infos: dict[str, dict[str, Any]] = {}
+        for agent in live:
+            i = index[agent]
+            obs[agent] = obs_all[i]
+            rew[agent] = rew_l[i]
+            term[agent] = term_l[i]
+            trunc[agent] = trunc_l[i]
+            infos[agent] = infos_l[i]
+        self.agents = [a for a in live if not (term[a] or trunc[a])]
+        return obs, rew, term, trunc, infos
+
+    def state(self) -> F64:
+        """The global state, ``Game.global_state``.
+
+        Planar: ``x, y, psi, u, v, r`` of every vehicle (N * 6); 3-D: ``x, y, z, phi, theta, psi,
+        u, v, w, p, q, r`` (N * 12).
+        """
+        return self.game.global_state(0)
+
+    def render(self) -> npt.NDArray[np.uint8] | None:
+        """The game's image (``render_mode="rgb_array"``: planar, a top-down map), else None."""
+        if self.render_mode != "rgb_array":
+            return None
+        return self.game.render(0)
+
+    def close(self) -> None:
+        """Release the simulation."""
+        self.game.close()
+
+
+class UPEGParallelEnv(GameParallelEnv):
+    """The planar UPEG as a PettingZoo ParallelEnv (:class:`GameParallelEnv` playing ``"planar"``).
 
     ## Description
     By default 3 work-class pursuers ``pursuer_0..2`` chase 1 spherical evader ``evader_0`` on a
@@ -54,7 +239,8 @@ class UPEGParallelEnv(AgentSpaces, ParallelEnv[str, npt.NDArray[np.float32], npt
     3-DOF Fossen model with its low-level controller (paper Eqs. 4-8, 15-16), stepped every
     ``dt = 0.25 s`` on the FMU backend (one FMI 2.0 CS instance per vehicle) or the batched
     backend; both give identical numbers for the same seed. The ``goto`` task (reach a goal
-    point) is the paper's first training stage in the source scenario.
+    point) is the paper's first training stage in the source scenario. A 3-D scenario is played
+    flat, at its operating depth.
 
     ## Action Space
     ``Box([v_min, -omega_max], [v_max, omega_max], float32)`` per agent: commanded surge speed
@@ -83,218 +269,35 @@ class UPEGParallelEnv(AgentSpaces, ParallelEnv[str, npt.NDArray[np.float32], npt
 
     ## Arguments
     ``scenario`` (name, path or :class:`~hptvsim.world.scenario.Scenario`; default
-    ``"source"``), ``backend`` (``"batched"`` or ``"fmu"``), ``task`` (override the scenario's),
-    ``sensor_fidelity`` (``"geometric"`` or ``"signal"``), ``fence`` (the site's edge is a wall
-    the sonar sees; default True), ``extended_obs``, ``max_steps``, ``seed``,
-    ``vehicle_parameters`` and ``reward`` (per-role vehicle limits and ``[task.reward]`` overrides),
-    ``render_mode`` (``None`` or ``"rgb_array"``).
+    ``"source"``), ``render_mode`` (``None`` or ``"rgb_array"``) and the options of
+    :class:`~hptvsim.envs.core.GameCore`: ``backend`` (``"batched"`` or ``"fmu"``), ``task``
+    (override the scenario's), ``sensor_fidelity`` (``"geometric"`` or ``"signal"``), ``fence``
+    (the site's edge is a wall the sonar sees; default True), ``extended_obs``, ``max_steps``,
+    ``seed``, ``vehicle_parameters`` and ``reward`` (per-role vehicle limits and
+    ``[task.reward]`` overrides).
 
     ## Version History
     * v0: first release.
     """
 
-    metadata: ClassVar[dict[str, Any]] = {
+    metadata: dict[str, Any] = {  # noqa: RUF012 - PettingZoo's attribute
         "name": "hptvsim_upeg_v0",
         "render_modes": ["rgb_array"],
         "render_fps": 4,
         "is_parallelizable": True,
     }
-
-    def __init__(
-        self,
-        scenario: Scenario | str = "source",
-        *,
-        backend: Backend = "batched",
-        task: Literal["pursuit", "goto"] | None = None,
-        sensor_fidelity: Literal["geometric", "signal"] | None = None,
-        fence: bool = True,
-        extended_obs: bool = False,
-        max_steps: int | None = None,
-        seed: int | None = None,
-        vehicle_parameters: Mapping[str, Mapping[str, float]] | None = None,
-        reward: Mapping[str, float] | None = None,
-        render_mode: str | None = None,
-    ) -> None:
-        if render_mode not in (None, "rgb_array"):
-            raise ValueError(f"render_mode = {render_mode!r} is invalid; valid: None, 'rgb_array'")
-        self.core = GameCore(
-            scenario,
-            num_envs=1,
-            backend=backend,
-            task=task,
-            sensor_fidelity=sensor_fidelity,
-            vehicle_parameters=vehicle_parameters,
-            reward=reward,
-            fence=fence,
-            extended_obs=extended_obs,
-            max_steps=max_steps,
-            seed=seed,
-            threads=1,
-        )
-        self.render_mode = render_mode
-        self.possible_agents = list(self.core.agents)
-        self.agents: list[str] = []
-        self._index = {name: i for i, name in enumerate(self.possible_agents)}
-        low, high = self.core.layout.bounds()
-        self._obs_space = {a: gymnasium.spaces.Box(low, high, dtype=np.float32) for a in self.possible_agents}
-        lim = self.core.robots.limits
-        self._act_space = {
-            a: gymnasium.spaces.Box(
-                np.array([lim[i, 0], -lim[i, 2]], dtype=np.float32),
-                np.array([lim[i, 1], lim[i, 2]], dtype=np.float32),
-                dtype=np.float32,
-            )
-            for a, i in self._index.items()
-        }
-        self._actions = np.zeros((1, len(self.possible_agents), 2))
-        self._renderer: Any = None
-        self.max_cycles = self.core.max_steps
-
-    # -- the API -----------------------------------------------------------------------------------
-
-    def reset(
-        self, seed: int | None = None, options: dict[str, Any] | None = None
-    ) -> tuple[dict[str, npt.NDArray[np.float32]], dict[str, dict[str, Any]]]:
-        """Start an episode; ``seed`` seeds spawn poses and sensor noise."""
-        obs = self.core.reset(seed=seed)[0]
-        self.agents = list(self.possible_agents)
-        if self._renderer is not None:
-            self._renderer.reset()
-        return (
-            {a: obs[i].copy() for a, i in self._index.items()},
-            {a: self._info(i) for a, i in self._index.items()},
-        )
-
-    def _info(self, i: int) -> dict[str, Any]:
-        s = self.core.state
-        return {
-            "distance": float(s.distance[0, i]),
-            "min_range": float(s.ranges[0, i].min()),
-            "step": int(s.steps[0]),
-        }
-
-    def step(
-        self, actions: dict[str, npt.ArrayLike]
-    ) -> tuple[
-        dict[str, npt.NDArray[np.float32]],
-        dict[str, float],
-        dict[str, bool],
-        dict[str, bool],
-        dict[str, dict[str, Any]],
-    ]:
-        """Advance one control step; every agent still in :attr:`agents` may act.
-
-        Agents absent from ``actions`` keep still (``[v_min, 0]``). Actions are clipped to the
-        action space.
-
-        Raises:
-            ValueError: An unknown or finished agent, a wrong shape or a non-finite value.
-            RuntimeError: ``step`` after the episode ended (call ``reset``).
-        """
-        if not self.agents:
-            raise RuntimeError("the episode is over; call reset() before step()")
-        act = self._actions
-        act[...] = 0.0
-        index = self._index
-        live = self.agents
-        for agent, a in actions.items():
-            i = index.get(agent)
-            if i is None:
-                raise ValueError(f"unknown agent {agent!r}; agents: {', '.join(self.possible_agents)}")
-            if agent not in live:
-                raise ValueError(f"{agent} has finished its episode and cannot act")
-            if np.shape(a) != (2,):
-                raise ValueError(
-                    f"the action of {agent} must have shape (2,) = [v, omega]; got {np.shape(a)}"
-                )
-            act[0, i] = a
-        result = self.core.step(act)
-        flags = result.flags
-        s = self.core.state
-        obs_all = result.obs[0].copy()
-        rew_l = result.reward[0].tolist()
-        term_l = result.terminated[0].tolist()
-        trunc_l = result.truncated[0].tolist()
-        dist_l = s.distance[0].tolist()
-        rmin_l = s.ranges[0].min(axis=1).tolist()
-        coll_l = flags.collision[0].tolist()
-        out_l = flags.out_of_site[0].tolist()
-        reach_l = flags.reached[0].tolist()
-        rc_l = result.terms.r_C[0].tolist()
-        re1_l = result.terms.r_E1[0].tolist()
-        re2_l = result.terms.r_E2[0].tolist()
-        captured = bool(flags.captured[0])
-        step = int(s.steps[0])
-        obs: dict[str, npt.NDArray[np.float32]] = {}
-        rew: dict[str, float] = {}
-        term: dict[str, bool] = {}
-        trunc: dict[str, bool] = {}
-        infos: dict[str, dict[str, Any]] = {}
-        for agent in self.agents:
-            i = self._index[agent]
-            obs[agent] = obs_all[i]
-            rew[agent] = rew_l[i]
-            term[agent] = term_l[i]
-            trunc[agent] = trunc_l[i]
-            infos[agent] = {
-                "distance": dist_l[i],
-                "min_range": rmin_l[i],
-                "step": step,
-                "captured": captured,
-                "collision": coll_l[i],
-                "out_of_site": out_l[i],
-                "reached": reach_l[i],
-                "r_C": rc_l[i],
-                "r_E1": re1_l[i],
-                "r_E2": re2_l[i],
-            }
-        self.agents = [a for a in self.agents if not (term[a] or trunc[a])]
-        return obs, rew, term, trunc, infos
-
-    def state(self) -> npt.NDArray[np.float64]:
-        """The global state: ``x, y, psi, u, v, r`` of every vehicle, flattened (N * 6)."""
-        s = self.core.state
-        return np.concatenate([s.positions[0], s.yaw[0, :, None], s.velocity[0]], axis=1).ravel()
-
-    def render(self) -> npt.NDArray[np.uint8] | None:
-        """A top-down RGB image (``render_mode="rgb_array"``), else None."""
-        if self.render_mode != "rgb_array":
-            return None
-        if self._renderer is None:
-            self._renderer = make_renderer(self.core)
-        return render_core(self._renderer, self.core, 0)
-
-    def close(self) -> None:
-        """Release the simulation."""
-        self.core.close()
+    default_scenario: ClassVar[str] = "source"
+    default_game: ClassVar[str | None] = "planar"
 
 
-def make_renderer(core: GameCore) -> Any:
-    """A :class:`~hptvsim.envs.render.TopDownRenderer` for a core's scenario."""
-    from hptvsim.envs.render import TopDownRenderer
-
-    return TopDownRenderer(
-        site=core.site,
-        depth=np.asarray(core.world.heightmap.depth),
-        occupied=np.asarray(core.grid.occupied),
-        extent=core.grid.geometry.extent,
-        pursuer=core.pursuer,
-        beam_angles=core.robots.beam_angles,
-    )
+def make_renderer(core: Any) -> Any:
+    """Nothing to make: a game draws itself (``Game.render``); returns the game (the earlier helper)."""
+    return core
 
 
-def render_core(renderer: Any, core: GameCore, b: int) -> npt.NDArray[np.uint8]:
-    """Render environment ``b`` of a core."""
-    s = core.state
-    image: npt.NDArray[np.uint8] = renderer.render(
-        positions=s.positions[b],
-        yaw=s.yaw[b],
-        ranges=s.ranges[b],
-        radii=core.robots.radii,
-        goals=None if s.goals is None else s.goals[b],
-        active=s.active[b],
-    )
-    return image
+def render_core(renderer: Any, core: Game, b: int) -> npt.NDArray[np.uint8]:
+    """Render environment ``b`` of a game (``Game.render``; the earlier helper)."""
+    return core.render(b)
 
 
 def parallel_env(scenario: Scenario | str = "source", **kwargs: Any) -> UPEGParallelEnv:

@@ -2,9 +2,9 @@
 
 Every policy follows the planar :class:`~hptvsim.envs.policies.Policy` interface
 (``act(obs, episode_start)``, vectorised over leading dimensions) on the 3-D observation
-(:class:`~hptvsim.envs.game3d.Obs3DLayout`) and returns the 3-D game's **normalised** actions
+(:class:`~hptvsim.envs.obs3d.Obs3DLayout`) and returns the 3-D game's **normalised** actions
 ``[a_v, a_omega, a_w]`` in ``[-1, 1]`` (``a_v = -1``: ``v_min``, ``+1``: ``v_max``; see
-:mod:`hptvsim.envs.game3d`). The names are the planar ones:
+:mod:`hptvsim.envs.core3d`). The names are the planar ones:
 
 * :class:`PurePursuit3D` (``"pure_pursuit"``): yaw rate towards the target's bearing, vertical
   speed towards its depth, full speed, climbing over a seabed that rises ahead;
@@ -17,16 +17,16 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import TYPE_CHECKING, Any, Final
+from typing import Any, Final
 
 import numpy as np
 import numpy.typing as npt
 
+from hptvsim.envs.obs3d import Obs3DLayout
 from hptvsim.envs.policies import Policy
+from hptvsim.envs.protocol import Game
+from hptvsim.envs.shared import build_policies
 from hptvsim.envs.task import wrap
-
-if TYPE_CHECKING:
-    from hptvsim.envs.game3d import Game3DCore, Obs3DLayout
 
 __all__ = [
     "POLICY_NAMES_3D",
@@ -247,40 +247,14 @@ def make_policy_3d(name: str, layout: Obs3DLayout) -> Policy:
 
 
 def build_policies_3d(
-    core: Game3DCore, agents: list[str], given: Mapping[str, Any] | None, *, seed: int | None = None
+    core: Game, agents: list[str], given: Mapping[str, Any] | None, *, seed: int | None = None
 ) -> dict[str, Policy]:
-    """Policies for ``agents``: given ones (names or objects with ``act``), defaults otherwise.
+    """Policies for ``agents`` of the 3-D game: :func:`hptvsim.envs.shared.build_policies` (the earlier name).
 
     Defaults: pursuers ``pure_pursuit``, evaders ``potential_field``; in goto every agent
-    ``pure_pursuit`` (its goal is its target). ``seed`` is accepted for the planar signature; the
-    3-D scripted policies draw no random numbers.
+    ``pure_pursuit`` (its goal is its target). The 3-D scripted policies draw no random numbers.
 
     Raises:
         ValueError: A policy for an unknown agent, an unknown name or one made for the other role.
     """
-    given = dict(given or {})
-    unknown = sorted(set(given) - set(core.agents))
-    if unknown:
-        raise ValueError(f"policies given for unknown agents {unknown}; agents: {', '.join(core.agents)}")
-    out: dict[str, Policy] = {}
-    for agent in agents:
-        i = core.agents.index(agent)
-        role = "pursuer" if core.pursuer[i] else "evader"
-        default = "pure_pursuit" if core.goto or role == "pursuer" else "potential_field"
-        spec = given.get(agent, default)
-        if isinstance(spec, str):
-            name = spec.removeprefix("scripted:")
-            if name in POLICY_ROLES_3D and role not in POLICY_ROLES_3D[name] and not core.goto:
-                fits = [n for n, roles in POLICY_ROLES_3D.items() if role in roles]
-                raise ValueError(
-                    f"policy {spec!r} drives {' and '.join(POLICY_ROLES_3D[name])}, not {agent} ({role}); "
-                    f"valid for {agent}: {', '.join(fits)}"
-                )
-            out[agent] = make_policy_3d(name, core.layout)
-        elif isinstance(spec, Policy):
-            out[agent] = spec
-        else:
-            raise ValueError(
-                f"the policy of {agent} must be a 3-D scripted policy's name or have act(obs); got {spec!r}"
-            )
-    return out
+    return build_policies(core, agents, given, seed=seed)

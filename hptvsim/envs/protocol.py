@@ -4,8 +4,10 @@ A game is ``B`` environments of one scenario stepped together, each with the sam
 (pursuers and evaders, or goto seekers). Everything above the games (the PettingZoo ParallelEnv,
 the Gymnasium single-agent views, the vector and SB3 envs, the TorchRL env, the episode engine,
 the policy zoo, the trainers, offline RL and the viewer) is written once against :class:`Game`
-and never asks which game it holds; a new game is one module implementing this protocol (see
-``tests/envs/test_protocol.py`` for a toy third game).
+and never asks which game it holds; a new game is one module implementing this protocol, made
+known with :func:`hptvsim.envs.games.register_game` (``tests/envs/toy_game.py`` is a toy third
+game, a surface vessel escorting a UUV, that ``tests/envs/test_protocol.py`` plays through every
+view).
 
 Conventions (shared by every game):
 
@@ -16,8 +18,14 @@ Conventions (shared by every game):
   :meth:`Game.reset` restarts them (partial resets);
 * the arrays a game returns are its buffers: valid until its next ``step`` or ``reset``;
 * per-agent information (:meth:`Game.info`) has the keys of :data:`INFO_KEYS` in every game
-  (a game without a quantity reports its natural value: 0 for a planar vehicle's ``z``, ``phi``
-  and ``theta``; ``False`` for a cause that cannot happen in it).
+  (a game without a quantity reports its natural value: a planar vehicle's ``z`` is the site's
+  operating depth, where it stays, its ``phi`` and ``theta`` 0; ``False`` for a cause that cannot
+  happen in it).
+
+Which class plays which game is known in one place only, :mod:`hptvsim.envs.games`
+(:func:`~hptvsim.envs.games.make_game`, :func:`~hptvsim.envs.games.register_game`); what every game
+and view shares (the action check, the info, the scripted policies by name) is written once, against
+this protocol, in :mod:`hptvsim.envs.shared`.
 """
 
 from __future__ import annotations
@@ -30,10 +38,12 @@ import gymnasium
 import numpy as np
 import numpy.typing as npt
 
+from hptvsim.envs.policies import Policy
 from hptvsim.envs.task import EndFlags, RewardTerms
+from hptvsim.world.grid import OccupancyGrid
 from hptvsim.world.scenario import Scenario
 
-__all__ = ["INFO_KEYS", "POSE_FIELDS", "Game", "StepResult"]
+__all__ = ["INFO_KEYS", "POSE_FIELDS", "RESET_INFO_KEYS", "VELOCITY_FIELDS", "Game", "Scene", "StepResult"]
 
 F32 = npt.NDArray[np.float32]
 F64 = npt.NDArray[np.float64]
@@ -42,6 +52,9 @@ I64 = npt.NDArray[np.int64]
 
 POSE_FIELDS = ("x", "y", "z", "phi", "theta", "psi")
 """The pose of every vehicle in every game: position [m] and Euler angles [rad] (Fossen's eta)."""
+
+VELOCITY_FIELDS = ("u", "v", "w", "p", "q", "r")
+"""The body velocity of every vehicle in every game: [m/s] and [rad/s] (Fossen's nu)."""
 
 INFO_KEYS = (
     *POSE_FIELDS,
@@ -61,6 +74,10 @@ INFO_KEYS = (
     "r_E2",  # Eq. 19, unweighted
 )
 """The keys of every agent's info, in every game (one set; see the module docstring)."""
+
+RESET_INFO_KEYS = INFO_KEYS[: INFO_KEYS.index("step") + 1]
+"""The keys of an agent's info after a reset (before any step): the pose, ``altitude``,
+``distance``, ``min_range`` and ``step``."""
 
 
 @dataclass
@@ -89,6 +106,43 @@ class StepResult:
     causes: Mapping[str, Bool] = field(default_factory=dict)
 
 
+@dataclass(frozen=True, kw_only=True)
+class Scene:
+    """What does not change during an episode of one environment: for the frame schema and viewers.
+
+    Attributes:
+        vertical: Whether the vehicles move in depth (their ``z``, ``phi``, ``theta``, heave speed
+            and altitude are states of their own); False where every vehicle keeps the site's
+            operating depth (:data:`POSE_FIELDS` still hold it: ``z`` the operating depth,
+            ``phi = theta = 0``).
+        radii: ``(N,)`` vehicle radii [m].
+        command_low: ``(N, C)`` the smallest command of each agent (:attr:`Game.command_fields`;
+            e.g. ``[v_min, -omega_max]`` [m/s, rad/s]).
+        command_high: ``(N, C)`` the largest (e.g. ``[v_max, omega_max]``).
+        beam_azimuth: ``(K,)`` sonar beam directions relative to the bow [rad], clockwise.
+        beam_elevation: ``(K,)`` their elevations [rad], positive down; None for a planar fan.
+        max_range: Sonar maximum range [m].
+        obstacles: What vehicles hit at their depth, as an occupancy grid (all free where only
+            the seabed is hit, as in the 3-D game).
+        fence: Whether the site's edge is a wall the sonar sees.
+        goals: ``(N, 3)`` each agent's goal ``[x, y, z]`` [m] in this environment's episode
+            (goto), else None.
+        goal_radius: ``(N,)`` goal radii [m] (goto), else None.
+    """
+
+    vertical: bool
+    radii: F64
+    command_low: F64
+    command_high: F64
+    beam_azimuth: F64
+    beam_elevation: F64 | None
+    max_range: float
+    obstacles: OccupancyGrid
+    fence: bool
+    goals: F64 | None
+    goal_radius: F64 | None
+
+
 @runtime_checkable
 class Game(Protocol):
     """``B`` environments of one scenario (see the module docstring for the conventions).
@@ -109,6 +163,20 @@ class Game(Protocol):
         episode_return: ``(B, N)`` each agent's undiscounted return so far.
         distance: ``(B, N)`` true distance to each agent's target [m].
         poses: ``(B, N, 6)`` ``[x, y, z, phi, theta, psi]`` [m, rad] (:data:`POSE_FIELDS`).
+        velocity: ``(B, N, 6)`` ``[u, v, w, p, q, r]`` [m/s, rad/s] (:data:`VELOCITY_FIELDS`).
+        altitude: ``(B, N)`` height above the seabed [m].
+        ranges: ``(B, N, K)`` the measured sonar ranges [m].
+        seed: The seed the game's generator started from.
+        backend: The simulation backend (``"batched"``, ``"fmu"``, ...).
+        goto: Whether the task is goto (every agent seeks its own goal) rather than pursuit.
+        command_fields: The commands an action sets, in order (``("v", "omega")`` [m/s, rad/s],
+            ``("v", "omega", "w_z")`` with the vertical speed [m/s]); an action has one value per
+            field, in the agent's action space (see :meth:`commands`).
+        policy_roles: The game's scripted policies by name, each with the roles it drives
+            (``"pursuer"``, ``"evader"``); :meth:`scripted_policy` builds them.
+        render_modes: What :meth:`render` draws (``("rgb_array",)``, or none).
+        action_bounds: ``(N, A)`` lowest and highest action of each agent, float64: the action
+            spaces' bounds, exactly (:meth:`step` clips to them).
     """
 
     kind: str
@@ -118,6 +186,36 @@ class Game(Protocol):
     pursuer: Bool
     dt: float
     max_steps: int
+
+    @property
+    def seed(self) -> int:
+        """The seed the game's generator started from."""
+        ...
+
+    @property
+    def backend(self) -> str:
+        """The simulation backend."""
+        ...
+
+    @property
+    def goto(self) -> bool:
+        """Whether the task is goto."""
+        ...
+
+    @property
+    def command_fields(self) -> tuple[str, ...]:
+        """The commands an action sets, in order."""
+        ...
+
+    @property
+    def policy_roles(self) -> Mapping[str, tuple[str, ...]]:
+        """The game's scripted policies by name, with the roles each drives."""
+        ...
+
+    @property
+    def render_modes(self) -> tuple[str, ...]:
+        """What :meth:`render` draws."""
+        ...
 
     @property
     def obs(self) -> F32:
@@ -154,6 +252,26 @@ class Game(Protocol):
         """``(B, N, 6)`` ``[x, y, z, phi, theta, psi]`` [m, rad]."""
         ...
 
+    @property
+    def velocity(self) -> F64:
+        """``(B, N, 6)`` ``[u, v, w, p, q, r]`` [m/s, rad/s]."""
+        ...
+
+    @property
+    def altitude(self) -> F64:
+        """``(B, N)`` height above the seabed [m]."""
+        ...
+
+    @property
+    def ranges(self) -> F64:
+        """``(B, N, K)`` the measured sonar ranges [m]."""
+        ...
+
+    @property
+    def action_bounds(self) -> tuple[F64, F64]:
+        """``(N, A)`` lowest and highest actions, float64 (the action spaces' bounds, exactly)."""
+        ...
+
     def observation_space(self, agent: str) -> gymnasium.spaces.Box:
         """An agent's observation space."""
         ...
@@ -180,6 +298,55 @@ class Game(Protocol):
 
     def info(self, result: StepResult | None, env: int, agent: int) -> dict[str, Any]:
         """One agent's info in one environment, with the keys of :data:`INFO_KEYS`."""
+        ...
+
+    def infos(self, result: StepResult | None, env: int) -> list[dict[str, Any]]:
+        """Every agent's :meth:`info` in one environment, in agent order (one pass)."""
+        ...
+
+    def global_state(self, env: int) -> F64:
+        """One environment's global state as one vector (for centralised critics)."""
+        ...
+
+    def commands(self, actions: npt.ArrayLike, agent: int | None = None) -> F64:
+        """What actions command, in SI units (:attr:`command_fields`), clipped to the limits.
+
+        Args:
+            actions: ``(..., N, A)`` actions of every agent, or, with ``agent``, ``(..., A)`` of
+                that agent.
+            agent: The agent's index, when ``actions`` are one agent's.
+
+        Returns:
+            ``(..., N, C)`` (or ``(..., C)``) commands [m/s, rad/s, ...].
+        """
+        ...
+
+    def to_actions(self, commands: npt.ArrayLike, agent: int | None = None) -> F64:
+        """The inverse of :meth:`commands`: SI commands as actions, clipped to the action spaces."""
+        ...
+
+    def scripted_policy(self, name: str, agent: str, *, seed: int | None = None) -> Policy:
+        """The scripted policy ``name`` (:attr:`policy_roles`) driving ``agent``, acting in its action space.
+
+        Raises:
+            ValueError: Unknown name (the message lists the valid ones) or agent.
+        """
+        ...
+
+    def default_policy(self, agent: str) -> str:
+        """The name of the scripted policy ``agent`` follows when none is given."""
+        ...
+
+    def render(self, env: int = 0) -> npt.NDArray[np.uint8]:
+        """An RGB image of one environment (``"rgb_array"`` in :attr:`render_modes`).
+
+        Raises:
+            ValueError: The game draws nothing (:attr:`render_modes` is empty).
+        """
+        ...
+
+    def scene(self, env: int = 0) -> Scene:
+        """What stays the same during the current episode of one environment."""
         ...
 
     def close(self) -> None:

@@ -1,33 +1,42 @@
-"""Gymnasium views of the game: one agent learns, the others follow given policies.
+"""Gymnasium views of every game: one agent learns, the others follow given policies.
 
-* :class:`UPEGSingleAgentEnv`: a ``gymnasium.Env`` over one environment (FMU or batched
+Written once against :class:`~hptvsim.envs.protocol.Game`, for the planar and the 3-D game alike:
+
+* :class:`GameSingleAgentEnv`: a ``gymnasium.Env`` over one environment (FMU or batched
   backend);
-* :class:`UPEGVectorEnv`: a ``gymnasium.vector.VectorEnv`` over B environments of the batched
+* :class:`GameVectorEnv`: a ``gymnasium.vector.VectorEnv`` over B environments of the batched
   backend, stepped as one batch; finished sub-environments reset in the same step (Gymnasium's
   ``SAME_STEP`` autoreset: the last observation of the ended episode is in
   ``infos["final_obs"]``), the others go on;
-* :class:`SB3VecEnv`: the same batch as a stable-baselines3 ``VecEnv``.
+* :func:`make_sb3_vec_env`: the same batch as a stable-baselines3 ``VecEnv``;
+* :class:`UPEGSingleAgentEnv` and :class:`UPEGVectorEnv`: the same, playing the planar game
+  (the Gymnasium ids ``hptvsim/UPEG-*`` and ``hptvsim/Goto-v0``; the 3-D ids ``hptvsim/UPEG3D-*``
+  play ``"3d"``).
 
 The other agents ("opponents" and teammates) act through :class:`~hptvsim.envs.policies.Policy`
-objects: scripted ones by name (defaults: pursuers ``pure_pursuit``, the evader
-``potential_field``) or any object with ``act(obs, episode_start)`` (a frozen trained policy).
+objects: the game's scripted ones by name (defaults: ``Game.default_policy``, pursuers
+``pure_pursuit``, the evader ``potential_field``) or any object with ``act(obs, episode_start)``
+(a frozen trained policy) returning actions in the agent's action space.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from typing import Any, Literal
+from typing import Any, ClassVar, cast
 
 import gymnasium
 import numpy as np
 import numpy.typing as npt
 from gymnasium.vector import AutoresetMode
 
-from hptvsim.envs.core import Backend, GameCore, StepResult
-from hptvsim.envs.policies import POLICY_ROLES, Limits, Policy, make_policy
+from hptvsim.envs.games import make_game
+from hptvsim.envs.protocol import Game
+from hptvsim.envs.shared import PolicySpec, build_policies, check_agent_action, info_arrays
 from hptvsim.world.scenario import Scenario
 
 __all__ = [
+    "GameSingleAgentEnv",
+    "GameVectorEnv",
     "PolicySpec",
     "SB3VecEnv",
     "UPEGSingleAgentEnv",
@@ -40,81 +49,35 @@ __all__ = [
 
 F32 = npt.NDArray[np.float32]
 F64 = npt.NDArray[np.float64]
+Bool = npt.NDArray[np.bool_]
 
-PolicySpec = str | Policy
-"""A policy: the name of a scripted one (:data:`~hptvsim.envs.policies.POLICY_NAMES`) or an object."""
-
-
-def default_policy_name(core: GameCore, agent: str) -> str:
-    """The scripted policy an agent follows when none is given."""
-    if core.goto:
-        return "pure_pursuit"  # heads for its goal: the goal is its target
-    return "pure_pursuit" if core.pursuer[core.agents.index(agent)] else "potential_field"
+SB3_INFO_KEYS = ("distance", "captured", "collision", "out_of_site", "reached")
+"""The per-environment info keys the SB3 ``VecEnv`` passes on (with ``terminal_observation``)."""
 
 
-def build_policies(
-    core: GameCore, agents: list[str], given: Mapping[str, PolicySpec] | None, *, seed: int | None = None
-) -> dict[str, Policy]:
-    """Policies for ``agents``: the given ones (names or objects), scripted defaults otherwise.
-
-    Raises:
-        ValueError: A given policy names an unknown agent or an unknown scripted policy.
-    """
-    given = dict(given or {})
-    unknown = sorted(set(given) - set(core.agents))
-    if unknown:
-        raise ValueError(f"policies given for unknown agents {unknown}; agents: {', '.join(core.agents)}")
-    out: dict[str, Policy] = {}
-    for agent in agents:
-        spec = given.get(agent, default_policy_name(core, agent))
-        if isinstance(spec, str):
-            i = core.agents.index(agent)
-            role = "pursuer" if core.pursuer[i] else "evader"
-            name = spec.removeprefix("scripted:")
-            if name in POLICY_ROLES and role not in POLICY_ROLES[name] and not core.goto:
-                fits = [n for n, roles in POLICY_ROLES.items() if role in roles]
-                raise ValueError(
-                    f"policy {spec!r} drives {' and '.join(POLICY_ROLES[name])}, not {agent} ({role}); "
-                    f"valid for {agent}: {', '.join(fits)}"
-                )
-            spec = name
-            v_min, v_max, om = core.robots.limits[i]
-            out[agent] = make_policy(
-                spec,
-                layout=core.layout,
-                limits=Limits(v_min=v_min, v_max=v_max, omega_max=om),
-                beam_angles=core.robots.beam_angles,
-                dt=core.dt,
-                seed=None if seed is None else seed + i,
-            )
-        elif isinstance(spec, Policy):
-            out[agent] = spec
-        else:
-            raise ValueError(
-                f"the policy of {agent} must be a scripted policy's name or have act(obs); got {spec!r}"
-            )
-    return out
+def default_policy_name(core: Game, agent: str) -> str:
+    """The scripted policy an agent follows when none is given (``Game.default_policy``)."""
+    return core.default_policy(agent)
 
 
 class _Driver:
-    """Turns the learner's action and the others' policies into ``(B, N, 2)`` actions."""
+    """Turns the learner's action and the others' policies into ``(B, N, A)`` actions."""
 
-    def __init__(
-        self, core: GameCore, learner: str, policies: Mapping[str, PolicySpec] | None, seed: int | None
-    ):
-        if learner not in core.agents:
-            raise ValueError(f"unknown agent {learner!r}; agents: {', '.join(core.agents)}")
-        self.core = core
+    def __init__(self, game: Game, learner: str, policies: Mapping[str, PolicySpec] | None, seed: int | None):
+        if learner not in game.agents:
+            raise ValueError(f"unknown agent {learner!r}; agents: {', '.join(game.agents)}")
+        self.game = game
         self.learner = learner
-        self.index = core.agents.index(learner)
-        self.others = [a for a in core.agents if a != learner]
-        self.policies = build_policies(core, self.others, policies, seed=seed)
-        self.other_index = [core.agents.index(a) for a in self.others]
-        self.actions = np.zeros((core.num_envs, core.num_agents, 2))
-        self.episode_start = np.ones(core.num_envs, dtype=bool)
+        self.index = game.agents.index(learner)
+        self.others = [a for a in game.agents if a != learner]
+        self.policies = build_policies(game, self.others, policies, seed=seed)
+        self.other_index = [game.agents.index(a) for a in self.others]
+        n, k = len(game.agents), game.action_bounds[0].shape[-1]
+        self.actions = np.zeros((game.num_envs, n, k))
+        self.episode_start = np.ones(game.num_envs, dtype=bool)
 
     def actions_for(self, learner_action: npt.ArrayLike) -> F64:
-        obs = self.core.state.obs
+        obs = self.game.obs
         self.actions[:, self.index, :] = learner_action
         for agent, i in zip(self.others, self.other_index, strict=True):
             self.actions[:, i, :] = self.policies[agent].act(obs[:, i, :], self.episode_start)
@@ -122,201 +85,184 @@ class _Driver:
         return self.actions
 
 
-class UPEGSingleAgentEnv(gymnasium.Env[F32, F32]):
-    """One agent of the UPEG (or goto) game as a Gymnasium environment.
+class GameSingleAgentEnv(gymnasium.Env[F32, F32]):
+    """One agent of any game as a Gymnasium environment (the others follow policies).
 
     Args:
-        scenario: Scenario name, path or object (default ``"source"``).
-        agent: The learning agent (default: ``pursuer_0`` in pursuit, the first agent in goto).
+        scenario: Scenario name, path or object (default :attr:`default_scenario`).
+        game: Play this game instead of the scenario's ``[simulation] game``
+            (:mod:`hptvsim.envs.games`).
+        agent: The learning agent (default: the first agent).
         policies: Policies of the other agents by name (see the module docstring).
-        backend, task, sensor_fidelity, fence, extended_obs, max_steps, seed: As for
-            :class:`~hptvsim.envs.core.GameCore`.
-        render_mode: ``None`` or ``"rgb_array"``.
+        render_mode: ``None`` or one of the game's ``render_modes`` (the planar game's
+            ``"rgb_array"``).
+        **options: The game's options (:func:`hptvsim.envs.games.game_options`: ``backend``,
+            ``task``, ``max_steps``, ``seed``, ``reward``, ...); ``seed`` seeds the scripted
+            policies as well.
 
-    Observation and action spaces are the learner's (Eq. 14; Eqs. 15-16, clipped). The episode
-    ends when the learner terminates or is truncated (see :mod:`hptvsim.envs.task`); the reward is
-    the learner's (Eq. 20). ``info`` holds the learner's metrics (``distance``, ``captured``,
-    ``collision``, ``out_of_site``, ``reached``, the reward terms).
+    Observation and action spaces are the learner's (the game's). The episode ends when the
+    learner terminates or is truncated; the reward is the learner's (Eq. 20). ``info`` is the
+    learner's, with the keys of :data:`~hptvsim.envs.protocol.INFO_KEYS` (after a reset, those
+    up to ``step``).
     """
 
     metadata: dict[str, Any] = {"render_modes": ["rgb_array"], "render_fps": 4}  # noqa: RUF012 - Gymnasium's attribute
+    default_scenario: ClassVar[str] = "source"
+    """The scenario when none is given."""
+    default_game: ClassVar[str | None] = None
+    """The game when none is given (None: the scenario's)."""
 
     def __init__(
         self,
-        scenario: Scenario | str = "source",
+        scenario: Scenario | str | None = None,
         *,
+        game: str | None = None,
         agent: str | None = None,
         policies: Mapping[str, PolicySpec] | None = None,
-        backend: Backend = "batched",
-        task: Literal["pursuit", "goto"] | None = None,
-        sensor_fidelity: Literal["geometric", "signal"] | None = None,
-        fence: bool = True,
-        extended_obs: bool = False,
-        max_steps: int | None = None,
-        seed: int | None = None,
-        vehicle_parameters: Mapping[str, Mapping[str, float]] | None = None,
-        reward: Mapping[str, float] | None = None,
         render_mode: str | None = None,
+        **options: Any,
     ) -> None:
-        if render_mode not in (None, "rgb_array"):
-            raise ValueError(f"render_mode = {render_mode!r} is invalid; valid: None, 'rgb_array'")
-        self.core = GameCore(
-            scenario,
+        core = make_game(
+            self.default_scenario if scenario is None else scenario,
             num_envs=1,
-            backend=backend,
-            task=task,
-            sensor_fidelity=sensor_fidelity,
-            vehicle_parameters=vehicle_parameters,
-            reward=reward,
-            fence=fence,
-            extended_obs=extended_obs,
-            max_steps=max_steps,
-            seed=seed,
-            threads=1,
+            game=self.default_game if game is None else game,
+            defaults={"threads": 1},
+            **options,
         )
-        learner = agent or self.core.agents[0]
-        self.driver = _Driver(self.core, learner, policies, seed)
+        try:
+            if render_mode is not None and render_mode not in core.render_modes:
+                valid = ", ".join(["None", *map(repr, core.render_modes)])
+                raise ValueError(f"render_mode = {render_mode!r} is invalid; valid: {valid}")
+            learner = agent or core.agents[0]
+            self.driver = _Driver(core, learner, policies, options.get("seed"))
+        except BaseException:
+            core.close()
+            raise
+        self.game: Game = core
+        self.metadata = {**type(self).metadata, "render_modes": list(core.render_modes)}
         self.agent = learner
-        low, high = self.core.layout.bounds()
-        self.observation_space = gymnasium.spaces.Box(low, high, dtype=np.float32)
-        v_min, v_max, om = self.core.robots.limits[self.driver.index]
-        self.action_space = gymnasium.spaces.Box(
-            np.array([v_min, -om], dtype=np.float32),
-            np.array([v_max, om], dtype=np.float32),
-            dtype=np.float32,
-        )
+        self.index = self.driver.index
+        self.observation_space = cast("gymnasium.spaces.Space[F32]", core.observation_space(learner))
+        self.action_space = cast("gymnasium.spaces.Space[F32]", core.action_space(learner))
         self.render_mode = render_mode
-        self._renderer: Any = None
+
+    @property
+    def core(self) -> Any:
+        """The game (:attr:`game`), under its earlier name (typed loosely: any game's own attributes)."""
+        return self.game
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[F32, dict[str, Any]]:
         """Start an episode (``seed`` seeds spawn poses and noise)."""
         super().reset(seed=seed)
-        obs = self.core.reset(seed=seed)
+        obs = self.game.reset(seed=seed)
         self.driver.episode_start[:] = True
-        if self._renderer is not None:
-            self._renderer.reset()
-        i = self.driver.index
-        return obs[0, i].copy(), {"distance": float(self.core.state.distance[0, i])}
+        i = self.index
+        return obs[0, i].copy(), self.game.info(None, 0, i)
 
     def step(self, action: npt.ArrayLike) -> tuple[F32, float, bool, bool, dict[str, Any]]:
-        """Advance one control step with the learner's ``[v, omega]`` (clipped).
+        """Advance one control step with the learner's action (clipped to its action space).
 
         Raises:
             ValueError: Wrong shape or a non-finite action.
         """
-        a = np.asarray(action, dtype=np.float64)
-        if a.shape != (2,):
-            raise ValueError(f"the action must have shape (2,) = [v, omega]; got {a.shape}")
-        if not np.isfinite(a).all():
-            raise ValueError(f"the action must be finite; got {a.tolist()}")
-        result = self.core.step(self.driver.actions_for(a))
-        i = self.driver.index
-        info = _agent_info(result, 0, i, self.core)
+        i = self.index
+        check_agent_action(self.game, i, action)
+        result = self.game.step(self.driver.actions_for(action))
         return (
             result.obs[0, i].copy(),
             float(result.reward[0, i]),
             bool(result.terminated[0, i]),
             bool(result.truncated[0, i]),
-            info,
+            self.game.info(result, 0, i),
         )
 
     def render(self) -> npt.NDArray[np.uint8] | None:
-        """A top-down RGB image (``render_mode="rgb_array"``)."""
+        """The game's image (``render_mode="rgb_array"``), else None."""
         if self.render_mode != "rgb_array":
             return None
-        from hptvsim.envs.parallel import render_core
-
-        if self._renderer is None:
-            from hptvsim.envs.parallel import make_renderer
-
-            self._renderer = make_renderer(self.core)
-        return render_core(self._renderer, self.core, 0)
+        return self.game.render(0)
 
     def close(self) -> None:
         """Release the simulation."""
-        self.core.close()
+        self.game.close()
 
 
-def _agent_info(result: StepResult, b: int, i: int, core: GameCore) -> dict[str, Any]:
-    f = result.flags
-    return {
-        "distance": float(core.state.distance[b, i]),
-        "captured": bool(f.captured[b]),
-        "collision": bool(f.collision[b, i]),
-        "out_of_site": bool(f.out_of_site[b, i]),
-        "reached": bool(f.reached[b, i]),
-        "r_C": float(result.terms.r_C[b, i]),
-        "r_E1": float(result.terms.r_E1[b, i]),
-        "r_E2": float(result.terms.r_E2[b, i]),
-    }
+class UPEGSingleAgentEnv(GameSingleAgentEnv):
+    """One agent of the planar UPEG (or goto) game as a Gymnasium environment.
+
+    :class:`GameSingleAgentEnv` playing ``"planar"`` (a 3-D scenario flat, at its operating
+    depth); default scenario ``"source"``. The options are :class:`~hptvsim.envs.core.GameCore`'s
+    (``backend``, ``task``, ``sensor_fidelity``, ``fence``, ``extended_obs``, ``max_steps``,
+    ``seed``, ``vehicle_parameters``, ``reward``). Observation and action spaces are the learner's
+    (Eq. 14; Eqs. 15-16, clipped).
+    """
+
+    default_scenario: ClassVar[str] = "source"
+    default_game: ClassVar[str | None] = "planar"
 
 
-class UPEGVectorEnv(gymnasium.vector.VectorEnv[F32, F32, F32]):
-    """B single-agent views stepped as one batch on the batched backend (same-step autoreset).
+class GameVectorEnv(gymnasium.vector.VectorEnv[F32, F32, F32]):
+    """B single-agent views of any game stepped as one batch (same-step autoreset).
 
     Args:
         num_envs: B.
-        scenario, agent, policies, task, sensor_fidelity, fence, extended_obs, max_steps, seed:
-            As for :class:`UPEGSingleAgentEnv`.
-        threads: Threads of the batched backend (``None``: up to 2).
+        scenario, game, agent, policies: As for :class:`GameSingleAgentEnv`.
+        **options: The game's options (its ``threads``: of the batched backend, ``None``: up to
+            2); always the batched backend.
 
-    ``step`` returns arrays over B; ``infos`` holds per-environment arrays (``distance``,
-    ``captured``, ``collision``, ``out_of_site``, ``reached``, the reward terms) and, for
-    environments that ended this step, ``final_obs``/``final_info`` with ``_final_obs`` marking
-    them (Gymnasium's ``SAME_STEP`` convention).
+    ``step`` takes the learners' ``(B, A)`` actions and returns arrays over B; ``infos`` holds
+    the learner's info as ``(B,)`` arrays (:data:`~hptvsim.envs.protocol.INFO_KEYS`) and, for
+    environments whose learner's episode ended in this step, ``final_obs``/``final_info`` with
+    ``_final_obs`` marking them (Gymnasium's ``SAME_STEP`` convention). With B = 1 and the same
+    seed it plays the episodes of :class:`GameSingleAgentEnv` on the batched backend.
     """
 
     metadata: dict[str, Any] = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}  # noqa: RUF012
+    default_scenario: ClassVar[str] = "source"
+    """The scenario when none is given."""
+    default_game: ClassVar[str | None] = None
+    """The game when none is given (None: the scenario's)."""
 
     def __init__(
         self,
         num_envs: int = 1,
-        scenario: Scenario | str = "source",
+        scenario: Scenario | str | None = None,
         *,
+        game: str | None = None,
         agent: str | None = None,
         policies: Mapping[str, PolicySpec] | None = None,
-        task: Literal["pursuit", "goto"] | None = None,
-        sensor_fidelity: Literal["geometric", "signal"] | None = None,
-        fence: bool = True,
-        extended_obs: bool = False,
-        max_steps: int | None = None,
-        seed: int | None = None,
-        vehicle_parameters: Mapping[str, Mapping[str, float]] | None = None,
-        reward: Mapping[str, float] | None = None,
-        threads: int | None = None,
+        **options: Any,
     ) -> None:
-        self.core = GameCore(
-            scenario,
+        core = make_game(
+            self.default_scenario if scenario is None else scenario,
             num_envs=num_envs,
             backend="batched",
-            task=task,
-            sensor_fidelity=sensor_fidelity,
-            vehicle_parameters=vehicle_parameters,
-            reward=reward,
-            fence=fence,
-            extended_obs=extended_obs,
-            max_steps=max_steps,
-            seed=seed,
-            threads=threads,
+            game=self.default_game if game is None else game,
+            **options,
         )
-        self.num_envs = self.core.num_envs
-        learner = agent or self.core.agents[0]
-        self.driver = _Driver(self.core, learner, policies, seed)
+        try:
+            learner = agent or core.agents[0]
+            self.driver = _Driver(core, learner, policies, options.get("seed"))
+        except BaseException:
+            core.close()
+            raise
+        self.game: Game = core
+        self.num_envs = core.num_envs
         self.agent = learner
-        low, high = self.core.layout.bounds()
-        self.single_observation_space = gymnasium.spaces.Box(low, high, dtype=np.float32)
-        v_min, v_max, om = self.core.robots.limits[self.driver.index]
-        self.single_action_space = gymnasium.spaces.Box(
-            np.array([v_min, -om], dtype=np.float32),
-            np.array([v_max, om], dtype=np.float32),
-            dtype=np.float32,
-        )
+        self.index = self.driver.index
+        self.single_observation_space = core.observation_space(learner)
+        self.single_action_space = core.action_space(learner)
         self.observation_space = gymnasium.vector.utils.batch_space(
             self.single_observation_space, self.num_envs
         )
         self.action_space = gymnasium.vector.utils.batch_space(self.single_action_space, self.num_envs)
+
+    @property
+    def core(self) -> Any:
+        """The game (:attr:`game`), under its earlier name (typed loosely: any game's own attributes)."""
+        return self.game
 
     def reset(
         self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None
@@ -324,52 +270,52 @@ class UPEGVectorEnv(gymnasium.vector.VectorEnv[F32, F32, F32]):
         """Reset every sub-environment (``seed``: one int seeds the whole batch)."""
         if isinstance(seed, list):
             seed = seed[0] if seed else None
-        obs = self.core.reset(seed=seed)
+        obs = self.game.reset(seed=seed)
         self.driver.episode_start[:] = True
-        i = self.driver.index
-        return obs[:, i].copy(), {"distance": self.core.state.distance[:, i].copy()}
+        i = self.index
+        return obs[:, i].copy(), info_arrays(self.game, None, i)
 
     def step(  # type: ignore[override]  # rewards are float64 and flags bool, not the base's float32
         self, actions: npt.ArrayLike
-    ) -> tuple[F32, F64, npt.NDArray[np.bool_], npt.NDArray[np.bool_], dict[str, Any]]:
-        """Step all sub-environments; finished ones reset in the same step."""
-        a = np.asarray(actions, dtype=np.float64)
-        if a.shape != (self.num_envs, 2):
-            raise ValueError(f"actions must have shape (num_envs, 2) = ({self.num_envs}, 2); got {a.shape}")
-        if not np.isfinite(a).all():
-            raise ValueError("actions must be finite")
-        result = self.core.step(self.driver.actions_for(a))
-        i = self.driver.index
+    ) -> tuple[F32, F64, Bool, Bool, dict[str, Any]]:
+        """Step all sub-environments with the learners' ``(B, A)`` actions; ended ones reset.
+
+        Raises:
+            ValueError: Wrong shape or a non-finite action.
+        """
+        game, i = self.game, self.index
+        check_agent_action(game, i, actions, num_envs=self.num_envs)
+        result = game.step(self.driver.actions_for(actions))
         obs = result.obs[:, i].copy()
         reward = result.reward[:, i].copy()
         terminated = result.terminated[:, i].copy()
         truncated = result.truncated[:, i].copy()
-        f = result.flags
-        infos: dict[str, Any] = {
-            "distance": self.core.state.distance[:, i].copy(),
-            "captured": f.captured.copy(),
-            "collision": f.collision[:, i].copy(),
-            "out_of_site": f.out_of_site[:, i].copy(),
-            "reached": f.reached[:, i].copy(),
-            "r_C": result.terms.r_C[:, i].copy(),
-            "r_E1": result.terms.r_E1[:, i].copy(),
-            "r_E2": result.terms.r_E2[:, i].copy(),
-        }
+        infos: dict[str, Any] = info_arrays(game, result, i)
         # the learner's episode ends even if others could go on (goto): finish the environment
-        core = self.core
-        autoreset(obs, terminated, truncated, infos, lambda envs: core.reset(envs)[envs, i])
+        autoreset(obs, terminated, truncated, infos, lambda envs: game.reset(envs)[envs, i])
         self.driver.episode_start[terminated | truncated] = True
         return obs, reward, terminated, truncated, infos
 
     def close_extras(self, **kwargs: Any) -> None:
         """Release the simulation."""
-        self.core.close()
+        self.game.close()
+
+
+class UPEGVectorEnv(GameVectorEnv):
+    """B single-agent views of the planar game (:class:`GameVectorEnv` playing ``"planar"``).
+
+    Default scenario ``"source"``; the options are :class:`~hptvsim.envs.core.GameCore`'s (always
+    the batched backend).
+    """
+
+    default_scenario: ClassVar[str] = "source"
+    default_game: ClassVar[str | None] = "planar"
 
 
 def autoreset(
     obs: F32,
-    terminated: npt.NDArray[np.bool_],
-    truncated: npt.NDArray[np.bool_],
+    terminated: Bool,
+    truncated: Bool,
     infos: dict[str, Any],
     reset: Callable[[npt.NDArray[np.intp]], F32],
 ) -> None:
@@ -390,18 +336,19 @@ def autoreset(
 
 
 class SB3VecEnv:
-    """A stable-baselines3 ``VecEnv`` over :class:`UPEGVectorEnv` (built lazily: SB3 is optional).
+    """A stable-baselines3 ``VecEnv`` over :class:`GameVectorEnv` (built lazily: SB3 is optional).
 
     Use :func:`make_sb3_vec_env`; this name exists for documentation.
     """
 
 
 def make_sb3_vec_env(num_envs: int = 1, scenario: Scenario | str = "source", **kwargs: Any) -> Any:
-    """A stable-baselines3 ``VecEnv`` of ``num_envs`` batched sub-environments.
+    """A stable-baselines3 ``VecEnv`` of ``num_envs`` batched sub-environments (:class:`UPEGVectorEnv`).
 
-    Finished sub-environments reset in the same step, and their last observation is in
-    ``infos[k]["terminal_observation"]`` (with ``"TimeLimit.truncated"`` on truncation), as SB3
-    expects; the others go on.
+    ``kwargs`` are :class:`GameVectorEnv`'s (``game="3d"`` plays the 3-D game, as
+    :func:`~hptvsim.envs.game3d.make_sb3_vec_env_3d`). Finished sub-environments reset in the
+    same step, and their last observation is in ``infos[k]["terminal_observation"]`` (with
+    ``"TimeLimit.truncated"`` on truncation), as SB3 expects; the others go on.
     """
     return sb3_vec_env(UPEGVectorEnv(num_envs, scenario, **kwargs))
 
@@ -409,8 +356,7 @@ def make_sb3_vec_env(num_envs: int = 1, scenario: Scenario | str = "source", **k
 def sb3_vec_env(vec: gymnasium.vector.VectorEnv[Any, Any, Any]) -> Any:
     """A stable-baselines3 ``VecEnv`` over a same-step-autoreset vector env of this package.
 
-    ``vec`` is a :class:`UPEGVectorEnv` or a :class:`~hptvsim.envs.game3d.UPEG3DVectorEnv`
-    (``infos`` arrays ``distance``, ``captured``, ``collision``, ``out_of_site``, ``reached``).
+    ``vec`` is a :class:`GameVectorEnv` (``infos`` arrays of :data:`SB3_INFO_KEYS` at least).
     """
     from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 
@@ -430,16 +376,13 @@ def sb3_vec_env(vec: gymnasium.vector.VectorEnv[Any, Any, Any]) -> Any:
         def step_async(self, actions: F64) -> None:
             self._actions = np.asarray(actions)
 
-        def step_wait(self) -> tuple[F32, F64, npt.NDArray[np.bool_], list[dict[str, Any]]]:
+        def step_wait(self) -> tuple[F32, F64, Bool, list[dict[str, Any]]]:
             assert self._actions is not None
             obs, rew, term, trunc, infos = vec.step(self._actions)
             done = term | trunc
             out: list[dict[str, Any]] = []
             for k in range(num_envs):
-                info = {
-                    key: infos[key][k]
-                    for key in ("distance", "captured", "collision", "out_of_site", "reached")
-                }
+                info = {key: infos[key][k] for key in SB3_INFO_KEYS}
                 if done[k]:
                     info["terminal_observation"] = infos["final_obs"][k]
                     info["TimeLimit.truncated"] = bool(trunc[k] and not term[k])

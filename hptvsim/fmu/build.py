@@ -33,7 +33,6 @@ import zipfile
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
-from importlib import resources
 from pathlib import Path
 from typing import Any, Final
 from xml.sax.saxutils import escape
@@ -506,7 +505,7 @@ def _model_description(
 
 
 def _template(name: str) -> str:
-    return resources.files("hptvsim.fmu").joinpath("templates", name).read_text()
+    return (Path(__file__).parent / "templates" / name).read_text()
 
 
 def resolve_vehicle(vehicle: str | VehicleType) -> VehicleType:

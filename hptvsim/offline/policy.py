@@ -30,18 +30,18 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, Final, cast
 
 import numpy as np
 import numpy.typing as npt
 import torch
 
 from hptvsim.envs.core import GameCore
-from hptvsim.envs.game3d import Game3DCore
+from hptvsim.envs.protocol import Game
 from hptvsim.envs.task import reward_terms
 from hptvsim.offline.model import DecisionTransformer, DTConfig
 
-__all__ = ["DEFAULT_TARGET", "DTPolicy", "load_dt", "load_policy_file", "reward_estimator"]
+__all__ = ["DEFAULT_TARGET", "DT_GAMES", "DTPolicy", "load_dt", "load_policy_file", "reward_estimator"]
 
 F32 = npt.NDArray[np.float32]
 F64 = npt.NDArray[np.float64]
@@ -56,6 +56,11 @@ them asks for a crash. The median asks for a typical expert episode.
 """
 
 POLICY_FORMAT = "hptvsim-dt"
+
+DT_GAMES: Final = ("planar",)
+"""The games (:attr:`~hptvsim.envs.protocol.Game.kind`) a Decision Transformer plays: the one its
+datasets come from (:mod:`hptvsim.offline.dataset` collects the planar game's episodes; a DT reads
+that game's observation layout, Eq. 14)."""
 
 RewardFn = Callable[[F32, F32], F64]
 
@@ -342,8 +347,8 @@ def _check_fits(payload: Mapping[str, Any], m: int, core: GameCore, agent: str, 
         )
     st = payload["models"][m]
     i = core.agents.index(agent)
-    v_min, v_max, om = (float(x) for x in core.robots.limits[i])
-    want = np.array([v_min, -om, v_max, om])
+    low, high = core.action_bounds  # [v_min, -omega_max], [v_max, omega_max] (Eq. 15)
+    want = np.concatenate([low[i], high[i]]).astype(np.float64)
     have = np.concatenate([np.asarray(st["action_low"]), np.asarray(st["action_high"])]).astype(np.float64)
     if not np.allclose(want, have, atol=1e-5):
         raise ValueError(
@@ -352,22 +357,14 @@ def _check_fits(payload: Mapping[str, Any], m: int, core: GameCore, agent: str, 
         )
 
 
-def load_dt(path: Path, core: GameCore | Game3DCore, agent: str) -> DTPolicy:
-    """The zoo loader of kind ``dt``: the file's model for ``agent``, targeting :data:`DEFAULT_TARGET`.
+def load_dt(path: Path, game: Game, agent: str) -> DTPolicy:
+    """The zoo's loader of kind ``dt``: the file's model for ``agent``, targeting :data:`DEFAULT_TARGET`.
 
     Raises:
-        ValueError: ``core`` is the 3-D game (the DT is trained on planar datasets only; the zoo
-            refuses the spec before it gets here).
+        ValueError: A game the DT was not trained on (:data:`DT_GAMES`; the zoo refuses the spec
+            before it gets here).
     """
-    if not isinstance(core, GameCore):
-        raise ValueError(f"{path}: a Decision Transformer plays the planar game only")
-    return policies_from_file(path, core, [agent])[agent]
-
-
-def _register() -> None:
-    from hptvsim.zoo import register_loader
-
-    register_loader("dt", load_dt)
-
-
-_register()
+    if game.kind not in DT_GAMES:
+        raise ValueError(f"{path}: a Decision Transformer plays the {' and '.join(DT_GAMES)} game only")
+    # the game of kind "planar" is GameCore: the DT reads its observation layout and task
+    return policies_from_file(path, cast(GameCore, game), [agent])[agent]

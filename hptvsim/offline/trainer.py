@@ -455,7 +455,7 @@ def train(
     Raises:
         ValueError: ``run_dir`` holds a run with a different config.
     """
-    from hptvsim.train.config import dump_toml
+    from hptvsim._toml import dump_toml
 
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)

@@ -1,7 +1,8 @@
 """Sensors: multi-beam sonar (geometric and signal-level), shared error model, acoustic link.
 
 * :class:`SonarConfig`, :class:`GaussMarkovConfig`, :class:`AcousticLinkConfig`: settings
-  (frozen dataclasses, loaded from scenario files);
+  (frozen dataclasses, loaded from scenario files; they live with the scenario schema, in
+  :mod:`hptvsim.world.sensor_config`, and are re-exported here);
 * :class:`Sonar`: the sonar as environments use it (fidelity plus Eq. 3 errors), built on
   :class:`GeometricSonar` (batched ray casts, compiled kernel) and :class:`SignalSonar`
   (echoes, the matched filter of Eq. 1, the spatial periodogram of Eq. 2);
@@ -19,13 +20,14 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from hptvsim._lazy import lazy_getattr
-from hptvsim.sensors.config import AcousticLinkConfig, GaussMarkovConfig, SonarConfig
+from hptvsim.world.sensor_config import AcousticLinkConfig, GaussMarkovConfig, SonarConfig
 
 if TYPE_CHECKING:
     from hptvsim.sensors.acoustic import AcousticLink
     from hptvsim.sensors.errors import GaussMarkov
+    from hptvsim.sensors.measured import Sonar
     from hptvsim.sensors.signal import SignalSonar
-    from hptvsim.sensors.sonar import GeometricSonar, Sonar, SonarScan, vehicle_radii
+    from hptvsim.sensors.sonar import GeometricSonar, SonarScan, vehicle_radii
     from hptvsim.sensors.sonar3d import GeometricSonar3d, Sonar3d, Sonar3dConfig, Sonar3dScan
 
 __all__ = [
@@ -50,7 +52,7 @@ _LAZY = {
     "GaussMarkov": "hptvsim.sensors.errors",
     "SignalSonar": "hptvsim.sensors.signal",
     "GeometricSonar": "hptvsim.sensors.sonar",
-    "Sonar": "hptvsim.sensors.sonar",
+    "Sonar": "hptvsim.sensors.measured",
     "SonarScan": "hptvsim.sensors.sonar",
     "vehicle_radii": "hptvsim.sensors.sonar",
     "GeometricSonar3d": "hptvsim.sensors.sonar3d",

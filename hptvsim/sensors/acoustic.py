@@ -3,7 +3,7 @@
 The paper's IoUT network (surface buoys and seabed sensor nodes) captures the target's position
 and reports it to the UUVs by acoustic communication. :class:`AcousticLink` models that report
 stream for ``B`` environments x ``P`` pursuers (the model is documented on
-:class:`~hptvsim.sensors.config.AcousticLinkConfig`):
+:class:`~hptvsim.world.sensor_config.AcousticLinkConfig`):
 
 * every ``report_period`` seconds after a reset (``t_k = k * report_period``, ``k = 0, 1, ...``)
   one report is broadcast, stamped ``t_k``, carrying the target's position at ``t_k`` plus the
@@ -28,8 +28,8 @@ import math
 import numpy as np
 import numpy.typing as npt
 
-from hptvsim.sensors.config import AcousticLinkConfig
 from hptvsim.sensors.errors import GaussMarkov, as_generator
+from hptvsim.world.sensor_config import AcousticLinkConfig
 
 __all__ = ["MAX_REPORTS_PER_STEP", "AcousticLink", "queue_length", "reports_per_step"]
 
@@ -42,7 +42,7 @@ _EPS_T = 1e-9  # s, tolerance when comparing report times with step times
 MAX_REPORTS_PER_STEP = 1000
 """Most reports one control step may send (``dt / report_period``): each is a loop iteration.
 
-The scenario schema's :data:`~hptvsim.sensors.config.MIN_REPORT_PERIOD` (0.1 s) with its
+The scenario schema's :data:`~hptvsim.world.sensor_config.MIN_REPORT_PERIOD` (0.1 s) with its
 largest ``dt`` (10 s) makes at most 100; this bounds the link built with other steps.
 """
 

@@ -1,4 +1,4 @@
-"""Sensor commands: ``hptvsim sonar ...`` and ``hptvsim bench sensors``."""
+"""Sensor commands: ``hptvsim sonar ...``."""
 
 from __future__ import annotations
 
@@ -39,8 +39,8 @@ def snr_plot(
     """Monte Carlo of the matched filter (Eq. 1): RMS range error and outlier rate against SNR."""
     import numpy as np
 
-    from hptvsim.sensors.config import SonarConfig
     from hptvsim.sensors.signal import plot_snr_sweep, snr_sweep
+    from hptvsim.world.sensor_config import SonarConfig
 
     if snr_step <= 0.0 or snr_max < snr_min:
         raise click.BadParameter("need --snr-step > 0 and --snr-max >= --snr-min", param_hint="--snr-step")
@@ -54,24 +54,6 @@ def snr_plot(
     click.echo(f"matched-filter error plot: {out_path.resolve()}")
 
 
-def bench_sensors_cmd(quick: bool, as_json: bool) -> None:
-    """Geometric sonar rays/s (B = 1, 64, 1024 x 4 agents) and matched-filter estimates/s."""
-    from hptvsim.bench.sensors import bench_sensors
-    from hptvsim.cli import emit
-
-    emit(bench_sensors(quick=quick), as_json)
-
-
-def register(main: click.Group, bench: click.Group) -> None:
-    """Add ``hptvsim sonar`` and ``hptvsim bench sensors``."""
+def register(main: click.Group) -> None:
+    """Add ``hptvsim sonar``."""
     main.add_command(sonar_group)
-    cmd = click.Command(
-        "sensors",
-        callback=bench_sensors_cmd,
-        params=[
-            click.Option(["--quick"], is_flag=True, help="Seconds instead of a minute."),
-            click.Option(["--json", "as_json"], is_flag=True, help="Print JSON instead of a table."),
-        ],
-        help=bench_sensors_cmd.__doc__,
-    )
-    bench.add_command(cmd)

@@ -29,7 +29,7 @@ import math
 import numpy as np
 import numpy.typing as npt
 
-from hptvsim.sensors.config import GaussMarkovConfig
+from hptvsim.world.sensor_config import GaussMarkovConfig
 
 __all__ = ["GaussMarkov", "as_generator"]
 

@@ -53,9 +53,10 @@ import numpy.typing as npt
 from scipy import fft as sp_fft
 from scipy import special
 
-from hptvsim.sensors.config import SonarConfig
 from hptvsim.sensors.errors import as_generator
+from hptvsim.sensors.sonar import GeometricSonar
 from hptvsim.world.grid import OccupancyGrid
+from hptvsim.world.sensor_config import SonarConfig
 
 __all__ = [
     "SignalSonar",
@@ -308,8 +309,6 @@ class SignalSonar:
         backend: Literal["c", "numpy"] = "c",
         threads: int | None = None,
     ) -> None:
-        from hptvsim.sensors.sonar import GeometricSonar
-
         self.config = config
         self.rng = as_generator(rng)
         self.geometric = GeometricSonar(config, grid, backend=backend, threads=threads)

@@ -42,7 +42,7 @@ transmits, but the beam still stops there).
 * a readable numpy reference (:func:`cast_reference_3d`) that solves every patch crossed.
 
 **Errors.** :class:`Sonar3d` adds the Gauss-Markov model of Eq. 3 (``config.errors``, one process
-per environment, vehicle and beam) exactly as the planar :class:`~hptvsim.sensors.sonar.Sonar`
+per environment, vehicle and beam) exactly as the planar :class:`~hptvsim.sensors.measured.Sonar`
 does, through the same :class:`~hptvsim.sensors.errors.GaussMarkov`.
 """
 
@@ -50,7 +50,6 @@ from __future__ import annotations
 
 import ctypes
 import math
-import threading
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Literal
@@ -58,15 +57,7 @@ from typing import Any, Literal
 import numpy as np
 import numpy.typing as npt
 
-from hptvsim.native import compile_c
-from hptvsim.sensors.config import (
-    GaussMarkovConfig,
-    SonarConfig,
-    _boolean,
-    _fail,
-    _finite,
-    _integer,
-)
+from hptvsim.native import compile_c, load_library
 from hptvsim.sensors.errors import GaussMarkov, as_generator
 from hptvsim.sensors.sonar import (
     _CFLAGS,
@@ -81,6 +72,14 @@ from hptvsim.sensors.sonar import (
     beam_angles,
 )
 from hptvsim.world._schema import spec
+from hptvsim.world.sensor_config import (
+    GaussMarkovConfig,
+    SonarConfig,
+    _boolean,
+    _fail,
+    _finite,
+    _integer,
+)
 from hptvsim.world.terrain import HeightMap
 
 __all__ = [
@@ -116,9 +115,10 @@ _HALF_PI = 0.5 * math.pi
 class Sonar3dConfig:
     """A 3-D multibeam sonar: ``azimuth_beams x elevation_beams`` beams, and its error model.
 
-    **Beams.** The azimuths are laid out as the planar :class:`~hptvsim.sensors.config.SonarConfig`
-    lays out its beams (:func:`hptvsim.sensors.sonar.beam_angles`): clockwise from the bow, a full
-    circle puts beam ``k`` at ``(k - A // 2) 2 pi / A``, a sector spreads them from
+    **Beams.** The azimuths are laid out as the planar
+    :class:`~hptvsim.world.sensor_config.SonarConfig` lays out its beams
+    (:func:`hptvsim.sensors.sonar.beam_angles`): clockwise from the bow, a full circle puts beam
+    ``k`` at ``(k - A // 2) 2 pi / A``, a sector spreads them from
     ``-azimuth_span/2`` to ``+azimuth_span/2`` inclusive. The elevations (positive down) spread
     from ``elevation_center - elevation_span/2`` to ``elevation_center + elevation_span/2``
     inclusive (one beam: ``elevation_center``), and must stay within ``[-pi/2, pi/2]``.
@@ -131,8 +131,8 @@ class Sonar3dConfig:
     ``SonarConfig``); :meth:`from_sonar` copies them from a planar sonar's settings.
 
     **Error model.** ``errors`` is the planar sonar's field, with the same type
-    (:class:`~hptvsim.sensors.config.GaussMarkovConfig`), default and meaning; the settings carry
-    their own copy rather than a whole ``SonarConfig``, whose beams, field of view and signal-level
+    (:class:`~hptvsim.world.sensor_config.GaussMarkovConfig`), default and meaning; the settings
+    carry their own copy rather than a whole ``SonarConfig``, whose beams, field of view and signal-level
     fields mean nothing here and would contradict the fields above.
 
     Attributes:
@@ -299,8 +299,9 @@ def block_minima(heightmap: HeightMap, block: int = BLOCK) -> F64:
 
 # --- the compiled kernel ------------------------------------------------------------------------
 
-_lib_lock = threading.Lock()
-_lib: ctypes.CDLL | None = None
+_SOURCE = Path(__file__).with_name("sonar3d_kernel.c")
+_WHAT = "the 3-D sonar's C kernel"
+_HINT = ", or use GeometricSonar3d(..., backend='numpy') (the numpy reference, much slower)"
 
 
 def compile_kernel_3d() -> Path:
@@ -310,13 +311,7 @@ def compile_kernel_3d() -> Path:
         RuntimeError: No C compiler, or it failed (the message holds its output; without a
             compiler, ``GeometricSonar3d(..., backend='numpy')`` still works, much slower).
     """
-    return compile_c(
-        "hptvsim.sensors",
-        "sonar3d_kernel.c",
-        flags=_CFLAGS,
-        what="the 3-D sonar's C kernel",
-        hint=", or use GeometricSonar3d(..., backend='numpy') (the numpy reference, much slower)",
-    )
+    return compile_c(_SOURCE, flags=_CFLAGS, what=_WHAT, hint=_HINT)
 
 
 class _Sonar3dStruct(ctypes.Structure):
@@ -341,17 +336,16 @@ class _Sonar3dStruct(ctypes.Structure):
     ]
 
 
+def _declare(lib: ctypes.CDLL) -> None:
+    vp, i64 = ctypes.c_void_p, ctypes.c_int64
+    # sonar, b0, b1, n_agents, poses, radii, active, ranges, hit_id, hit_xyz
+    lib.hptv_sonar3d_cast.argtypes = [vp, i64, i64, i64, vp, vp, vp, vp, vp, vp]
+    lib.hptv_sonar3d_cast.restype = ctypes.c_int
+
+
 def _kernel() -> ctypes.CDLL:
-    global _lib
-    with _lib_lock:
-        if _lib is None:
-            lib = ctypes.CDLL(str(compile_kernel_3d()))
-            vp, i64 = ctypes.c_void_p, ctypes.c_int64
-            # sonar, b0, b1, n_agents, poses, radii, active, ranges, hit_id, hit_xyz
-            lib.hptv_sonar3d_cast.argtypes = [vp, i64, i64, i64, vp, vp, vp, vp, vp, vp]
-            lib.hptv_sonar3d_cast.restype = ctypes.c_int
-            _lib = lib
-        return _lib
+    """``sonar3d_kernel.c``, compiled, loaded and typed once (:func:`hptvsim.native.load_library`)."""
+    return load_library(_SOURCE, flags=_CFLAGS, declare=_declare, what=_WHAT, hint=_HINT)
 
 
 # --- results ------------------------------------------------------------------------------------
@@ -712,7 +706,7 @@ class Sonar3d:
     :class:`~hptvsim.sensors.errors.GaussMarkov` of shape ``(B, N, K)``) is added to every beam
     that got an echo and the result clipped to ``[0, max_range]``; a beam with no echo keeps
     ``max_range`` (nothing to be wrong about). This is the planar
-    :class:`~hptvsim.sensors.sonar.Sonar`'s rule, with the same draws from the same generator in
+    :class:`~hptvsim.sensors.measured.Sonar`'s rule, with the same draws from the same generator in
     the same order, so for equal true ranges and seed the two report the same numbers.
 
     Args:

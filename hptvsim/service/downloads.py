@@ -413,7 +413,7 @@ def csv_chunks(rows: TrajectoryRows) -> Iterator[bytes]:
     import pyarrow as pa
     import pyarrow.csv as pacsv
 
-    from hptvsim.viz.frames import Trajectories
+    from hptvsim.episodes.frames import Trajectories
 
     try:
         names = rows.column_names
@@ -481,7 +481,7 @@ def json_chunks(rows: TrajectoryRows) -> Iterator[bytes]:
     Raises:
         ValueError: A non-finite value (JSON cannot hold it; the stream ends there).
     """
-    from hptvsim.viz.frames import AgentTrajectory
+    from hptvsim.episodes.frames import AgentTrajectory
 
     out = _Chunker()
     try:

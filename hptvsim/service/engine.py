@@ -33,7 +33,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from hptvsim.viz.frames import AgentInfo
+    from hptvsim.episodes.frames import AgentInfo
 
 __all__ = [
     "RECORDING_FILE",
@@ -70,7 +70,7 @@ def client_message(exc: BaseException) -> str:
 
     The log gets the traceback; this is what the episode's ``error`` and the API's answers say.
     """
-    from hptvsim.viz.episode import SimulationError
+    from hptvsim.episodes.stepper import SimulationError
 
     if isinstance(exc, SimulationError):
         return str(exc)
@@ -181,7 +181,7 @@ def static_dict(static: Any) -> dict[str, Any]:
     The terrain mesh and obstacle map are most of the work and the same for every episode of a
     scenario; their plain data is kept for the last few scenarios a process saw.
     """
-    from hptvsim.viz.frames import to_dict
+    from hptvsim.episodes.frames import to_dict
 
     out: dict[str, Any] = {}
     for f in dataclasses.fields(static):
@@ -296,7 +296,8 @@ def run_job(spec: JobSpec, emit: Emit, should_stop: Callable[[], str | None]) ->
     Returns:
         What ``result.json`` holds (summary, steps, seed, file paths, error).
     """
-    from hptvsim.viz.episode import SimulationError, run_episode
+    from hptvsim.episodes.stepper import SimulationError
+    from hptvsim.viz.episode import run_episode  # the engine's, with recording_path
 
     started = time.perf_counter()
     deadline = started + spec.timeout_s
@@ -366,7 +367,8 @@ class InteractiveEpisode:
     """
 
     def __init__(self, spec: JobSpec) -> None:
-        from hptvsim.viz.episode import EXTERNAL, EpisodeStepper
+        from hptvsim.episodes.stepper import EXTERNAL
+        from hptvsim.viz.episode import EpisodeStepper  # the engine's, with recording_path
 
         self.spec = spec
         policies = dict(spec.policies)
@@ -402,7 +404,8 @@ class InteractiveEpisode:
     def state(self) -> dict[str, Any]:
         """Agents, spaces and the controlled agents' observations."""
         static = self.stepper.static
-        low, high = self.stepper.core.layout.bounds()
+        space = self.stepper.core.observation_space(self.stepper.agents[0])
+        low, high = space.low, space.high
         return {
             "agents": list(self.stepper.agents),
             "control": list(self.control),

@@ -37,8 +37,8 @@ def _preview(name: str, path: str) -> str:
     policy is loaded.
     """
     from hptvsim.catalog import shipped_scenario
+    from hptvsim.episodes.stepper import EXTERNAL, EpisodeStepper
     from hptvsim.service.engine import static_dict, write_json_atomic
-    from hptvsim.viz.episode import EXTERNAL, EpisodeStepper
 
     scenario = shipped_scenario(name)
     agents = [a.name for a in scenario.agents]

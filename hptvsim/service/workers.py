@@ -84,7 +84,7 @@ def _child_setup(preload: bool = True) -> None:
         return
     import rerun  # noqa: F401
 
-    import hptvsim.viz.episode
+    import hptvsim.episodes.runner
     import hptvsim.viz.recording  # noqa: F401
 
 
@@ -447,9 +447,9 @@ def _host_main(
     """
     _child_setup()
     _host_preload()
+    from hptvsim.episodes.stepper import SimulationError
     from hptvsim.service.engine import InteractiveEpisode, client_message
     from hptvsim.service.limits import CpuTimeExceeded, apply_process_limits, memory_message, start_cpu_budget
-    from hptvsim.viz.episode import SimulationError
 
     apply_process_limits(memory_mb, None)
     conn.send((0, "ready", os.getpid()))

@@ -7,8 +7,13 @@ The pieces, each usable alone:
 * :mod:`hptvsim.train.maisac` / :mod:`hptvsim.train.ippo`: one SB3 SAC / PPO per agent.
 * :mod:`hptvsim.train.fast`: every agent's SAC update batched into one call.
 * :mod:`hptvsim.train.trainer`: the joint loop, curriculum stages, logs, checkpoints, resume.
-* :mod:`hptvsim.train.evaluate`, :mod:`hptvsim.train.figures`, :mod:`hptvsim.train.sweeps`.
+* :mod:`hptvsim.train.evaluate`: evaluation over fixed seeds of policies given as objects, run
+  folders or checkpoints (named policies through the caller's ``named`` builder).
 * :mod:`hptvsim.train.toy`: a tiny point-mass game for tests and smoke runs.
+
+Figures, sweeps and the reproduction of section V, and training or evaluating against the
+policy zoo's names, are in :mod:`hptvsim.experiments` (above the zoo, which sits above this
+package). This package never imports :mod:`hptvsim.offline`.
 
 Names are imported lazily so that ``import hptvsim.train`` (and the CLI) stays fast.
 """

@@ -41,6 +41,7 @@ from types import MappingProxyType
 from typing import Any, Literal, TypeVar, get_args, get_origin
 
 from hptvsim._paths import shipped_dir
+from hptvsim._toml import dump_toml
 from hptvsim.train.envs import EnvSpec, env_kinds, env_options
 
 __all__ = [
@@ -57,6 +58,7 @@ __all__ = [
     "config_to_dict",
     "dump_toml",
     "load_config",
+    "load_run_config",
     "raw_config",
     "resolve_config_path",
 ]
@@ -508,6 +510,11 @@ def _raw_config(path: Path) -> dict[str, Any]:
 
 def _build(data: Mapping[str, Any], where: str) -> TrainConfig:
     data = dict(data)
+    if data.get("regime") == "fast":
+        raise ConfigError(
+            f"{where}: a batched config (regime = 'fast'): `hptvsim train` runs it; in Python, "
+            "hptvsim.train.batched_run.load_batched_config reads it"
+        )
     stages = data.pop("stage", [])
     data.pop("description", None)
     if not isinstance(stages, list):
@@ -599,33 +606,14 @@ def config_to_dict(cfg: Any) -> Any:
     return cfg
 
 
-def _toml_value(value: Any) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, int | float):
-        return repr(value)
-    if isinstance(value, str):
-        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
-    if isinstance(value, list):
-        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
-    if isinstance(value, Mapping):
-        return "{ " + ", ".join(f"{k} = {_toml_value(v)}" for k, v in value.items()) + " }"
-    raise TypeError(f"cannot write {value!r} as TOML")
+def load_run_config(run_dir: Path) -> TrainConfig:
+    """The config a run is trained with (``RUN_DIR/config.toml``).
 
-
-def dump_toml(data: Mapping[str, Any]) -> str:
-    """Write a raw config mapping as TOML (scalars first, then tables, then ``[[stage]]``)."""
-    lines: list[str] = []
-    tables: list[tuple[str, Mapping[str, Any]]] = []
-    for k, v in data.items():
-        if k == "stage":
-            continue
-        if isinstance(v, Mapping):
-            tables.append((k, v))
-        else:
-            lines.append(f"{k} = {_toml_value(v)}")
-    for k, v in tables:
-        lines += ["", f"[{k}]"] + [f"{kk} = {_toml_value(vv)}" for kk, vv in v.items()]
-    for stage in data.get("stage", []):
-        lines += ["", "[[stage]]"] + [f"{kk} = {_toml_value(vv)}" for kk, vv in stage.items()]
-    return "\n".join(lines) + "\n"
+    Raises:
+        FileNotFoundError: ``run_dir`` holds no run.
+    """
+    path = Path(run_dir) / "config.toml"
+    if not path.is_file():
+        raise FileNotFoundError(f"{run_dir} is not a training run: it has no config.toml")
+    with path.open("rb") as f:
+        return config_from_dict(tomllib.load(f), str(path))

@@ -18,8 +18,12 @@ Policies come from specs (``policy_from_spec``):
     The obvious policy of the toy game (evaders flee).
 ``random``
     Uniform random actions.
-``scripted:NAME``
-    A scripted policy of the underwater game: ``hptvsim.envs.scripted_policy(NAME, env, agent)``.
+``scripted:NAME`` and every name of the policy zoo (``sb3:PATH``, ``dt:PATH``, shipped names)
+    Named policies of the underwater game. The zoo sits above training (it loads training's
+    and offline RL's checkpoints), so these are built by the ``named`` argument
+    (:data:`NamedPolicy`) that the caller passes: :func:`hptvsim.experiments.policies.named_policy`,
+    which ``hptvsim evaluate`` and ``hptvsim train`` pass, and the ``policies_from_specs`` of
+    :mod:`hptvsim.experiments.policies` pass it for you.
 """
 
 from __future__ import annotations
@@ -33,11 +37,13 @@ from typing import Any
 import numpy as np
 
 from hptvsim.envs.metrics import EpisodeMetrics, agent_role, mean_std, summarize
+from hptvsim.train.config import load_run_config
 from hptvsim.train.envs import EnvFactory
 
 __all__ = [
     "EpisodeMetrics",
     "EvalResult",
+    "NamedPolicy",
     "Policy",
     "evaluate",
     "markdown_table",
@@ -48,6 +54,10 @@ __all__ = [
 
 Policy = Callable[[np.ndarray], np.ndarray]
 """An agent's policy: observation in, env action (the agent's own units) out."""
+
+NamedPolicy = Callable[[str, Any, str], Policy]
+"""Builds agent ``agent``'s policy in ``env`` from a spec naming a policy (``scripted:NAME``, a
+policy zoo name); raises :class:`ValueError` for a spec it does not know."""
 
 EVAL_SEED_OFFSET = 10_000_019  # evaluation seeds never coincide with training reset seeds
 
@@ -190,41 +200,10 @@ def run_stage_dir(run_dir: Path, stage: str | None = None) -> Path:
     if summary.is_file():
         order = [s["stage"] for s in json.loads(summary.read_text()).get("stages", [])]
     if not order and (run_dir / "config.toml").is_file():
-        from hptvsim.train.trainer import load_run_config
-
         order = [s.name for s in load_run_config(run_dir).stages if (root / s.name / "stage.json").is_file()]
     if not order:
         raise FileNotFoundError(f"{run_dir} has no finished stage (train it first)")
     return root / order[-1]
-
-
-class _ActAdapter:
-    """A policy object with ``act(obs, episode_start)`` (hptvsim.envs' scripted policies) as a Policy."""
-
-    def __init__(self, policy: Any) -> None:
-        self.policy = policy
-        self.start = True
-
-    def reset(self) -> None:
-        """The next call starts an episode."""
-        self.start = True
-
-    def __call__(self, obs: np.ndarray) -> np.ndarray:
-        action = self.policy.act(np.asarray(obs)[None], episode_start=np.array([self.start]))
-        self.start = False
-        return np.asarray(action, dtype=np.float32).reshape(-1)
-
-
-def _in_env_units(policy: Any) -> Any:
-    """A zoo policy acting as the environment takes actions.
-
-    The zoo's policies act in SI units (``[v, omega]``, ``[v, omega, w_z]``), as the planar envs
-    take them; the 3-D envs take normalised actions, which the zoo's 3-D policies wrap
-    (:class:`~hptvsim.zoo.Commands3D`): the wrapped policy is the one the env takes.
-    """
-    from hptvsim.zoo import Commands3D
-
-    return policy.policy if isinstance(policy, Commands3D) else policy
 
 
 def reset_policies(policies: Mapping[str, Any]) -> None:
@@ -235,8 +214,15 @@ def reset_policies(policies: Mapping[str, Any]) -> None:
             reset()
 
 
-def policy_from_spec(spec: str, env: Any, agent: str) -> Policy:
+def policy_from_spec(spec: str, env: Any, agent: str, *, named: NamedPolicy | None = None) -> Policy:
     """Build one agent's policy from a spec string (see the module docstring).
+
+    Args:
+        spec: The spec.
+        env: The environment the policy acts in.
+        agent: The agent it drives.
+        named: Builds the named policies of the underwater game (``scripted:NAME`` and the
+            policy zoo's names); without it, only the specs training knows itself are valid.
 
     Raises:
         ValueError: Unknown spec kind (the message lists the valid ones).
@@ -263,27 +249,16 @@ def policy_from_spec(spec: str, env: Any, agent: str) -> Policy:
         return sb3_policy(_load_sb3(file))
     if kind == "zip":
         return sb3_policy(_load_sb3(Path(rest)))
-    if kind == "scripted":
-        import importlib
-
-        envs = importlib.import_module("hptvsim.envs")
-        make = getattr(envs, "scripted_policy", None)
-        if make is not None:
-            scripted = make(rest, env, agent)
-        elif hasattr(env, "core"):  # the underwater game: the zoo's scripted policies (roles checked)
-            from hptvsim.zoo import load_policy
-
-            scripted = _in_env_units(load_policy(f"scripted:{rest}", env.core, agent))
-        else:
-            raise ValueError(f"scripted policies need the underwater game (hptvsim.envs); {env!r} is not")
-        return _ActAdapter(scripted) if hasattr(scripted, "act") else scripted
-    if hasattr(env, "core"):  # the underwater game: anything the policy zoo knows
-        from hptvsim.zoo import UnknownPolicyError, load_policy
-
-        try:
-            return _ActAdapter(_in_env_units(load_policy(spec, env.core, agent, allow_paths=True)))
-        except UnknownPolicyError as exc:
-            raise ValueError(f"{exc}; also valid: run:RUN_DIR[@STAGE], zip:PATH, random") from None
+    if kind == "scripted" and not hasattr(env, "core"):
+        raise ValueError(f"scripted policies need the underwater game (hptvsim.envs); {env!r} is not")
+    if hasattr(env, "core"):  # the underwater game: a named policy (scripted ones included)
+        if named is None:
+            raise ValueError(
+                f"policy spec {spec!r} names a policy; named policies need the policy zoo, which "
+                "sits above training: pass named= (hptvsim.experiments.policies.named_policy); "
+                "valid here: run:RUN_DIR[@STAGE], zip:PATH, random"
+            )
+        return named(spec, env, agent)
     raise ValueError(
         f"unknown policy spec {spec!r}; "
         "valid: run:RUN_DIR[@STAGE], zip:PATH, toy:greedy, random, scripted:NAME, and for the "
@@ -292,7 +267,11 @@ def policy_from_spec(spec: str, env: Any, agent: str) -> Policy:
 
 
 def policies_from_specs(
-    default: str, overrides: Mapping[str, str] | None = None, *, required: Collection[str] = ()
+    default: str,
+    overrides: Mapping[str, str] | None = None,
+    *,
+    required: Collection[str] = (),
+    named: NamedPolicy | None = None,
 ) -> Callable[[Any], dict[str, Policy]]:
     """A builder of ``agent -> policy``: ``overrides`` by agent or role (``pursuer``), else ``default``.
 
@@ -301,6 +280,7 @@ def policies_from_specs(
         overrides: Spec by agent name or role.
         required: Keys of ``overrides`` that must name an agent or a role of the env (the
             builder raises ``ValueError`` naming the valid ones); other keys may name none.
+        named: Builds named policies (see :func:`policy_from_spec`).
     """
     over = dict(overrides or {})
 
@@ -314,7 +294,7 @@ def policies_from_specs(
         out = {}
         for agent in env.possible_agents:
             spec = over.get(agent) or over.get(agent_role(agent)) or default
-            out[agent] = policy_from_spec(spec, env, agent)
+            out[agent] = policy_from_spec(spec, env, agent, named=named)
         return out
 
     return build

@@ -112,6 +112,15 @@ def resolve_precision(precision: str) -> str:
     return precision
 
 
+def _gpu_precision(precision: str) -> str:
+    """On a CUDA device: ``"auto"`` is bfloat16 where the card supports it (Ampere and later)."""
+    if precision not in ("auto", "float32", "bfloat16"):
+        raise ValueError(f"precision must be 'auto', 'float32' or 'bfloat16', got {precision!r}")
+    if precision == "auto":
+        return "bfloat16" if torch.cuda.is_bf16_supported() else "float32"
+    return precision
+
+
 def raise_malloc_thresholds() -> bool:
     """Keep freed tensor memory in glibc's heap instead of returning it to the OS.
 
@@ -180,7 +189,7 @@ def _narrow_linear(x: Tensor, W: Tensor, b: Tensor) -> Tensor:
     return torch.stack(cols, dim=-1) + b.unsqueeze(1)
 
 
-class _BatchedAdam:
+class BatchedAdam:
     """Adam on stacked parameters with one step count per agent (torch's Adam, element-wise)."""
 
     def __init__(
@@ -209,8 +218,9 @@ class _BatchedAdam:
         self.steps += 1.0
         bc1 = 1.0 - self.beta1**self.steps
         bc2_sqrt = np.sqrt(1.0 - self.beta2**self.steps)
-        step_size = torch.as_tensor(self.lr / bc1, dtype=torch.float32)
-        bc2 = torch.as_tensor(bc2_sqrt, dtype=torch.float32)
+        dev = self.params[0].device
+        step_size = torch.as_tensor(self.lr / bc1, dtype=torch.float32, device=dev)
+        bc2 = torch.as_tensor(bc2_sqrt, dtype=torch.float32, device=dev)
         with torch.no_grad():
             for p, m, v, rep in zip(self.params, self.exp_avg, self.exp_avg_sq, self.reps, strict=True):
                 g = p.grad
@@ -232,16 +242,28 @@ class BatchedSAC:
         precision: ``"float32"``, ``"bfloat16"`` or ``"auto"`` (:func:`resolve_precision`) for the
             hidden layers' matrix products; :attr:`precision` holds the one in use.
         seed: Seed of the replay sampling generator.
+        device: Where the stacked parameters, optimiser state and updates live (the SB3 models
+            stay on the CPU; :meth:`pull` and :meth:`push` copy across).
 
     Raises:
         ValueError: The models differ in shapes or hyperparameters, or use unsupported features;
             the message names the agent index and what differs.
     """
 
-    def __init__(self, models: Sequence[Any], *, precision: str = "float32", seed: int | None = None) -> None:
+    def __init__(
+        self,
+        models: Sequence[Any],
+        *,
+        precision: str = "float32",
+        seed: int | None = None,
+        device: torch.device | str = "cpu",
+    ) -> None:
         if not models:
             raise ValueError("BatchedSAC needs at least one model")
-        self.precision = resolve_precision(precision)
+        self.device = torch.device(device)
+        self.precision = (
+            resolve_precision(precision) if self.device.type == "cpu" else _gpu_precision(precision)
+        )
         raise_malloc_thresholds()
         self.models = list(models)
         self.n = len(self.models)
@@ -258,7 +280,9 @@ class BatchedSAC:
         self.auto_ent = m0.ent_coef_optimizer is not None
         self.low = np.stack([m.action_space.low for m in self.models]).astype(np.float32)
         self.high = np.stack([m.action_space.high for m in self.models]).astype(np.float32)
-        self.target_entropy = torch.tensor([float(m.target_entropy) for m in self.models]).view(-1, 1, 1)
+        self.target_entropy = torch.tensor(
+            [float(m.target_entropy) for m in self.models], device=self.device
+        ).view(-1, 1, 1)
         self._build()
         self.pull()
 
@@ -308,35 +332,35 @@ class BatchedSAC:
     def _build(self) -> None:
         m0 = self.models[0]
         self.actor = [
-            torch.zeros((self.n, *p.shape), requires_grad=True)
+            torch.zeros((self.n, *p.shape), device=self.device, requires_grad=True)
             for layer in self._actor_layers(m0)
             for p in (layer.weight, layer.bias)
         ]
         self.critic = [
-            torch.zeros((2 * self.n, *p.shape), requires_grad=True)
+            torch.zeros((2 * self.n, *p.shape), device=self.device, requires_grad=True)
             for layer in self._critic_layers(m0.critic)[0]
             for p in (layer.weight, layer.bias)
         ]
         self.critic_target = [torch.zeros_like(p, requires_grad=False) for p in self.critic]
-        self.log_ent_coef = torch.zeros(self.n, requires_grad=self.auto_ent)
+        self.log_ent_coef = torch.zeros(self.n, device=self.device, requires_grad=self.auto_ent)
         opt = m0.actor.optimizer.param_groups[0]
         betas = (float(opt["betas"][0]), float(opt["betas"][1]))
         lr = float(m0.lr_schedule(1.0))
-        self.actor_opt = _BatchedAdam(self.actor, [1] * len(self.actor), self.n, lr, betas, float(opt["eps"]))
+        self.actor_opt = BatchedAdam(self.actor, [1] * len(self.actor), self.n, lr, betas, float(opt["eps"]))
         copt = m0.critic.optimizer.param_groups[0]
         cbetas = (float(copt["betas"][0]), float(copt["betas"][1]))
-        self.critic_opt = _BatchedAdam(
+        self.critic_opt = BatchedAdam(
             self.critic, [2] * len(self.critic), self.n, lr, cbetas, float(copt["eps"])
         )
-        self.ent_opt: _BatchedAdam | None = None
+        self.ent_opt: BatchedAdam | None = None
         if self.auto_ent:
             eg = m0.ent_coef_optimizer.param_groups[0]
             ebetas = (float(eg["betas"][0]), float(eg["betas"][1]))
-            self.ent_opt = _BatchedAdam([self.log_ent_coef], [1], self.n, lr, ebetas, float(eg["eps"]))
+            self.ent_opt = BatchedAdam([self.log_ent_coef], [1], self.n, lr, ebetas, float(eg["eps"]))
 
-    def _pairs(self, m: Any, i: int) -> list[tuple[Tensor, Tensor, int, _BatchedAdam | None, Any, int]]:
+    def _pairs(self, m: Any, i: int) -> list[tuple[Tensor, Tensor, int, BatchedAdam | None, Any, int]]:
         """Per parameter of model i: (SB3 tensor, stacked, its index, optimiser, SB3 optimiser, row)."""
-        out: list[tuple[Tensor, Tensor, int, _BatchedAdam | None, Any, int]] = []
+        out: list[tuple[Tensor, Tensor, int, BatchedAdam | None, Any, int]] = []
         k = 0
         for layer in self._actor_layers(m):
             for p in (layer.weight, layer.bias):
@@ -398,16 +422,16 @@ class BatchedSAC:
                     continue
                 opt.state[p] = {
                     "step": torch.tensor(bopt.steps[i], dtype=torch.float32),
-                    "exp_avg": bopt.exp_avg[k][row].clone(),
-                    "exp_avg_sq": bopt.exp_avg_sq[k][row].clone(),
+                    "exp_avg": bopt.exp_avg[k][row].to("cpu", copy=True),
+                    "exp_avg_sq": bopt.exp_avg_sq[k][row].to("cpu", copy=True),
                 }
             if self.auto_ent:
                 assert self.ent_opt is not None
                 m.log_ent_coef.copy_(self.log_ent_coef[i : i + 1])
                 m.ent_coef_optimizer.state[m.log_ent_coef] = {
                     "step": torch.tensor(self.ent_opt.steps[i], dtype=torch.float32),
-                    "exp_avg": self.ent_opt.exp_avg[0][i : i + 1].clone(),
-                    "exp_avg_sq": self.ent_opt.exp_avg_sq[0][i : i + 1].clone(),
+                    "exp_avg": self.ent_opt.exp_avg[0][i : i + 1].to("cpu", copy=True),
+                    "exp_avg_sq": self.ent_opt.exp_avg_sq[0][i : i + 1].to("cpu", copy=True),
                 }
 
     # --- networks -----------------------------------------------------------------------------
@@ -449,7 +473,7 @@ class BatchedSAC:
         """Squashed Gaussian action and its log-probability (SB3's SquashedDiagGaussian)."""
         mean, log_std = self._actor_dist(obs, exact=exact)
         std = torch.exp(log_std)
-        eps = torch.empty(mean.shape).normal_()
+        eps = torch.empty(mean.shape, device=mean.device).normal_()
         gaussian = mean + eps * std
         log_prob = (
             -((gaussian - mean) ** 2) / (2 * std**2) - log_std - math.log(math.sqrt(2 * math.pi))
@@ -470,13 +494,13 @@ class BatchedSAC:
     @torch.no_grad()
     def predict_scaled(self, obs: np.ndarray, *, deterministic: bool) -> np.ndarray:
         """Actions in [-1, 1] for one observation per agent (``obs``: [N, obs_dim])."""
-        x = torch.as_tensor(np.asarray(obs, dtype=np.float32)).unsqueeze(1)
+        x = torch.as_tensor(np.asarray(obs, dtype=np.float32), device=self.device).unsqueeze(1)
         if deterministic:
             mean, _ = self._actor_dist(x, exact=True)
             action = torch.tanh(mean)
         else:
             action, _ = self._sample(x, exact=True)
-        return action.squeeze(1).numpy()
+        return action.squeeze(1).cpu().numpy()
 
     def unscale(self, scaled: np.ndarray) -> np.ndarray:
         """[-1, 1] actions to the agents' action bounds (SB3's ``unscale_action``)."""
@@ -499,7 +523,7 @@ class BatchedSAC:
             cols[2].append(buf.next_observations[idx, 0])
             cols[3].append((buf.dones[idx, 0] * (1.0 - buf.timeouts[idx, 0]))[:, None])
             cols[4].append(buf.rewards[idx, 0][:, None])
-        t = [torch.as_tensor(np.stack(c).astype(np.float32, copy=False)) for c in cols]
+        t = [torch.as_tensor(np.stack(c).astype(np.float32, copy=False), device=self.device) for c in cols]
         return ReplayBatch(*t)
 
     def train(self, gradient_steps: int) -> dict[str, np.ndarray]:
@@ -509,7 +533,7 @@ class BatchedSAC:
             logs.append(self.update(self.sample()))
         for m in self.models:
             m._n_updates += gradient_steps
-        mean = torch.stack(logs).mean(0).numpy() if logs else np.full((4, self.n), np.nan)
+        mean = torch.stack(logs).mean(0).cpu().numpy() if logs else np.full((4, self.n), np.nan)
         return {"actor_loss": mean[0], "critic_loss": mean[1], "ent_coef": mean[2], "ent_coef_loss": mean[3]}
 
     def update(self, batch: ReplayBatch) -> Tensor:
@@ -526,7 +550,7 @@ class BatchedSAC:
             self.ent_opt.step()
         else:
             ent_coef = torch.exp(self.log_ent_coef.detach()).view(-1, 1, 1)
-            ent_loss = torch.full((self.n,), float("nan"))
+            ent_loss = torch.full((self.n,), float("nan"), device=self.device)
 
         with torch.no_grad():
             next_actions, next_log_prob = self._sample(batch.next_observations)

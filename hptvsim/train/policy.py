@@ -1,8 +1,10 @@
 """Trained SB3 models (SAC or PPO, ours or anyone's) as policies of the zoo (kind ``sb3``).
 
-Importing this module registers the loader with :mod:`hptvsim.zoo`, so ``sb3:path/to/model.zip``
-and shipped entries of kind ``sb3`` load wherever policies load: the environments' views,
-``hptvsim evaluate``, the service and the dashboard.
+:func:`load_sb3` is the zoo's loader of the kind (:mod:`hptvsim.zoo` imports it), so
+``sb3:path/to/model.zip`` and shipped entries of kind ``sb3`` load wherever policies load: the
+environments' views, ``hptvsim evaluate``, the episode engine, the service and the dashboard. A
+model plays any game (:class:`~hptvsim.envs.protocol.Game`) whose spaces it fits: it acts in the
+agent's action space (the zoo maps those actions to commands where they differ).
 """
 
 from __future__ import annotations
@@ -15,10 +17,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from hptvsim.envs.core import GameCore
-from hptvsim.envs.game3d import Game3DCore
+from hptvsim.envs.protocol import Game
 from hptvsim.envs.task import EXTENDED_SIZE, fill_extended
-from hptvsim.zoo import Commands3D, register_loader
 
 __all__ = [
     "MODEL_CACHE_SIZE",
@@ -26,6 +26,8 @@ __all__ = [
     "SB3Policy",
     "cached_sb3_model",
     "check_observation",
+    "check_sb3",
+    "load_sb3",
     "load_sb3_model",
     "sb3_spaces",
 ]
@@ -99,32 +101,37 @@ class ExtendedObservation:
     Args:
         core: The game whose state the rows come from (rows = its environments, in order).
         agent: The agent index.
+        yaw: The slot of the (normalised) yaw in the observation.
+        azimuth: The slot of the (normalised) azimuth of the target in the observation.
     """
 
-    def __init__(self, core: GameCore, agent: int) -> None:
+    def __init__(self, core: Game, agent: int, *, yaw: int, azimuth: int) -> None:
         self.core = core
         self.agent = agent
+        self.yaw = yaw
+        self.azimuth = azimuth
+        high = core.action_bounds[1][agent]  # [v_max, omega_max] (Eq. 15)
+        self.v_max, self.omega_max = float(high[0]), float(high[1])
+        self.site = (float(core.scenario.site.size[0]), float(core.scenario.site.size[1]))
 
     def __call__(self, obs: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
         """``(B, size)`` Eq. 14 rows of this agent -> ``(B, size + 6)``."""
         core, i = self.core, self.agent
-        layout = core.layout
-        s = core.state
         if obs.shape[0] != core.num_envs:
             raise ValueError(
                 f"expected one observation row per environment ({core.num_envs}), got {obs.shape[0]}"
             )
-        psi = obs[:, layout.yaw].astype(np.float64) * np.pi
-        rel = obs[:, layout.azimuth].astype(np.float64) * np.pi - psi
+        psi = obs[:, self.yaw].astype(np.float64) * np.pi
+        rel = obs[:, self.azimuth].astype(np.float64) * np.pi - psi
         extra = np.empty((obs.shape[0], EXTENDED_SIZE), dtype=np.float32)
         fill_extended(
             extra,
             relative_bearing=rel,
-            velocity=s.velocity[:, i],
-            v_max=core.robots.limits[i, 1],
-            omega_max=core.robots.limits[i, 2],
-            positions=s.positions[:, i, :2],
-            site=core.site,
+            velocity=core.velocity[:, i][:, [0, 1, 5]],  # [u, v, r]
+            v_max=self.v_max,
+            omega_max=self.omega_max,
+            positions=core.poses[:, i, 0:2],
+            site=self.site,
         )
         return np.concatenate([obs, extra], axis=-1)
 
@@ -181,25 +188,42 @@ def check_observation(shape: tuple[int, ...], obs_size: int, *, extended: bool) 
         )
 
 
-def _fit(
-    path: Path, observation: tuple[int, ...], action: tuple[int, ...], core: GameCore | Game3DCore
-) -> bool:
-    """Check a model's spaces against the game; returns whether the extended values are appended.
+def _extension(game: Game, agent: str, observation: tuple[int, ...]) -> ExtendedObservation | None:
+    """The extended values to append for a model trained with them, on a game that observes plain Eq. 14.
+
+    None where the model observes what the game does. The one place this module reads a game
+    beyond the protocol: the observation layout's ``extended`` flag and its yaw and azimuth
+    slots (the planar game's :class:`~hptvsim.envs.task.ObsLayout`; a game without them, as the
+    3-D game, is never extended). To become ``Game.observation_extension(agent)``.
+    """
+    layout = getattr(game, "layout", None)
+    size = int(game.observation_space(agent).shape[0])
+    if layout is None or getattr(layout, "extended", True) or not observation:
+        return None
+    if observation[0] != size + EXTENDED_SIZE:
+        return None
+    return ExtendedObservation(
+        game, game.agents.index(agent), yaw=int(layout.yaw), azimuth=int(layout.azimuth)
+    )
+
+
+def _fit(path: Path, observation: tuple[int, ...], action: tuple[int, ...], game: Game, agent: str) -> bool:
+    """Check a model's spaces against the agent's; returns whether the extended values are appended.
 
     Raises:
         ValueError: The model was trained on another game or observation layout.
     """
-    if isinstance(core, Game3DCore):
-        # a model of the 3-D envs (make_sb3_vec_env_3d, the UPEG3D ids): normalised actions
-        if tuple(action) != (3,):
-            raise ValueError(
-                f"{path}: the model acts in {tuple(action)}, the 3-D game takes 3 normalised "
-                "values [v, omega, w_z]; it was trained on another game"
-            )
-        check_observation(observation, core.layout.size, extended=False)
-        return False
-    size = core.layout.size
-    extend = bool(observation) and not core.layout.extended and observation[0] == size + EXTENDED_SIZE
+    space = game.action_space(agent)
+    act = tuple(int(n) for n in space.shape)
+    if tuple(action) != act:
+        unit_box = bool(np.all(space.low == -1.0) and np.all(space.high == 1.0))
+        from_box = " normalised" if unit_box else ""
+        raise ValueError(
+            f"{path}: the model acts in {tuple(action)}, the {game.kind} game takes {act[0]}{from_box} "
+            f"values [{', '.join(game.command_fields)}]; it was trained on another game"
+        )
+    size = int(game.observation_space(agent).shape[0])
+    extend = _extension(game, agent, observation) is not None
     check_observation(observation, size, extended=extend)
     return extend
 
@@ -226,24 +250,24 @@ def sb3_spaces(path: Path) -> tuple[tuple[int, ...], tuple[int, ...]] | None:
     return obs, act
 
 
-def _load(path: Path, core: GameCore | Game3DCore, agent: str) -> SB3Policy | Commands3D:
+def load_sb3(path: Path, game: Game, agent: str) -> SB3Policy:
+    """The zoo's loader of kind ``sb3``: the model for ``agent`` of ``game``, acting in its action space.
+
+    Raises:
+        ValueError: Not an SB3 SAC or PPO file, or one trained on another game or layout.
+    """
     model = cached_sb3_model(path)
-    extend = _fit(path, tuple(model.observation_space.shape), tuple(model.action_space.shape), core)
-    if isinstance(core, Game3DCore):
-        return Commands3D(SB3Policy(model, obs_size=core.layout.size), core, core.agents.index(agent))
-    index = core.agents.index(agent)
+    _fit(path, tuple(model.observation_space.shape), tuple(model.action_space.shape), game, agent)
+    size = int(game.observation_space(agent).shape[0])
     return SB3Policy(
-        model, obs_size=core.layout.size, extend=ExtendedObservation(core, index) if extend else None
+        model, obs_size=size, extend=_extension(game, agent, tuple(model.observation_space.shape))
     )
 
 
-def _check(path: Path, core: GameCore | Game3DCore, agent: str) -> None:
-    """:func:`_load`'s checks, from the spaces the file states (else the model is loaded)."""
+def check_sb3(path: Path, game: Game, agent: str) -> None:
+    """:func:`load_sb3`'s checks, from the spaces the file states (else the model is loaded)."""
     spaces = sb3_spaces(path)
     if spaces is None:
-        _load(path, core, agent)
+        load_sb3(path, game, agent)
     else:
-        _fit(path, *spaces, core)
-
-
-register_loader("sb3", _load, _check)
+        _fit(path, *spaces, game, agent)

@@ -47,19 +47,19 @@ from hptvsim.train.config import (
     ConfigError,
     TrainConfig,
     check_env_spec,
-    config_from_dict,
     config_to_dict,
     dump_toml,
+    load_run_config,
 )
 from hptvsim.train.curriculum import build_learner, finish_stage, stage_dir
 from hptvsim.train.envs import EnvFactory, make_env_factory
+from hptvsim.train.evaluate import NamedPolicy, policy_from_spec, reset_policies
 from hptvsim.train.logs import RunLogger
 
 __all__ = [
     "RunResult",
     "TrainingInterrupted",
     "check_stages",
-    "load_run_config",
     "resume_changes",
     "train",
 ]
@@ -85,21 +85,6 @@ class RunResult:
     global_step: int
     finished: bool
     stage_dirs: tuple[Path, ...]
-
-
-def load_run_config(run_dir: Path) -> TrainConfig:
-    """The config a run is trained with (``RUN_DIR/config.toml``).
-
-    Raises:
-        FileNotFoundError: ``run_dir`` holds no run.
-    """
-    import tomllib
-
-    path = Path(run_dir) / "config.toml"
-    if not path.is_file():
-        raise FileNotFoundError(f"{run_dir} is not a training run: it has no config.toml")
-    with path.open("rb") as f:
-        return config_from_dict(tomllib.load(f), str(path))
 
 
 def _env_versions() -> dict[str, str]:
@@ -216,7 +201,11 @@ def resume_changes(saved: TrainConfig, given: TrainConfig, state: LoopState) -> 
 
 
 def check_stages(
-    cfg: TrainConfig, env_factories: Mapping[str, EnvFactory] | None = None, *, start: int = 0
+    cfg: TrainConfig,
+    env_factories: Mapping[str, EnvFactory] | None = None,
+    *,
+    start: int = 0,
+    named: NamedPolicy | None = None,
 ) -> None:
     """Check every stage from ``start`` on before training: build its env once, load its fixed policies.
 
@@ -224,6 +213,7 @@ def check_stages(
         cfg: The run's config.
         env_factories: ``stage name -> factory`` replacing the stages' env specs (as in :func:`train`).
         start: Index of the first stage to check (a resumed run's finished stages are not).
+        named: Builds the fixed policies given by name (as in :func:`train`).
 
     Raises:
         ConfigError: One line naming the stage and the problem: an unknown env kind, option or
@@ -252,7 +242,7 @@ def check_stages(
                     learning.append(agent)
                     continue
                 try:
-                    _fixed_policies(cfg, env, [agent])
+                    _fixed_policies(cfg, env, [agent], named=named)
                 except (ValueError, FileNotFoundError) as exc:
                     raise ConfigError(f"{where}: fixed.{fixed[0]}: {exc}") from exc
             if not learning:
@@ -318,6 +308,7 @@ def train(
     label: str | None = None,
     update_config: bool = False,
     log: Callable[[str], None] | None = None,
+    named: NamedPolicy | None = None,
 ) -> RunResult:
     """Train a run to the end of its curriculum (or continue a killed one with ``resume``).
 
@@ -343,6 +334,11 @@ def train(
             what is not trained yet (:func:`resume_changes`); it becomes the run's
             ``config.toml`` and ``run.json`` records when (``config_updated_at``).
         log: Called with a line on what is worth telling the user (a config update on resume).
+        named: Builds the policies ``cfg.fixed`` gives by name (``scripted:NAME``, the policy
+            zoo's names; :func:`hptvsim.train.evaluate.policy_from_spec`). Training sits below
+            the zoo, so whoever trains from names passes it
+            (:func:`hptvsim.experiments.policies.named_policy`, as ``hptvsim train`` does);
+            without it only the specs training knows itself are valid.
 
     Raises:
         FileExistsError: ``run_dir`` holds a run and ``resume`` is false.
@@ -371,7 +367,7 @@ def train(
                 f"{run_dir} already holds a run; continue it with --resume or choose another --out"
             )
         state, ckpt_models = LoopState(), None
-    check_stages(cfg, env_factories, start=state.stage_index)
+    check_stages(cfg, env_factories, start=state.stage_index, named=named)
     if changes and log is not None:
         log(
             f"note: resuming with the given config, which changes {', '.join(changes)} (not started "
@@ -395,7 +391,7 @@ def train(
             factory = factories.get(stage.name) or make_env_factory(stage.env)
             env = factory()
             try:
-                fixed = _fixed_policies(cfg, env)
+                fixed = _fixed_policies(cfg, env, named=named)
                 spaces = {a: s for a, s in agent_spaces(env).items() if a not in fixed}
                 if not spaces:
                     raise ValueError(
@@ -460,17 +456,17 @@ def _fixed_spec(cfg: TrainConfig, agent: str) -> tuple[str, str] | None:
     return None
 
 
-def _fixed_policies(cfg: TrainConfig, env: Any, agents: Sequence[str] | None = None) -> dict[str, Any]:
+def _fixed_policies(
+    cfg: TrainConfig, env: Any, agents: Sequence[str] | None = None, *, named: NamedPolicy | None = None
+) -> dict[str, Any]:
     """Policies of the agents that do not learn (``cfg.fixed``, by agent name or role)."""
     if not cfg.fixed:
         return {}
-    from hptvsim.train.evaluate import policy_from_spec
-
     out = {}
     for agent in env.possible_agents if agents is None else agents:
         fixed = _fixed_spec(cfg, agent)
         if fixed is not None:
-            out[agent] = policy_from_spec(fixed[1], env, agent)
+            out[agent] = policy_from_spec(fixed[1], env, agent, named=named)
     return out
 
 
@@ -542,8 +538,6 @@ def _run_stage(
             obs, _ = env.reset(seed=episode_seed(cfg.seed, idx, state.stage_episode))
             episode_log_start = logger.offsets()["episodes"]
             if fixed:
-                from hptvsim.train.evaluate import reset_policies
-
                 reset_policies(fixed)
             if not env.agents:
                 raise RuntimeError(f"stage {stage.name!r}: the environment has no agents after reset")

@@ -1,19 +1,16 @@
-"""Visualisation and recording: the frame schema, the episode runner, rerun recordings, viser.
+"""Visualisation and recording: drawing and recording the episodes the engine produces.
 
-What a service (or a script) calls:
+The episodes themselves (running, stepping, trajectories, metrics) and their frame schema are
+the episode engine's, the layer below (:mod:`hptvsim.episodes`, :mod:`hptvsim.episodes.frames`).
+What this package adds:
 
-* :func:`hptvsim.viz.episode.run_episode` ``(scenario, policies, seed, max_steps,
-  sensor_fidelity, backend, *, on_static=, on_frame=, cancel=, recording_path=)`` ->
-  :class:`~hptvsim.viz.episode.EpisodeResult` (``.summary`` with ``.metrics``,
-  ``.trajectories``, ``.recording_path``); plain picklable arguments, for worker processes;
-* :class:`hptvsim.viz.episode.EpisodeStepper`: the same one step at a time (``reset``,
-  ``step({agent: [v, omega]})`` (3-D game: ``[v, omega, w_z]``), ``frame``, ``observations()``,
-  ``summary()``), for interactive stepping and remote environments;
-* :mod:`hptvsim.viz.frames`: the one frame schema (``EpisodeStatic``, ``Frame``,
-  ``EpisodeSummary``, ``Trajectories``; ``to_json``/``from_json``; ``json_schema()``);
-* :func:`hptvsim.viz.recording.read_recording`: a recording's static part, summary, poses (with
-  depth and attitude in the 3-D game) and scalar series (depth, altitude);
-* :class:`hptvsim.viz.viser_view.LiveView`: the live 3D view on its own port.
+* :mod:`hptvsim.viz.recording`: rerun recordings, written frame by frame
+  (:func:`~hptvsim.viz.recording.recorder` is what the engine's ``recorder=`` takes) and read
+  back (:func:`~hptvsim.viz.recording.read_recording`: a recording's static part, summary,
+  poses, with depth and attitude in the 3-D game, and scalar series);
+* :class:`hptvsim.viz.viser_view.LiveView`: the live 3D view on its own port (it runs its
+  episodes with the engine's :class:`~hptvsim.episodes.stepper.EpisodeStepper`);
+* :mod:`hptvsim.viz.replay`: replaying recordings in rerun's viewer.
 
 Submodules are imported on use (rerun and viser are heavy), so ``import hptvsim.viz`` is cheap.
 """

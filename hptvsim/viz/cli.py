@@ -1,7 +1,6 @@
 """Commands of the visualisation layer.
 
-``hptvsim episode``, ``replay``, ``view``, ``viz schema``,
-``bench episode``.
+``hptvsim episode``, ``replay``, ``view``, ``viz schema``.
 """
 
 from __future__ import annotations
@@ -112,7 +111,7 @@ def check_episode_args(
             a policy unknown or made for another role or game (the same rule as the service's), a
             negative seed, a step limit below 1, or an output folder that cannot be made.
     """
-    from hptvsim.viz.episode import resolve_scenario
+    from hptvsim.episodes.scenarios import resolve_scenario
     from hptvsim.world.scenario import ScenarioError
 
     try:
@@ -172,8 +171,8 @@ def check_web_out(out_dir: Path | None, check: bool, **_: Any) -> None:
             raise click.BadParameter(f"cannot make {out_dir}: {exc.strerror}", param_hint="--out") from None
 
 
-def register(main: click.Group, bench: click.Group) -> None:
-    """Add the visualisation commands to ``main`` and the episode benchmark to ``bench``."""
+def register(main: click.Group) -> None:
+    """Add the visualisation commands to ``main``."""
 
     @main.group("viz")
     def viz() -> None:
@@ -191,9 +190,9 @@ def register(main: click.Group, bench: click.Group) -> None:
         "--check", is_flag=True, help="Fail if the written files differ from what would be generated."
     )
     def viz_schema(out_dir: Path | None, check: bool) -> None:
-        """Write web/schema/frames.schema.json and web/js/frames.gen.js from hptvsim/viz/frames.py."""
+        """Write web/schema/frames.schema.json and web/js/frames.gen.js from hptvsim/episodes/frames.py."""
         check_web_out(out_dir, check)
-        from hptvsim.viz.frames import json_schema, schema_js
+        from hptvsim.episodes.frames import json_schema, schema_js
 
         web = out_dir if out_dir is not None else _repo_web()
         schema = json_schema()
@@ -262,7 +261,9 @@ def register(main: click.Group, bench: click.Group) -> None:
         import signal
         import threading
 
-        from hptvsim.viz.episode import SimulationError, run_episode
+        from hptvsim.episodes.runner import run_episode
+        from hptvsim.episodes.stepper import SimulationError
+        from hptvsim.viz.recording import recorder
 
         stop = threading.Event()
 
@@ -280,7 +281,7 @@ def register(main: click.Group, bench: click.Group) -> None:
                 sensor_fidelity=sensor_fidelity,  # type: ignore[arg-type]  # click.Choice checked it
                 backend=backend,  # type: ignore[arg-type]  # click.Choice checked it
                 cancel=stop,
-                recording_path=record,
+                recorder=recorder(record, None),
                 progress=True,
                 allow_paths=True,
             )
@@ -337,15 +338,3 @@ def register(main: click.Group, bench: click.Group) -> None:
             pass
         finally:
             live.stop()
-
-    @bench.command("episode")
-    @click.option("--quick", is_flag=True, help="Seconds instead of a minute.")
-    @click.option("--scenario", default="target", show_default=True)
-    @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of a table.")
-    def bench_episode(quick: bool, scenario: str, as_json: bool) -> None:
-        """µs per episode step: bare GameCore, + frames, + rerun recording (ratios to the bare core)."""
-        check_scenario_arg(scenario)
-        from hptvsim.cli import emit
-        from hptvsim.viz.bench import bench_episode as run
-
-        emit(run(quick=quick, scenario=scenario), as_json)

@@ -25,8 +25,8 @@ state, so a service writes many at once). Entities (world frame NED, ``RIGHT_HAN
                                        also ``depth`` (``z`` [m], positive down), ``altitude``
                                        (above the seabed [m]) and ``w_cmd`` (commanded vertical
                                        speed [m/s], positive down)
-``meta/static``, ``meta/summary``      the episode's :class:`~hptvsim.viz.frames.EpisodeStatic`
-                                       and :class:`~hptvsim.viz.frames.EpisodeSummary` as JSON
+``meta/static``, ``meta/summary``      the episode's :class:`~hptvsim.episodes.frames.EpisodeStatic`
+                                       and :class:`~hptvsim.episodes.frames.EpisodeSummary` as JSON
 =====================================  ===========================================================
 
 Every agent's entities (body, heading, trail, sonar fan, path, its plot series) are drawn in its
@@ -48,6 +48,7 @@ import json
 import math
 import uuid
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -55,8 +56,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from hptvsim.palette import SONAR_HIT_COLOR
-from hptvsim.viz.frames import (
+from hptvsim.episodes.frames import (
     AgentState,
     EpisodeStatic,
     EpisodeSummary,
@@ -66,6 +66,7 @@ from hptvsim.viz.frames import (
     beam_directions,
     quaternion_zyx,
 )
+from hptvsim.palette import SONAR_HIT_COLOR
 from hptvsim.viz.style import depth_colors, hex_rgb
 
 __all__ = [
@@ -74,6 +75,7 @@ __all__ = [
     "RecordingWriter",
     "blueprint",
     "read_recording",
+    "recorder",
     "recording_static",
 ]
 
@@ -463,6 +465,29 @@ class RecordingWriter:
         finally:
             self._closed = True
             rec.disconnect()
+
+
+def recorder(
+    path: str | Path | None, options: RecordingOptions | None = None
+) -> Callable[[EpisodeStatic], RecordingWriter] | None:
+    """What the episode engine takes as ``recorder``: a rerun recording of each episode at ``path``.
+
+    ``run_episode(..., recorder=recorder(path))`` (:func:`hptvsim.episodes.runner.run_episode`,
+    :class:`~hptvsim.episodes.stepper.EpisodeStepper`): the engine opens it with the episode's
+    static part at every reset, hands it each frame, and closes it with the summary.
+
+    Args:
+        path: The ``.rrd`` file; None: no recording (returns None).
+        options: What to record (default :class:`RecordingOptions`).
+    """
+    if path is None:
+        return None
+    target = Path(path)
+
+    def open_recording(static: EpisodeStatic) -> RecordingWriter:
+        return RecordingWriter(target, static, options=options)
+
+    return open_recording
 
 
 # --- reading ----------------------------------------------------------------------------------

@@ -2,10 +2,10 @@
 
 :class:`SceneRenderer` draws the frame schema into a viser scene: :meth:`~SceneRenderer.set_static`
 builds the terrain mesh (banded by depth), the site's edge, goals and the vehicles; and
-:meth:`~SceneRenderer.show` moves them to a :class:`~hptvsim.viz.frames.Frame`.
+:meth:`~SceneRenderer.show` moves them to a :class:`~hptvsim.episodes.frames.Frame`.
 
 :class:`LiveView` is the viser server with a simulation thread: it runs episodes with an
-:class:`~hptvsim.viz.episode.EpisodeStepper` and offers play/pause, speed, reset, scenario,
+:class:`~hptvsim.episodes.stepper.EpisodeStepper` and offers play/pause, speed, reset, scenario,
 policy and seed pickers, sonar and trail switches, progress and a distance plot (simulated
 seconds on its x axis, one line per pursuer in the pursuer's colour of :mod:`hptvsim.palette`,
 see :func:`distance_plot`). Viser runs its
@@ -51,9 +51,9 @@ import numpy as np
 import numpy.typing as npt
 
 from hptvsim.catalog import MAX_SEED, CatalogError, Role
+from hptvsim.episodes.frames import AgentState, EpisodeStatic, Frame, beam_directions, quaternion_zyx
 from hptvsim.palette import SONAR_HIT_COLOR
 from hptvsim.sensors.sonar3d import rotation_zyx
-from hptvsim.viz.frames import AgentState, EpisodeStatic, Frame, beam_directions, quaternion_zyx
 from hptvsim.viz.style import depth_colors, hex_rgb
 
 __all__ = ["Launcher", "LiveView", "SceneRenderer", "distance_plot", "plotted_agents", "start_live_view"]
@@ -77,7 +77,7 @@ def _quat_wxyz(psi: float, phi: float = 0.0, theta: float = 0.0) -> tuple[float,
         phi: Roll [rad].
         theta: Pitch [rad], positive nose up.
 
-    :func:`~hptvsim.viz.frames.quaternion_zyx` (the recording's) in viser's order.
+    :func:`~hptvsim.episodes.frames.quaternion_zyx` (the recording's) in viser's order.
     """
     x, y, z, w = quaternion_zyx(phi, theta, psi).tolist()
     return (w, x, y, z)
@@ -545,7 +545,7 @@ class LiveView:
             OSError: The view's port cannot be bound.
             RuntimeError: viser cannot be bound to a Unix socket.
         """
-        from hptvsim.viz.episode import EpisodeStepper
+        from hptvsim.episodes.stepper import EpisodeStepper
         from hptvsim.viz.gateway import Gateway
 
         self._socket_dir = tempfile.mkdtemp(prefix="hptvsim-view-")  # mode 0700: this user only
@@ -744,7 +744,7 @@ class LiveView:
     # -- the simulation thread -------------------------------------------------------------------
 
     def _apply(self, req: _Request) -> None:
-        from hptvsim.viz.episode import EpisodeStepper
+        from hptvsim.episodes.stepper import EpisodeStepper
 
         assert self.renderer is not None
         if req.kind in ("play", "pause"):

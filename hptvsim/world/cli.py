@@ -1,4 +1,4 @@
-"""Command line of the world package: ``hptvsim scenario``, ``hptvsim terrain``, ``hptvsim bench world``.
+"""Command line of the world package: ``hptvsim scenario``, ``hptvsim terrain``.
 
 Heavy modules are imported inside the commands so ``hptvsim --help`` stays fast.
 """
@@ -13,11 +13,10 @@ import click
 __all__ = ["register"]
 
 
-def register(main: click.Group, bench: click.Group) -> None:
-    """Add the ``scenario`` and ``terrain`` groups to ``main`` and ``world`` to ``bench``."""
+def register(main: click.Group) -> None:
+    """Add the ``scenario`` and ``terrain`` groups to ``main``."""
     main.add_command(scenario)
     main.add_command(terrain)
-    bench.add_command(bench_world_cmd)
 
 
 # --- scenario ------------------------------------------------------------------------------------
@@ -220,17 +219,3 @@ def terrain_import(
     click.echo(f"depth:      {lo:.2f} .. {hi:.2f} m (positive down); {result.holes_filled} hole cells filled")
     click.echo(f"height map: {path.resolve()}")
     click.echo(f"preview:    {preview.resolve()}")
-
-
-# --- bench ---------------------------------------------------------------------------------------
-
-
-@click.command("world")
-@click.option("--quick", is_flag=True, help="Seconds instead of a minute.")
-@click.option("--json", "as_json", is_flag=True, help="Print JSON instead of a table.")
-def bench_world_cmd(quick: bool, as_json: bool) -> None:
-    """µs per point of the per-step world queries (distance, occupancy, depth, currents)."""
-    from hptvsim.cli import emit
-    from hptvsim.world.bench import bench_world
-
-    emit(bench_world(quick=quick), as_json)

@@ -68,7 +68,6 @@ import numpy.typing as npt
 from hptvsim._paths import shipped_dir
 from hptvsim.cosim.vehicles import ExternalVehicleType, VehicleFileError, load_vehicle_file
 from hptvsim.dynamics import BUILTIN_VEHICLES, VEHICLE_TYPES, ParameterError, VehicleParameters, VehicleType
-from hptvsim.sensors.config import AcousticLinkConfig, SonarConfig
 from hptvsim.world._schema import (
     JSON_SCHEMA_DIALECT,
     Context,
@@ -89,6 +88,7 @@ from hptvsim.world._schema import (
 from hptvsim.world.currents import CURRENT_KINDS, MAX_ANGLE, MAX_COORDINATE, CurrentField, CurrentSum
 from hptvsim.world.grid import GridGeometry, OccupancyGrid
 from hptvsim.world.importers import Format, ImportOptions, import_terrain
+from hptvsim.world.sensor_config import AcousticLinkConfig, SonarConfig
 from hptvsim.world.terrain import (
     MAX_DEPTH,
     MAX_RESOLUTION,

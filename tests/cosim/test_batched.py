@@ -13,8 +13,9 @@ import pytest
 
 from hptvsim.cosim import FmuError
 from hptvsim.cosim.batched import BatchedSnapshot, BatchedVehicleSystem, NonFiniteStateError
+from hptvsim.cosim.interface import SystemSpec, VehicleSpec, VehicleSystem
 from hptvsim.cosim.orchestrator import SimulationFailedError, SimulationPausedError
-from hptvsim.cosim.system import FmuVehicleSystem, SystemSpec, VehicleSpec, VehicleSystem
+from hptvsim.cosim.system import FmuVehicleSystem
 from hptvsim.dynamics import ParameterError
 
 # Mixed types, the spherical one between work-class ones (so a type's vehicles are not contiguous),

@@ -9,14 +9,9 @@ import pytest
 
 from hptvsim.cosim.batched import BatchedVehicleSystem
 from hptvsim.cosim.graph import load_graph, save_graph
+from hptvsim.cosim.interface import SystemSpec, VehicleSpec
 from hptvsim.cosim.orchestrator import Orchestrator
-from hptvsim.cosim.system import (
-    FmuVehicleSystem,
-    SystemSpec,
-    VehicleSpec,
-    make_system,
-    vehicle_graph,
-)
+from hptvsim.cosim.system import FmuVehicleSystem, make_system, vehicle_graph
 from hptvsim.dynamics import ParameterError, wrap_angle
 
 SPEC = SystemSpec(

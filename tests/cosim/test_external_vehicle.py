@@ -14,7 +14,8 @@ from vehicle_fmus import unicycle_fmu
 
 from hptvsim.cli import main
 from hptvsim.cosim.batched import BatchedVehicleSystem
-from hptvsim.cosim.system import FmuVehicleSystem, SystemSpec, VehicleSpec
+from hptvsim.cosim.interface import SystemSpec, VehicleSpec
+from hptvsim.cosim.system import FmuVehicleSystem
 from hptvsim.cosim.vehicles import ExternalVehicleType, VehicleFileError, load_vehicle_file
 from hptvsim.dynamics import ParameterError
 from hptvsim.viz.episode import run_episode

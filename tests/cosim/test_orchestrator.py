@@ -15,7 +15,7 @@ from fmpy.fmi2 import FMU2Slave
 from fmpy.validation import validate_fmu
 
 from hptvsim.cosim import FmuError
-from hptvsim.cosim.fmi2 import load_model
+from hptvsim.cosim.fmu_model import load_model
 from hptvsim.cosim.graph import Component, Connection, ExternalInput, ExternalOutput, Graph, GraphError, Port
 from hptvsim.cosim.orchestrator import Orchestrator, SimulationFailedError, SimulationPausedError
 from hptvsim.fmu import fmu_path
@@ -355,25 +355,25 @@ def test_extracted_fmus_of_killed_processes_are_removed(
     import sys
     import tempfile
 
-    from hptvsim.cosim import fmi2
+    from hptvsim.cosim import fmu_model
 
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
-    monkeypatch.setitem(fmi2._orphans_swept, "done", False)
+    monkeypatch.setitem(fmu_model._orphans_swept, "done", False)
     gone = subprocess.Popen([sys.executable, "-c", "pass"])
     gone.wait()
-    ns = fmi2._pid_namespace()
+    ns = fmu_model._pid_namespace()
     orphan = tmp_path / f"hptvsim-fmu-{ns}-{gone.pid}-WorkClassUUV-abc"
     living = tmp_path / f"hptvsim-fmu-{ns}-{os.getppid()}-WorkClassUUV-def"
     elsewhere = tmp_path / f"hptvsim-fmu-{ns}1-{gone.pid}-WorkClassUUV-jkl"  # another pid namespace
     other = tmp_path / f"hptvsim-fmu-{ns}-notapid-x"
     for folder in (orphan, living, elsewhere, other):
         (folder / "binaries").mkdir(parents=True)
-    model = fmi2.FmuModel(fmu_path("work_class"))
+    model = fmu_model.FmuModel(fmu_path("work_class"))
     assert not orphan.exists() and living.exists() and elsewhere.exists() and other.exists()
     assert model.unzip_dir.parent == tmp_path
     assert model.unzip_dir.name.startswith(f"hptvsim-fmu-{ns}-{os.getpid()}-WorkClassUUV-")
     # once per process: a later orphan waits for the next process
     later = tmp_path / f"hptvsim-fmu-{ns}-{gone.pid}-SphericalUUV-ghi"
     later.mkdir()
-    fmi2.FmuModel(fmu_path("work_class"))
+    fmu_model.FmuModel(fmu_path("work_class"))
     assert later.exists()

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from hptvsim.cosim.batched import BatchedVehicleSystem
-from hptvsim.cosim.system import SIXDOF_LAYOUT, FmuVehicleSystem, SystemSpec, VehicleSpec, make_system
+from hptvsim.cosim.interface import SIXDOF_LAYOUT, SystemSpec, VehicleSpec
+from hptvsim.cosim.system import FmuVehicleSystem, make_system
 from hptvsim.dynamics import ParameterError
 
 

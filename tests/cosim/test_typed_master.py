@@ -14,7 +14,7 @@ from fmpy import simulate_fmu
 from typed_fmus import typed_fmus
 
 from hptvsim.cli import main
-from hptvsim.cosim.fmi2 import FmuDiscardError, FmuError
+from hptvsim.cosim.fmi import FmuDiscardError, FmuError
 from hptvsim.cosim.graph import Component, Connection, ExternalInput, ExternalOutput, Graph, GraphError, Port
 from hptvsim.cosim.orchestrator import Orchestrator
 

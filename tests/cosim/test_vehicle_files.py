@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from hptvsim.cosim.batched import BatchedVehicleSystem
-from hptvsim.cosim.system import FmuVehicleSystem, SystemSpec, VehicleSpec
+from hptvsim.cosim.interface import SystemSpec, VehicleSpec
+from hptvsim.cosim.system import FmuVehicleSystem
 from hptvsim.cosim.vehicles import VehicleFileError, load_vehicle_file
 from hptvsim.dynamics import BUILTIN_VEHICLES, ParameterError, VehicleType
 from hptvsim.fmu import fmu_for

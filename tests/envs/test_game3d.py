@@ -359,7 +359,7 @@ def test_potential_field_evader_flees_stationary_pursuers_without_hitting_the_se
         act[:, p] = still.act(core.obs[:, p])
         act[:, ~p] = flee.act(core.obs[:, ~p])
         r = core.step(act)
-        seabed |= r.seabed.any(axis=1)
+        seabed |= r.causes["seabed"].any(axis=1)
         if core.done.all():
             break
     pos = core.poses[..., 0:3]

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from fmpy import read_model_description
 
-from hptvsim.cosim.fmi2 import FmuModel
+from hptvsim.cosim.fmu_model import FmuModel
 from hptvsim.dynamics import FMU_NAMES
 from hptvsim.fmu import fmu_path
 from hptvsim.fmu.build import CROSS_COMPILERS, _fmi_include_dir, build_fmu, check_binaries

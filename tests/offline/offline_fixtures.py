@@ -11,7 +11,7 @@ from offline_helpers import TINY_STEPS
 @pytest.fixture(scope="session")
 def tiny_data(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, object]:
     """Six pure-pursuit episodes of the target scenario, one Minari dataset per pursuer."""
-    from hptvsim.offline.dataset import collect
+    from hptvsim.experiments.collect import collect
 
     root = tmp_path_factory.mktemp("datasets")
     res = collect(

@@ -10,13 +10,12 @@ import pytest
 from offline_helpers import TINY_STEPS
 
 from hptvsim.envs.core import GameCore
+from hptvsim.experiments.collect import collect, resolve_policy_specs
 from hptvsim.offline.dataset import (
     Trajectories,
-    collect,
     load_trajectories,
     minari_root,
     open_dataset,
-    resolve_policy_specs,
 )
 from hptvsim.zoo import default_policy
 

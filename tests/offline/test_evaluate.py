@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from hptvsim.envs.core import GameCore
-from hptvsim.offline.evaluate import evaluate_dt, normalised_score, write_report
+from hptvsim.experiments.dt_evaluate import evaluate_dt, normalised_score, write_report
+from hptvsim.experiments.dt_pipeline import figures_for_run
 from hptvsim.offline.figures import smooth
-from hptvsim.offline.pipeline import figures_for_run
 from hptvsim.offline.rollout import episode_metrics, play
 from hptvsim.zoo import load_policy
 
@@ -94,7 +94,7 @@ def test_smooth() -> None:
 
 
 def test_pipeline_end_to_end_and_rerun(tmp_path: Path) -> None:
-    from hptvsim.offline.pipeline import run_pipeline
+    from hptvsim.experiments.dt_pipeline import run_pipeline
 
     small = {"updates": 2, "batch_size": 4, "log_every": 1, "model.embed_dim": 16, "model.layers": 1}
     kw: dict[str, Any] = dict(

@@ -22,7 +22,7 @@ from typing import Any
 
 import pytest
 
-from hptvsim.offline.pipeline import run_pipeline
+from hptvsim.experiments.dt_pipeline import run_pipeline
 
 TARGETS = ["q50", "q90"]
 

@@ -29,8 +29,8 @@ import pyarrow.parquet as pq
 import pytest
 from service_helpers import Server, start_server, wait_final
 
+from hptvsim.episodes.frames import AgentTrajectory
 from hptvsim.service.downloads import MAX_STREAMS
-from hptvsim.viz.frames import AgentTrajectory
 
 RSS_LIMIT = 300 * 2**20
 """Most growth [B] of the API process's resident memory during one download."""
@@ -538,7 +538,7 @@ def test_range_requests_on_the_parquet_file_and_the_recording(server: Server, ap
 def test_small_documents_are_unchanged(server: Server, api: httpx.Client) -> None:
     """A small episode's JSON is the document the dashboard reads (frame schema Trajectories),
     and the CSV has its header with units."""
-    from hptvsim.viz.frames import Trajectories
+    from hptvsim.episodes.frames import Trajectories
 
     ep = _finished(api, {"scenario": "goto_tiny", "max_steps": 20, "record": False}, timeout=300.0)
     r = api.get(f"/episodes/{ep['id']}/trajectory", params={"format": "json"})

@@ -15,7 +15,7 @@ from canary import sb3_canary, scenario_canary
 
 from hptvsim.catalog import CatalogError, check_policy, check_scenario, check_seed
 from hptvsim.envs import GameCore
-from hptvsim.viz.episode import EpisodeStepper
+from hptvsim.episodes import EpisodeStepper
 from hptvsim.world.scenario import ScenarioError
 from hptvsim.zoo import load_policy
 

@@ -12,8 +12,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from hptvsim.sensors import sonar3d as s3d
-from hptvsim.sensors.config import GaussMarkovConfig, SonarConfig
-from hptvsim.sensors.sonar import HIT_NOTHING, HIT_TERRAIN, Sonar, beam_angles
+from hptvsim.sensors.measured import Sonar
+from hptvsim.sensors.sonar import HIT_NOTHING, HIT_TERRAIN, beam_angles
 from hptvsim.sensors.sonar3d import (
     GeometricSonar3d,
     Sonar3d,
@@ -25,6 +25,7 @@ from hptvsim.sensors.sonar3d import (
     rotation_zyx,
 )
 from hptvsim.world.grid import GridGeometry
+from hptvsim.world.sensor_config import GaussMarkovConfig, SonarConfig
 from hptvsim.world.terrain import HeightMap, RollingMountains
 
 Backend = Literal["c", "numpy"]

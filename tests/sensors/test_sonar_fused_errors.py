@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from hptvsim.sensors import Sonar
-from hptvsim.sensors.config import GaussMarkovConfig, SonarConfig
 from hptvsim.sensors.sonar import vehicle_radii
 from hptvsim.world.scenario import load_scenario
+from hptvsim.world.sensor_config import GaussMarkovConfig, SonarConfig
 
 
 @pytest.mark.parametrize(

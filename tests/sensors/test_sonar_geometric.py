@@ -13,7 +13,8 @@ import pytest
 from hptvsim.dynamics import VEHICLE_RADIUS
 from hptvsim.sensors import GaussMarkovConfig, SonarConfig
 from hptvsim.sensors import sonar as sonar_mod
-from hptvsim.sensors.sonar import HIT_NOTHING, HIT_TERRAIN, GeometricSonar, Sonar, beam_angles, vehicle_radii
+from hptvsim.sensors.measured import Sonar
+from hptvsim.sensors.sonar import HIT_NOTHING, HIT_TERRAIN, GeometricSonar, beam_angles, vehicle_radii
 from hptvsim.world.grid import GridGeometry, OccupancyGrid
 
 Backend = Literal["c", "numpy"]

@@ -13,7 +13,8 @@ from click.testing import CliRunner
 
 from hptvsim.sensors import GaussMarkovConfig, SonarConfig
 from hptvsim.sensors import signal as sig
-from hptvsim.sensors.sonar import GeometricSonar, Sonar
+from hptvsim.sensors.measured import Sonar
+from hptvsim.sensors.sonar import GeometricSonar
 from hptvsim.world.grid import GridGeometry, OccupancyGrid
 
 

@@ -12,7 +12,7 @@ from service_helpers import Server, wait_final
 
 from hptvsim.client import Client, ServiceError
 from hptvsim.envs.policies3d import POLICY_NAMES_3D
-from hptvsim.viz.frames import EpisodeStatic, Frame, Trajectories
+from hptvsim.episodes.frames import EpisodeStatic, Frame, Trajectories
 
 
 def test_scenarios_and_policies_name_their_game(api: httpx.Client) -> None:
@@ -93,7 +93,7 @@ def test_remote_env_of_a_3d_scenario_matches_the_local_episode(server: Server) -
     from gymnasium.utils.env_checker import check_env
 
     from hptvsim.client import RemoteEnv
-    from hptvsim.viz.episode import EXTERNAL, EpisodeStepper
+    from hptvsim.episodes import EXTERNAL, EpisodeStepper
 
     env = RemoteEnv(server.url, scenario="dive_flat", agent="evader_0", seed=4, max_steps=40, record=False)
     try:

@@ -16,7 +16,7 @@ from service_helpers import Server, wait_final
 
 from hptvsim.catalog import shipped_scenario
 from hptvsim.client import Client, ServiceError
-from hptvsim.viz.frames import EpisodeStatic, EpisodeSummary, Frame, Trajectories
+from hptvsim.episodes.frames import EpisodeStatic, EpisodeSummary, Frame, Trajectories
 from hptvsim.viz.recording import read_recording
 from hptvsim.zoo import default_policy
 

@@ -8,10 +8,10 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
+from hptvsim.episodes import EpisodeResult, run_episode
+from hptvsim.episodes.frames import FrameOptions, Trajectories
 from hptvsim.service.api import trajectory_csv, trajectory_json
 from hptvsim.service.engine import TRAJECTORY_FILE, write_outputs
-from hptvsim.viz.episode import EpisodeResult, run_episode
-from hptvsim.viz.frames import FrameOptions, Trajectories
 
 
 @pytest.fixture(scope="module")

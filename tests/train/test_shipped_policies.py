@@ -118,8 +118,9 @@ def test_the_shipped_policies_are_the_pursuit_defaults() -> None:
 
 def _capture(pursuers: str, evaders: str, scenario: str = "target") -> float:
     """Capture rate over 100 seeded episodes (extended observation, 1200 steps), as `evaluate`."""
+    from hptvsim.experiments.policies import policies_from_specs
     from hptvsim.train.envs import EnvSpec, make_env_factory
-    from hptvsim.train.evaluate import evaluate, policies_from_specs
+    from hptvsim.train.evaluate import evaluate
 
     options = {"extended_obs": True, "max_steps": 1200}
     factory = make_env_factory(EnvSpec(kind="hptvsim", scenario=scenario, task="pursuit", options=options))

@@ -16,15 +16,32 @@ from hptvsim.train.config import (
     config_to_dict,
     dump_toml,
     load_config,
+    raw_config,
 )
 
 
-@pytest.mark.parametrize("name", sorted(p.stem for p in config_dir().glob("*.toml") if p.stem != "stt"))
+def _batched(name: str) -> bool:
+    return raw_config(name).get("regime") == "fast"
+
+
+@pytest.mark.parametrize(
+    "name", sorted(p.stem for p in config_dir().glob("*.toml") if p.stem != "stt" and not _batched(p.stem))
+)
 def test_shipped_configs_load(name: str) -> None:
     cfg = load_config(name)
     assert cfg.stages
     again = config_from_dict(tomllib.loads(dump_toml(config_to_dict(cfg))), "round trip")
     assert again == cfg
+
+
+@pytest.mark.parametrize("name", sorted(p.stem for p in config_dir().glob("*.toml") if _batched(p.stem)))
+def test_shipped_batched_configs_load_and_are_refused_by_the_one_game_loader(name: str) -> None:
+    from hptvsim.train.batched_run import load_batched_config
+
+    cfg = load_batched_config(name)
+    assert cfg.stages and cfg.budget_steps == sum(s.budget_steps for s in cfg.stages)
+    with pytest.raises(ConfigError, match="a batched config"):
+        load_config(name)
 
 
 def test_paper_config_is_table_ii() -> None:
@@ -97,7 +114,7 @@ def test_overrides_reach_nested_keys_and_stages() -> None:
 
 @pytest.mark.parametrize("path", sorted((config_dir() / "sweeps").glob("*.toml")), ids=lambda p: p.stem)
 def test_shipped_sweeps_make_valid_configs(path: Path) -> None:
-    from hptvsim.train.sweeps import load_sweep, plan_jobs
+    from hptvsim.experiments.sweeps import load_sweep, plan_jobs
 
     spec = load_sweep(path)  # builds every job's config: a bad grid key fails here
     assert len(plan_jobs(spec)) == len(spec.seeds) * int(np.prod([len(v) for v in spec.grid.values()]))

@@ -12,9 +12,10 @@ from click.testing import CliRunner
 from train_helpers import toy_config
 
 from hptvsim.cli import main
+from hptvsim.experiments.policies import policies_from_specs, policy_from_spec
+from hptvsim.experiments.sweeps import load_sweep, plan_jobs, run_sweep
 from hptvsim.train.envs import EnvSpec, make_env_factory
-from hptvsim.train.evaluate import evaluate, policies_from_specs, policy_from_spec
-from hptvsim.train.sweeps import load_sweep, plan_jobs, run_sweep
+from hptvsim.train.evaluate import evaluate
 from hptvsim.train.trainer import train
 
 PURSUIT = EnvSpec(kind="toy", task="pursuit", options={"n_pursuers": 2, "max_steps": 120})
@@ -156,7 +157,7 @@ def test_sweep_on_a_local_ray(tmp_path: Path) -> None:
 def test_every_figure_of_a_tiny_sweep_with_one_colour_per_agent_and_series(tmp_path: Path) -> None:
     from matplotlib.colors import to_hex
 
-    from hptvsim.train.figures import reward_agents_figure
+    from hptvsim.experiments.figures import reward_agents_figure
 
     spec = load_sweep(_sweep_file(tmp_path))
     run_sweep(spec, tmp_path / "out", serial=True, progress=False)
@@ -194,7 +195,7 @@ def test_a_stage_still_training_is_drawn_apart_and_not_counted_as_a_seed(tmp_pat
     """Figures made mid-sweep: a run that has not finished a stage is no seed of that stage."""
     import matplotlib.pyplot as plt
 
-    from hptvsim.train.figures import (
+    from hptvsim.experiments.figures import (
         _expand,
         final_reward_figure,
         finished_stages,
@@ -242,7 +243,7 @@ def test_a_stage_still_training_is_drawn_apart_and_not_counted_as_a_seed(tmp_pat
 
 def test_stages_of_different_curricula_share_a_segment_by_name() -> None:
     """A run trained in the target scenario alone is drawn over the STT runs' target stage."""
-    from hptvsim.train.figures import stage_segments
+    from hptvsim.experiments.figures import stage_segments
 
     stt: dict[tuple[int, str], dict[str, list[float]]] = {
         (0, "source"): {},
@@ -284,7 +285,7 @@ def test_names_of_narrow_stages_do_not_print_over_each_other() -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from hptvsim.train.figures import _stage_labels
+    from hptvsim.experiments.figures import _stage_labels
 
     fig, ax = plt.subplots(figsize=(5, 3))
     ax.set_xlim(0, 330)
@@ -321,8 +322,8 @@ def test_every_panel_title_of_the_per_agent_figure_stands_at_one_height(tmp_path
     """One panel raises a narrow stage's name, the other does not: their titles still line up."""
     import matplotlib.pyplot as plt
 
+    from hptvsim.experiments.figures import reward_agents_figure
     from hptvsim.palette import color_of
-    from hptvsim.train.figures import reward_agents_figure
 
     narrow, even = tmp_path / "narrow-seed0", tmp_path / "even-seed0"
     _write_run(narrow, [("source", 30), ("transition", 3), ("target", 120)])
@@ -349,7 +350,7 @@ def test_a_setting_with_no_episode_yet_gets_a_panel_that_says_so(tmp_path: Path)
 
     import matplotlib.pyplot as plt
 
-    from hptvsim.train.figures import reward_agents_figure
+    from hptvsim.experiments.figures import reward_agents_figure
 
     ran, fresh = tmp_path / "ran-seed0", tmp_path / "fresh-seed0"
     _write_run(ran, [("source", 20)])
@@ -372,8 +373,8 @@ def test_a_sweeps_curves_use_its_window_and_end_at_the_final_reward(tmp_path: Pa
     group's curve ends at the mean over seeds of the final training reward of the report's tables."""
     import matplotlib.pyplot as plt
 
-    from hptvsim.train.figures import _expand, reward_curve_figures
-    from hptvsim.train.reproduce import _training_metrics
+    from hptvsim.experiments.figures import _expand, reward_curve_figures
+    from hptvsim.experiments.reproduce import _training_metrics
 
     rng = np.random.default_rng(3)
     runs = [tmp_path / f"runs/s-seed{k}" for k in range(3)]
@@ -448,7 +449,7 @@ def test_bands_much_wider_than_the_curves_are_cut_at_the_axes_and_the_caption_sa
     the mean stays readable (whole, within the limits), and the line under the figure says so."""
     import matplotlib.pyplot as plt
 
-    from hptvsim.train.figures import BAND_CUT, reward_agents_figure, reward_curve_figures
+    from hptvsim.experiments.figures import BAND_CUT, reward_agents_figure, reward_curve_figures
 
     runs = _noisy_runs(tmp_path, spreads)
     wild = max(spreads) > 100.0
@@ -476,7 +477,7 @@ def test_a_curve_over_seeds_of_unequal_length_says_where_it_stops(tmp_path: Path
     and the line under the figure says so (and that the tables use each seed's own last episodes)."""
     import matplotlib.pyplot as plt
 
-    from hptvsim.train.figures import UNEVEN, reward_agents_figure, reward_curve_figures
+    from hptvsim.experiments.figures import UNEVEN, reward_agents_figure, reward_curve_figures
 
     runs = _noisy_runs(tmp_path, (1.0, 1.0, 1.0))
     csv_path = runs[2] / "episodes.csv"
@@ -503,8 +504,8 @@ def test_the_claims_figure_shows_every_seed_in_its_colour_and_the_intervals_the_
     import matplotlib.pyplot as plt
     from matplotlib.colors import to_hex
 
-    from hptvsim.train.figures import SEED_COLORS, ClaimPanel, claims_figure
-    from hptvsim.train.stats import mean_interval, slope
+    from hptvsim.experiments.figures import SEED_COLORS, ClaimPanel, claims_figure
+    from hptvsim.experiments.stats import mean_interval, slope
 
     rate = ClaimPanel(
         title="R: capture rate",

@@ -15,8 +15,8 @@ from pathlib import Path
 import pytest
 from train_helpers import ROOT
 
+from hptvsim.experiments.reproduce import build_config, load_plan, plan_jobs, write_report
 from hptvsim.train.config import ConfigError, load_config
-from hptvsim.train.reproduce import build_config, load_plan, plan_jobs, write_report
 
 PLANS = ROOT / "configs" / "reproduce"
 HPTVSIM = [sys.executable, "-m", "hptvsim.cli"]
@@ -128,7 +128,7 @@ def test_a_report_without_runs_says_what_is_missing(tmp_path: Path) -> None:
 def test_the_report_lists_every_seed_behind_each_claim(tmp_path: Path) -> None:
     """The table under the verdicts gives each claim's metric per setting and seed (``-`` where a
     run has not finished the stage), and the figure beside it is drawn."""
-    from hptvsim.train.reproduce import Results, _seeds_section, claim_result
+    from hptvsim.experiments.reproduce import Results, _seeds_section, claim_result
 
     plan = load_plan(PLANS / "toy.toml")
     c1 = next(c for c in plan.claims if c.compare is not None)
@@ -155,7 +155,7 @@ def test_the_report_lists_every_seed_behind_each_claim(tmp_path: Path) -> None:
     assert "![claims](fig/claims.png)" in text
     assert (tmp_path / "fig/claims.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert trend.x_text() == "initial entropy coefficient alpha_0 (dimensionless)"
-    from hptvsim.train.reproduce import Entry, Experiment
+    from hptvsim.experiments.reproduce import Entry, Experiment
 
     def unnamed(*labels: str) -> Experiment:
         return Experiment("e", "", "", tuple(Entry(lb, "s", float(k)) for k, lb in enumerate(labels)))
@@ -468,7 +468,7 @@ def test_the_sweep_bar_counts_the_env_steps_of_every_run(tmp_path: Path) -> None
     """What the progress bar of ``hptvsim reproduce`` shows, from the run folders alone: a finished
     run counts its budget, a run training the env step of its last logged episode, read from the
     end of a long ``episodes.csv``."""
-    from hptvsim.train.reproduce import steps_done, sweep_progress
+    from hptvsim.experiments.reproduce import steps_done, sweep_progress
 
     header = "stage_index,stage,episode,agent,env_step,return,length,terminated,truncated,info\n"
     training = tmp_path / "runs" / "a-seed0"
@@ -488,7 +488,7 @@ def test_the_sweep_bar_counts_the_env_steps_of_every_run(tmp_path: Path) -> None
 
 def test_a_run_started_before_its_first_checkpoint_is_not_called_not_started(tmp_path: Path) -> None:
     """``--status`` and the report's run table: a run is "not started" only until its run.json."""
-    from hptvsim.train.reproduce import _progress_of, budget_steps
+    from hptvsim.experiments.reproduce import _progress_of, budget_steps
 
     cfg = load_config(ROOT / "configs" / "train" / "quick.toml")
     run_dir = tmp_path / "runs" / "a-seed0"
@@ -505,7 +505,7 @@ def test_a_run_started_before_its_first_checkpoint_is_not_called_not_started(tmp
 def test_status_gives_the_running_sweeps_rate_and_the_time_left(tmp_path: Path) -> None:
     """``--status`` reads the ``sweep.json`` a sweep rewrites every 10 s: running or not (its pid
     alive and the record fresh), its rate over the last 15 min, and the time the rest takes."""
-    from hptvsim.train.reproduce import _RateMeter, sweep_eta, write_sweep_record
+    from hptvsim.experiments.reproduce import _RateMeter, sweep_eta, write_sweep_record
 
     meter = _RateMeter(window_s=900.0)
     assert meter.add(0.0, 0) is None and meter.add(30.0, 3_000) is None  # under a minute: no rate
@@ -597,7 +597,7 @@ def test_finished_runs_are_archived_beside_the_report_and_a_fresh_clone_trains_o
     assert _tables(report) == tables
 
     # an archive the plan no longer builds is not restored: that run would train again
-    from hptvsim.train.reproduce import restore_archived
+    from hptvsim.experiments.reproduce import restore_archived
 
     said: list[str] = []
     changed = load_plan(_tiny_plan(tmp_path, budget=300))
@@ -605,7 +605,7 @@ def test_finished_runs_are_archived_beside_the_report_and_a_fresh_clone_trains_o
     assert said and "trained with another config than the plan builds now: base-seed0 trains again" in said[0]
     assert not (tmp_path / "d" / "runs" / "base-seed0" / "summary.json").exists()
     # and an archived run of another config is replaced whole when the run of this one finishes
-    from hptvsim.train.reproduce import archive_finished
+    from hptvsim.experiments.reproduce import archive_finished
 
     (archived / "config.toml").write_text((archived / "config.toml").read_text() + "# another plan\n")
     (archived / "eval" / "gone.json").write_text("{}")
@@ -616,7 +616,7 @@ def test_finished_runs_are_archived_beside_the_report_and_a_fresh_clone_trains_o
 def test_more_workers_than_cores_gets_a_warning_naming_the_faster_setting() -> None:
     """Runs beyond the core count only share the cores (measured: 3 on 2 cores is slower in
     total), so the sweep warns and names the worker count to use; at or under it, nothing."""
-    from hptvsim.train.reproduce import workers_warning
+    from hptvsim.experiments.reproduce import workers_warning
 
     assert workers_warning(2, cpus=2) is None
     assert workers_warning(1, cpus=2) is None

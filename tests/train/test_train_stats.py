@@ -1,4 +1,4 @@
-"""Intervals over seeds (hptvsim.train.stats) against SciPy's own tests and hand computations."""
+"""Intervals over seeds (hptvsim.experiments.stats) against SciPy's own tests and hand computations."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from scipy import stats as st
 
-from hptvsim.train.reproduce import metric_range
-from hptvsim.train.stats import difference, mean_interval, slope, verdict
+from hptvsim.experiments.reproduce import metric_range
+from hptvsim.experiments.stats import difference, mean_interval, slope, verdict
 
 
 def test_mean_interval_is_the_student_t_interval() -> None:

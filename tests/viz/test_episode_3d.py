@@ -9,8 +9,8 @@ import jsonschema  # type: ignore[import-untyped]  # no stubs installed
 import numpy as np
 import pytest
 
-import hptvsim.viz.frames as F
-from hptvsim.viz.episode import EXTERNAL, EpisodeResult, EpisodeStepper, run_episode
+import hptvsim.episodes.frames as F
+from hptvsim.episodes import EXTERNAL, EpisodeResult, EpisodeStepper, run_episode
 from hptvsim.world.scenario import load_scenario
 
 STEPS = 120

@@ -8,10 +8,10 @@ from typing import Any
 import numpy as np
 import pytest
 
+from hptvsim.episodes import EpisodeResult, run_episode
+from hptvsim.episodes.frames import AgentState, Frame
 from hptvsim.sensors.sonar3d import rotation_zyx
-from hptvsim.viz.episode import EpisodeResult, run_episode
-from hptvsim.viz.frames import AgentState, Frame
-from hptvsim.viz.recording import RecordingOptions, read_recording, recording_static
+from hptvsim.viz.recording import RecordingOptions, read_recording, recorder, recording_static
 
 Recorded = tuple[EpisodeResult, Path, list[Frame]]  # as the `recorded` fixture (viz_fixtures.py)
 
@@ -41,8 +41,7 @@ def dive(tmp_path_factory: pytest.TempPathFactory) -> Recorded:
         seed=1,
         max_steps=160,
         on_frame=frames.append,
-        recording_path=path,
-        recording_options=RecordingOptions(sonar_every=SONAR_EVERY, flush_every=50),
+        recorder=recorder(path, RecordingOptions(sonar_every=SONAR_EVERY, flush_every=50)),
     )
     assert result.static.game == "3d"
     return result, path, frames
@@ -164,7 +163,7 @@ def test_paths_are_3d_and_the_blueprint_has_a_depth_plot(dive: Recorded) -> None
 
 def test_a_goal_is_logged_at_its_depth(tmp_path: Path) -> None:
     path = tmp_path / "goto.rrd"
-    result = run_episode("dive_goto", seed=0, max_steps=3, recording_path=path)
+    result = run_episode("dive_goto", seed=0, max_steps=3, recorder=recorder(path))
     goal = result.static.agents[0].goal
     assert goal is not None and len(goal) == 3
     from rerun.chunk import RrdReader

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from hptvsim.catalog import policies
+from hptvsim.episodes import EpisodeResult, run_episode
+from hptvsim.episodes.frames import AgentState, Frame
 from hptvsim.sensors.sonar3d import rotation_zyx
-from hptvsim.viz.episode import EpisodeResult, run_episode
-from hptvsim.viz.frames import AgentState, Frame
 from hptvsim.viz.viser_view import LiveView, SceneRenderer
 
 

@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hptvsim.viz.episode import EXTERNAL, EpisodeStepper, resolve_scenario, run_episode
-from hptvsim.viz.frames import EpisodeStatic, Frame
+from hptvsim.episodes import EXTERNAL, EpisodeStepper, resolve_scenario, run_episode
+from hptvsim.episodes.frames import EpisodeStatic, Frame
 from hptvsim.world.scenario import ScenarioError, load_scenario
 from hptvsim.zoo import default_policy
 
@@ -173,7 +173,7 @@ def test_stepper_reset_replays_and_reseeds() -> None:
 
 
 def test_observations_in_frames_when_asked() -> None:
-    from hptvsim.viz.frames import FrameOptions
+    from hptvsim.episodes.frames import FrameOptions
 
     st = EpisodeStepper(
         "source", seed=1, max_steps=5, options=FrameOptions(obs=True, sonar_every=2, hits=False)

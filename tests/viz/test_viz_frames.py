@@ -13,8 +13,8 @@ import jsonschema  # type: ignore[import-untyped]  # no stubs installed
 import numpy as np
 import pytest
 
-from hptvsim.viz import frames as F
-from hptvsim.viz.episode import EpisodeResult
+from hptvsim.episodes import EpisodeResult
+from hptvsim.episodes import frames as F
 
 Recorded = tuple[EpisodeResult, Path, list[F.Frame]]  # the `recorded` fixture (conftest.py)
 

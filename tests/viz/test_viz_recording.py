@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hptvsim.viz.episode import EpisodeResult
-from hptvsim.viz.frames import EpisodeStatic, EpisodeSummary, Frame, Trajectories
+from hptvsim.episodes import EpisodeResult
+from hptvsim.episodes.frames import EpisodeStatic, EpisodeSummary, Frame, Trajectories
 from hptvsim.viz.recording import RecordingOptions, read_recording
 
 Recorded = tuple[EpisodeResult, Path, list[Frame]]  # the `recorded` fixture (conftest.py)
@@ -109,15 +109,15 @@ def test_a_killed_episode_keeps_what_was_flushed(tmp_path: Path) -> None:
     code = textwrap.dedent(
         f"""
         import os, signal
-        from hptvsim.viz.episode import run_episode
-        from hptvsim.viz.recording import RecordingOptions
+        from hptvsim.episodes import run_episode
+        from hptvsim.viz.recording import RecordingOptions, recorder
 
         def on_frame(f):
             if f.step == 70:
                 os.kill(os.getpid(), signal.SIGKILL)
 
-        run_episode("target", seed=2, on_frame=on_frame, recording_path={str(path)!r},
-                    recording_options=RecordingOptions(flush_every=20))
+        run_episode("target", seed=2, on_frame=on_frame,
+                    recorder=recorder({str(path)!r}, RecordingOptions(flush_every=20)))
         """
     )
     proc = subprocess.run(

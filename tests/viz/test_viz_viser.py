@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
+from hptvsim.episodes import run_episode
+from hptvsim.episodes.frames import Frame
 from hptvsim.palette import agent_color
-from hptvsim.viz.episode import run_episode
-from hptvsim.viz.frames import Frame
 from hptvsim.viz.viser_view import (
     CAMERA_FAR,
     TIME_LABEL,

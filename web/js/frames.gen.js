@@ -1,5 +1,5 @@
-// Generated from hptvsim/viz/frames.py by `hptvsim viz schema`; do not edit.
-// A test (tests/viz/test_frames.py) fails when this file is out of date.
+// Generated from hptvsim/episodes/frames.py by `hptvsim viz schema`; do not edit.
+// A test (tests/viz/test_viz_frames.py) fails when this file is out of date.
 
 /**
  * What does not change during an episode; sent once, before its frames.
@@ -196,7 +196,7 @@ export const FRAME_SCHEMA = {
   "$schema": "https://json-schema.org/draft/2020-12/schema",
   "$id": "https://hptvsim.dev/schema/frames.schema.json",
   "title": "hptvsim frames",
-  "description": "hptvsim-frames/2: the episode frame schema shared by recordings, the API, viser and the dashboard. Generated from hptvsim/viz/frames.py by `hptvsim viz schema`; do not edit.",
+  "description": "hptvsim-frames/2: the episode frame schema shared by recordings, the API, viser and the dashboard. Generated from hptvsim/episodes/frames.py by `hptvsim viz schema`; do not edit.",
   "version": "hptvsim-frames/2",
   "anyOf": [
     {

@@ -133,6 +133,7 @@ def _run_job(config: str, overrides: dict[str, Any], run_dir: str, label: str) -
     """Train one job (in a Ray worker or in this process); finished jobs are skipped, killed ones resumed."""
     import torch
 
+    from hptvsim.experiments.policies import named_policy
     from hptvsim.train.checkpoint import has_checkpoint
     from hptvsim.train.trainer import train
 
@@ -141,7 +142,7 @@ def _run_job(config: str, overrides: dict[str, Any], run_dir: str, label: str) -
     if (out / "summary.json").is_file():
         return {"run_dir": run_dir, "status": "done before"}
     cfg = load_config(config, overrides)
-    result = train(cfg, out, resume=has_checkpoint(out), progress=False, label=label)
+    result = train(cfg, out, resume=has_checkpoint(out), progress=False, label=label, named=named_policy)
     return {"run_dir": run_dir, "status": "finished", "global_step": result.global_step}
 
 

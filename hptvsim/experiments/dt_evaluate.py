@@ -30,7 +30,8 @@ from typing import Any
 import numpy as np
 
 from hptvsim.envs.core import GameCore, planar_scenario
-from hptvsim.offline.dataset import RANDOM_SPEC, build_policies, versions
+from hptvsim.experiments.collect import RANDOM_SPEC, build_policies
+from hptvsim.offline.dataset import versions
 from hptvsim.offline.policy import DEFAULT_TARGET, load_policy_file, policies_from_file, resolve_target
 from hptvsim.offline.rollout import Episode, episode_metrics, play
 

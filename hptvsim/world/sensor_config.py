@@ -1,5 +1,9 @@
 """Sensor settings: the sonar, the shared Gauss-Markov error model (Eq. 3) and the IoUT link.
 
+A scenario states what its vehicles carry (``[sonar]``, ``[acoustic]``), so these settings are
+part of the scenario schema and live in the world layer; :mod:`hptvsim.sensors`, one layer up,
+implements them over the world's maps (and re-exports the classes).
+
 Every class here is a frozen, keyword-only dataclass whose fields all have defaults, so a
 scenario file only names what it changes. Units are SI inside (metres, seconds, hertz,
 radians). Fields are declared with :func:`hptvsim.world._schema.spec`: their docs, and the
@@ -9,7 +13,7 @@ checks here share. Angle fields carry ``unit = "rad"`` so that file loaders may 
 raises :class:`ValueError` naming the field and what would be valid
 (``SonarConfig.beams = 0 is invalid; valid: an integer in [1, 1024]``).
 
-The scenario schema (``hptvsim.world``) maps TOML tables onto these classes through
+The scenario schema (:mod:`hptvsim.world.scenario`) maps TOML tables onto these classes through
 :func:`dataclasses.fields`; a nested dataclass field (``SonarConfig.errors``) is a nested table.
 """
 

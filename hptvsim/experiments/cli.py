@@ -1,4 +1,9 @@
-"""Training commands: ``hptvsim train``, ``evaluate``, ``figures``, ``sweep``, ``bench train``."""
+"""Training commands: ``hptvsim train``, ``evaluate``, ``figures``, ``sweep``, ``reproduce``.
+
+They start from the policy zoo's names (a config's fixed policies, ``--policy``), which sit above
+training, so they live here, above the zoo; the offline-RL commands are in
+:mod:`hptvsim.experiments.offline_cli`, which :func:`register` adds too.
+"""
 
 from __future__ import annotations
 
@@ -41,8 +46,11 @@ def _parse_env(text: str, options: dict[str, Any]) -> Any:
     return EnvSpec(kind=kind, scenario=scenario or "source", task=task or "pursuit", options=options)
 
 
-def register(main: click.Group, bench: click.Group) -> None:
-    """Add the training commands to ``hptvsim`` and ``hptvsim bench``."""
+def register(main: click.Group) -> None:
+    """Add the training and the offline-RL commands to ``hptvsim``."""
+    from hptvsim.experiments import offline_cli
+
+    offline_cli.register(main)
 
     @main.command("train")
     @click.argument("config", required=False)
@@ -69,6 +77,19 @@ def register(main: click.Group, bench: click.Group) -> None:
     )
     @click.option("--no-progress", is_flag=True, help="No progress bars.")
     @click.option("--no-tensorboard", is_flag=True, help="No TensorBoard events.")
+    @click.option(
+        "--seeds",
+        default=None,
+        metavar="SEEDS",
+        help="Batched configs (regime = 'fast'): train these seeds in one process, e.g. 0-9 or 0,3,7; "
+        "each writes the folder a run of that seed alone writes (OUT/seed<k>).",
+    )
+    @click.option(
+        "--device",
+        type=click.Choice(["auto", "cpu", "cuda"]),
+        default=None,
+        help="Batched configs: where the learners run (default: the config's, 'auto').",
+    )
     def train_cmd(
         config: str | None,
         out_dir: Path | None,
@@ -78,6 +99,8 @@ def register(main: click.Group, bench: click.Group) -> None:
         overrides: tuple[str, ...],
         no_progress: bool,
         no_tensorboard: bool,
+        seeds: str | None,
+        device: str | None,
     ) -> None:
         """Train MAISAC or IPPO through a curriculum (CONFIG: a file or a shipped name: quick, paper, toy).
 
@@ -87,9 +110,21 @@ def register(main: click.Group, bench: click.Group) -> None:
         CONFIG (or --set) that corrects stages not started yet is taken, one that changes what is
         trained already is refused.
         """
-        from hptvsim.train.config import ConfigError, load_config
+        from hptvsim.train.config import ConfigError, load_config, raw_config
 
         sets = parse_overrides(overrides)
+        try:
+            batched = config is not None and raw_config(config).get("regime") == "fast"
+        except ConfigError as exc:
+            raise click.ClickException(str(exc)) from None
+        if batched:
+            assert config is not None
+            _train_batched(config, out_dir, resume, seed, seeds, algo, device, sets, not no_progress)
+            return
+        if seeds is not None or device is not None:
+            raise click.UsageError(
+                "--seeds and --device are for batched configs (regime = 'fast', e.g. 'fast')"
+            )
         if seed is not None:
             sets["seed"] = seed
         if algo is not None:
@@ -108,7 +143,8 @@ def register(main: click.Group, bench: click.Group) -> None:
         except ConfigError as exc:
             raise click.ClickException(str(exc)) from None
         run_dir = out_dir if out_dir is not None else default_run_dir(cfg.name, cfg.algo, cfg.seed)
-        from hptvsim.train.trainer import TrainingInterrupted, train  # torch: after the config is read
+        from hptvsim.experiments.policies import named_policy  # torch: after the config is read
+        from hptvsim.train.trainer import TrainingInterrupted, train
 
         try:
             result = train(
@@ -119,6 +155,7 @@ def register(main: click.Group, bench: click.Group) -> None:
                 tensorboard=not no_tensorboard,
                 update_config=resume and (config is not None or bool(sets)),
                 log=lambda line: click.echo(line, err=True),
+                named=named_policy,
             )
         except TrainingInterrupted as exc:
             click.echo(str(exc), err=True)
@@ -203,10 +240,10 @@ def register(main: click.Group, bench: click.Group) -> None:
         """
         import json
 
-        from hptvsim.train.config import ConfigError, check_env_spec
+        from hptvsim.experiments.policies import policies_from_specs
+        from hptvsim.train.config import ConfigError, check_env_spec, load_run_config
         from hptvsim.train.envs import EnvSpec, make_env_factory
-        from hptvsim.train.evaluate import across_seeds, evaluate, markdown_table, policies_from_specs
-        from hptvsim.train.trainer import load_run_config
+        from hptvsim.train.evaluate import across_seeds, evaluate, markdown_table
 
         over: dict[str, str] = {}
         if pursuers:
@@ -314,7 +351,7 @@ def register(main: click.Group, bench: click.Group) -> None:
         final rewards' mean and variance per setting (Fig. 11) and one episode's trajectories
         per stage (Figs. 12-13). DT runs (a folder with dt.pt): Figs. 14-17.
         """
-        from hptvsim.train.figures import WindowError, make_figures
+        from hptvsim.experiments.figures import WindowError, make_figures
 
         out = out_dir if out_dir is not None else paths[0] / "figures"
         try:
@@ -340,8 +377,8 @@ def register(main: click.Group, bench: click.Group) -> None:
         sweep_file: Path, out_dir: Path | None, address: str | None, num_cpus: int | None, serial: bool
     ) -> None:
         """Run a sweep file: one training job per (setting, seed) on Ray; finished jobs are skipped."""
+        from hptvsim.experiments.sweeps import load_sweep, run_sweep
         from hptvsim.train.config import ConfigError
-        from hptvsim.train.sweeps import load_sweep, run_sweep
 
         try:
             spec = load_sweep(sweep_file)
@@ -414,8 +451,7 @@ def register(main: click.Group, bench: click.Group) -> None:
         second Ctrl-C stops at once); a hard kill loses at most the config's `checkpoint_every` env
         steps per run. Run the same command again to go on.
         """
-        from hptvsim.train.config import ConfigError
-        from hptvsim.train.reproduce import (
+        from hptvsim.experiments.reproduce import (
             archive_dir,
             load_plan,
             plan_jobs,
@@ -426,6 +462,7 @@ def register(main: click.Group, bench: click.Group) -> None:
             workers_warning,
             write_report,
         )
+        from hptvsim.train.config import ConfigError
 
         if report_only and status_only:
             raise click.UsageError("give one of --status and --report-only, not both")
@@ -485,21 +522,82 @@ def register(main: click.Group, bench: click.Group) -> None:
         if any(st.get("status") == "failed" for st in statuses.values()):
             sys.exit(1)
 
-    @bench.command("train")
-    @click.option("--quick", is_flag=True, help="Seconds instead of minutes.")
-    @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of a table.")
-    @click.option(
-        "--env",
-        "env_kind",
-        type=click.Choice(["auto", "toy", "hptvsim", "3d"]),
-        default="auto",
-        show_default=True,
-        help="Game to step: the 3-vs-1 underwater game when available, else the toy game; 3d: the "
-        "3-D game (6-DOF vehicles that dive, dive_flat scenario).",
-    )
-    def bench_train_cmd(quick: bool, as_json: bool, env_kind: str) -> None:
-        """Env steps/s of MAISAC with 4 learners: plain SB3 vs the batched path, in the same run."""
-        from hptvsim.bench.train import bench_train
-        from hptvsim.cli import emit
 
-        emit(bench_train(quick=quick, env_kind=env_kind), as_json)
+def parse_seeds(text: str) -> tuple[int, ...]:
+    """``"0-9"``, ``"0,3,7"`` or ``"4"`` -> the seeds.
+
+    Raises:
+        click.BadParameter: Not of that form, a seed below 0 or a range that runs backwards.
+    """
+    out: list[int] = []
+    try:
+        for part in text.split(","):
+            part = part.strip()
+            if "-" in part:
+                lo, hi = (int(v) for v in part.split("-", 1))
+                if hi < lo:
+                    raise ValueError
+                out.extend(range(lo, hi + 1))
+            else:
+                out.append(int(part))
+    except ValueError:
+        raise click.BadParameter(
+            f"{text!r} is not a seed list; valid: 0-9, 0,3,7 or 4", param_hint="--seeds"
+        ) from None
+    if any(s < 0 for s in out) or len(set(out)) != len(out) or not out:
+        raise click.BadParameter(f"{text!r}: seeds must be distinct and >= 0", param_hint="--seeds")
+    return tuple(out)
+
+
+def _train_batched(
+    config: str,
+    out_dir: Path | None,
+    resume: bool,
+    seed: int | None,
+    seeds: str | None,
+    algo: str | None,
+    device: str | None,
+    sets: dict[str, Any],
+    progress: bool,
+) -> None:
+    """``hptvsim train`` of a batched config (``regime = "fast"``; :mod:`hptvsim.train.batched_run`)."""
+    from hptvsim.train.batched_run import batched_config_from_dict
+    from hptvsim.train.config import ConfigError, apply_overrides, raw_config, resolve_config_path
+
+    data = apply_overrides(raw_config(config), sets)
+    if algo is not None:
+        data["algo"] = algo
+    if seeds is not None and seed is not None:
+        raise click.UsageError("give --seed or --seeds, not both")
+    if seed is not None:
+        data["seeds"] = [seed]
+    if seeds is not None:
+        data["seeds"] = list(parse_seeds(seeds))
+    if device is not None:
+        data["device"] = device
+    try:
+        cfg = batched_config_from_dict(data, where=str(resolve_config_path(config)))
+    except ConfigError as exc:
+        raise click.ClickException(str(exc)) from None
+    run_dir = out_dir if out_dir is not None else Path("hptvsim-out") / "runs" / cfg.name
+    from hptvsim.experiments.policies import zoo_fixed
+    from hptvsim.train.batched_run import train_batched
+
+    try:
+        result = train_batched(
+            cfg,
+            None,
+            run_dir,
+            fixed=zoo_fixed(cfg.fixed) if cfg.fixed else None,
+            resume=resume,
+            progress=progress,
+        )
+    except (FileNotFoundError, ValueError) as exc:
+        raise click.ClickException(str(exc)) from None
+    for folder, cap, reached in zip(result.folders, result.final_capture, result.reached_s, strict=True):
+        when = "not reached" if reached is None else f"reached at {reached:.0f} s"
+        click.echo(
+            f"{folder}: capture {cap:.2f} of {cfg.eval_episodes} fixed episodes; "
+            f"{cfg.target_capture:.2f} {when}; models in {folder / 'models'}"
+        )
+    click.echo(f"{result.game_steps:,} game steps per seed in {result.wall_s:.0f} s")

@@ -22,7 +22,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from hptvsim.offline.dataset import collect, dataset_path, open_dataset
+from hptvsim.experiments.collect import collect
+from hptvsim.offline.dataset import dataset_path, open_dataset
 
 __all__ = ["PipelineResult", "dt_config_dir", "figures_for_run", "run_pipeline"]
 
@@ -59,7 +60,7 @@ def figures_for_run(
     reset with ``seed``.
     """
     from hptvsim.envs.core import GameCore, planar_scenario
-    from hptvsim.offline.evaluate import expert_specs
+    from hptvsim.experiments.dt_evaluate import expert_specs
     from hptvsim.offline.figures import distance_figures, loss_curves, trajectory_figure
     from hptvsim.offline.policy import load_policy_file, policies_from_file
     from hptvsim.offline.rollout import play
@@ -132,7 +133,7 @@ def run_pipeline(
         progress: Progress bars.
         log: Where progress lines go.
     """
-    from hptvsim.offline.evaluate import evaluate_dt, write_report
+    from hptvsim.experiments.dt_evaluate import evaluate_dt, write_report
     from hptvsim.offline.trainer import apply_overrides, config_from_mapping, load_train_config, train
 
     out = Path(out)
@@ -257,7 +258,7 @@ def _check_experts(
     Raises:
         ValueError: Naming the folder, what its data was collected with and what was asked.
     """
-    from hptvsim.offline.dataset import default_expert_spec
+    from hptvsim.experiments.collect import default_expert_spec
 
     want = {
         "pursuer": pursuers or default_expert_spec("pursuer", scenario),

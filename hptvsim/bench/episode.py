@@ -1,8 +1,9 @@
 """``hptvsim bench episode``: what frames, JSON and recordings cost per episode step.
 
 The floor is the bare game (one :class:`~hptvsim.envs.core.GameCore`, the same scripted
-policies, no frames); the rows add, in turn, the frames of :class:`~hptvsim.viz.episode.EpisodeStepper`,
-their JSON text (what a stream sends), and the rerun recording.
+policies, no frames); the rows add, in turn, the frames of the episode engine's
+:class:`~hptvsim.episodes.stepper.EpisodeStepper`, their JSON text (what a stream sends), and the
+rerun recording (:func:`hptvsim.viz.recording.recorder`).
 """
 
 from __future__ import annotations
@@ -20,7 +21,9 @@ __all__ = ["bench_episode"]
 def bench_episode(*, quick: bool = False, scenario: str = "target") -> BenchResult:
     """Measure µs per episode step (see the module docstring)."""
     from hptvsim.envs.core import GameCore
-    from hptvsim.viz.episode import EpisodeStepper, default_policy
+    from hptvsim.episodes.static import default_policy
+    from hptvsim.episodes.stepper import EpisodeStepper
+    from hptvsim.viz.recording import recorder
     from hptvsim.zoo import load_policy
 
     steps = 300 if quick else 2000
@@ -48,7 +51,7 @@ def bench_episode(*, quick: bool = False, scenario: str = "target") -> BenchResu
     def stepper(*, as_json: bool, record: bool) -> None:
         with tempfile.TemporaryDirectory() as tmp:
             path = Path(tmp) / "ep.rrd" if record else None
-            st = EpisodeStepper(scenario, seed=seed, max_steps=steps, recording_path=path)
+            st = EpisodeStepper(scenario, seed=seed, max_steps=steps, recorder=recorder(path))
             for _ in range(steps):
                 if st.done:
                     st.reset()

@@ -17,7 +17,7 @@ paper's statements, each a comparison or a trend of one metric). :func:`reproduc
 3. evaluates every finished stage of every run on fixed seeds (``hptvsim.offline.rollout.play``:
    the same spawn poses and noise for every run): the run's agents against each other, the
    run's pursuers against a scripted evader, and the run's evader against scripted pursuers;
-4. writes the report (Markdown, with figures drawn by :func:`hptvsim.train.figures.make_figures`
+4. writes the report (Markdown, with figures drawn by :func:`hptvsim.experiments.figures.make_figures`
    from each experiment's folder, i.e. ``hptvsim figures OUT/experiments/<id>``) from whatever
    results exist, naming what is missing.
 
@@ -36,7 +36,7 @@ restores them (:func:`restore_archived`) and trains only the runs not in the arc
 report regenerates from a clone alone. An archived run is restored only while the plan still
 builds the config it was trained with.
 
-Metrics (per run; then mean and 95 % interval over seeds, :mod:`hptvsim.train.stats`):
+Metrics (per run; then mean and 95 % interval over seeds, :mod:`hptvsim.experiments.stats`):
 
 ``train_final.<role>``
     Mean total reward per episode of the role's agents over the last ``last_episodes``
@@ -76,6 +76,7 @@ from typing import Any, Literal
 import numpy as np
 
 from hptvsim._process import pid_alive, usable_cores
+from hptvsim.experiments.stats import Interval, difference, mean_interval, slope, verdict
 from hptvsim.train.config import (
     ConfigError,
     TrainConfig,
@@ -84,7 +85,6 @@ from hptvsim.train.config import (
     raw_config,
     resolve_config_path,
 )
-from hptvsim.train.stats import Interval, difference, mean_interval, slope, verdict
 
 __all__ = [
     "Claim",
@@ -609,6 +609,7 @@ def run_job(plan_path: str, job: ReproJob, out: str) -> dict[str, Any]:
 
     Runs in a worker process; returns a status dict.
     """
+    from hptvsim.experiments.policies import named_policy
     from hptvsim.train.checkpoint import has_checkpoint
     from hptvsim.train.trainer import train
 
@@ -629,6 +630,7 @@ def run_job(plan_path: str, job: ReproJob, out: str) -> dict[str, Any]:
                 tensorboard=False,
                 stop_requested=_stop_requested,
                 label=setting.label,
+                named=named_policy,
             )
             if not result.finished:  # asked to stop: checkpointed at an episode's end
                 note = f"at env step {result.global_step:,}, checkpoint written"
@@ -645,7 +647,7 @@ def run_job(plan_path: str, job: ReproJob, out: str) -> dict[str, Any]:
 
 
 def _saved_config(run_dir: Path) -> TrainConfig:
-    from hptvsim.train.trainer import load_run_config
+    from hptvsim.train.config import load_run_config
 
     return load_run_config(run_dir)
 
@@ -739,7 +741,7 @@ def evaluate_stage(models: Path, stage: Any, spec: EvalSpec) -> dict[str, Any]:
 
 def _training_metrics(run_dir: Path, last: int) -> dict[str, dict[str, float]]:
     """Stage -> metric -> value from ``episodes.csv`` (finished stages only)."""
-    from hptvsim.train.figures import episode_returns, finished_stages
+    from hptvsim.experiments.figures import episode_returns, finished_stages
 
     out: dict[str, dict[str, float]] = {}
     if not (run_dir / "episodes.csv").is_file():
@@ -909,8 +911,7 @@ def restore_archived(plan: Plan, out: Path, archive: Path, log: Callable[[str], 
     Returns:
         The runs restored.
     """
-    from hptvsim.train.config import config_to_dict
-    from hptvsim.train.trainer import load_run_config
+    from hptvsim.train.config import config_to_dict, load_run_config
 
     restored = []
     for job in plan_jobs(plan):
@@ -1088,7 +1089,7 @@ def write_report(
     (:func:`archive_dir`) and ``out`` are brought level: archived runs missing under ``out`` are
     restored, finished runs missing from the archive are archived.
     """
-    from hptvsim.bench.common import machine_summary
+    from hptvsim._output import machine_summary
 
     archive = archive_dir(report)
     restore_archived(plan, out, archive)
@@ -1128,7 +1129,7 @@ def write_report(
     w(
         "- Statistics: every number is a mean over training seeds with its 95 % Student-t interval "
         "`[low, high]`; differences use Welch's interval, trends the least-squares slope's t interval "
-        "(`hptvsim.train.stats`); an interval is cut to the range its quantity cannot leave (a "
+        "(`hptvsim.experiments.stats`); an interval is cut to the range its quantity cannot leave (a "
         "rate to [0, 1], a difference of rates to [-1, 1], a variance or a time to capture to "
         ">= 0), which keeps its coverage. A claim **holds** only when the whole interval lies on the claimed "
         "side of zero, **does not hold** when it lies wholly on the other side, and is **not "
@@ -1229,7 +1230,7 @@ def _seeds_section(
     if figures:
         import matplotlib.pyplot as plt
 
-        from hptvsim.train.figures import ClaimPanel, claims_figure
+        from hptvsim.experiments.figures import ClaimPanel, claims_figure
 
         panels = []
         for c in plan.claims:
@@ -1310,7 +1311,7 @@ def _experiment_section(
     figures: bool,
     w: Callable[[str], None],
 ) -> None:
-    from hptvsim.train.figures import make_figures
+    from hptvsim.experiments.figures import make_figures
 
     w(f"## {exp.title} ({exp.figure})")
     w("")

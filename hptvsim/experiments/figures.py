@@ -643,7 +643,7 @@ def claims_figure(panels: Sequence[ClaimPanel], *, caption: str = "", columns: i
     import matplotlib.pyplot as plt
     from matplotlib.lines import Line2D
 
-    from hptvsim.train.stats import mean_interval
+    from hptvsim.experiments.stats import mean_interval
 
     n = max(len(panels), 1)
     cols = min(columns, n)
@@ -726,9 +726,10 @@ def trajectories(run_dir: Path, out: Path, *, seed: int = 0) -> list[Path]:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from hptvsim.experiments.policies import policies_from_specs
+    from hptvsim.train.config import load_run_config
     from hptvsim.train.envs import make_env_factory
-    from hptvsim.train.evaluate import EVAL_SEED_OFFSET, policies_from_specs, reset_policies
-    from hptvsim.train.trainer import load_run_config
+    from hptvsim.train.evaluate import EVAL_SEED_OFFSET, reset_policies
 
     cfg = load_run_config(run_dir)
     written = []
@@ -861,7 +862,7 @@ def make_figures(
     dt_runs = [p for p in paths if (p / "dt.pt").is_file()]
     written: list[Path] = []
     for p in dt_runs:  # Figs. 14-17 of the offline stage
-        from hptvsim.offline.pipeline import figures_for_run
+        from hptvsim.experiments.dt_pipeline import figures_for_run
 
         written += figures_for_run(p / "dt.pt", out if len(dt_runs) == 1 else out / p.name, run_dir=p)
     paths = [p for p in paths if p not in dt_runs]

@@ -1,4 +1,9 @@
-"""Offline RL commands: ``hptvsim collect``, ``hptvsim dt train|evaluate|figures|pipeline``, ``bench dt``."""
+"""Offline RL commands: ``hptvsim collect``, ``hptvsim dt train|evaluate|figures|pipeline``.
+
+Collecting and evaluating start from the policy zoo's names (the experts), so these commands live
+above the zoo, with the experiments (:mod:`hptvsim.experiments.collect`,
+:mod:`hptvsim.experiments.dt_evaluate`, :mod:`hptvsim.experiments.dt_pipeline`).
+"""
 
 from __future__ import annotations
 
@@ -40,8 +45,8 @@ def _targets(values: tuple[str, ...]) -> list[float | str]:
     return out
 
 
-def register(main: click.Group, bench: click.Group) -> None:
-    """Add the offline commands to ``hptvsim`` and ``hptvsim bench``."""
+def register(main: click.Group) -> None:
+    """Add the offline commands to ``hptvsim``."""
 
     @main.command("collect")
     @click.option("--scenario", default="target", show_default=True, help="Scenario name or file.")
@@ -122,7 +127,7 @@ def register(main: click.Group, bench: click.Group) -> None:
         no_progress: bool,
     ) -> None:
         """Roll out expert policies and write offline datasets in Minari format (one per agent)."""
-        from hptvsim.offline.dataset import collect
+        from hptvsim.experiments.collect import collect
 
         try:
             res = collect(
@@ -263,7 +268,7 @@ def register(main: click.Group, bench: click.Group) -> None:
         no_progress: bool,
     ) -> None:
         """DT pursuers vs the evader over seeded episodes: SAC metrics plus normalised scores."""
-        from hptvsim.offline.evaluate import evaluate_dt, write_report
+        from hptvsim.experiments.dt_evaluate import evaluate_dt, write_report
         from hptvsim.offline.policy import DEFAULT_TARGET
 
         path = policy / "dt.pt" if policy.is_dir() else policy
@@ -313,7 +318,7 @@ def register(main: click.Group, bench: click.Group) -> None:
         max_steps: int | None,
     ) -> None:
         """Figs. 14-17: loss curves, one episode's trajectories and pursuer-evader distances."""
-        from hptvsim.offline.pipeline import figures_for_run
+        from hptvsim.experiments.dt_pipeline import figures_for_run
 
         path = run / "dt.pt" if run.is_dir() else run
         run_dir = path.parent
@@ -373,7 +378,7 @@ def register(main: click.Group, bench: click.Group) -> None:
         no_progress: bool,
     ) -> None:
         """Collect expert data, train the DT pursuers, evaluate them, draw Figs. 14-17 (resumable)."""
-        from hptvsim.offline.pipeline import run_pipeline
+        from hptvsim.experiments.dt_pipeline import run_pipeline
         from hptvsim.offline.policy import DEFAULT_TARGET
 
         try:
@@ -394,14 +399,3 @@ def register(main: click.Group, bench: click.Group) -> None:
             )
         except (ValueError, FileNotFoundError) as exc:
             raise click.ClickException(str(exc)) from None
-
-    @bench.command("dt")
-    @click.option("--quick", is_flag=True, help="Seconds instead of a minute.")
-    @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of a table.")
-    def bench_dt_cmd(quick: bool, as_json: bool) -> None:
-        """DT training updates/s and inference actions/s, each against a peer measured in the same run."""
-        from hptvsim.bench.dt import bench_dt
-        from hptvsim.cli import emit
-
-        for result in bench_dt(quick=quick):
-            emit(result, as_json)

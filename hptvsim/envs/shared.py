@@ -1,0 +1,312 @@
+"""What every game and every view shares, written once against :class:`~hptvsim.envs.protocol.Game`.
+
+* :func:`check_actions`: the one check of actions (shape, finiteness with the agent and
+  environment named, clipping to the action spaces) that every game's ``step`` runs, whichever
+  view (PettingZoo, Gymnasium, vector, batch) drives it; :func:`check_agent_action`: the shape
+  of one agent's action, which the views check before they assemble the game's actions;
+* :func:`agent_infos` and :func:`info_arrays`: the per-agent info of :data:`~hptvsim.envs.protocol.INFO_KEYS`;
+* :func:`build_policies`: the other agents' scripted policies (by name) or given policy objects;
+* :func:`scenario_argument` and :func:`common_overrides`: a game's ``scenario``, ``task``,
+  ``max_steps`` and ``reward`` arguments.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import gymnasium
+import numpy as np
+import numpy.typing as npt
+
+from hptvsim.envs.policies import Policy
+from hptvsim.envs.protocol import INFO_KEYS, POSE_FIELDS, RESET_INFO_KEYS, Game, StepResult
+from hptvsim.world.scenario import Scenario, load_scenario
+
+__all__ = [
+    "PolicySpec",
+    "action_box",
+    "agent_infos",
+    "build_policies",
+    "check_actions",
+    "check_agent_action",
+    "common_overrides",
+    "info_arrays",
+    "scenario_argument",
+]
+
+F32 = npt.NDArray[np.float32]
+F64 = npt.NDArray[np.float64]
+
+PolicySpec = str | Policy
+"""A policy: the name of one of the game's scripted policies (``Game.policy_roles``) or an object."""
+
+_CAUSES = ("seabed", "surface")
+"""The collision causes of :data:`~hptvsim.envs.protocol.INFO_KEYS` (``StepResult.causes``)."""
+
+
+# --- arguments -------------------------------------------------------------------------------------
+
+
+def scenario_argument(scenario: Scenario | str) -> Scenario:
+    """A game's ``scenario`` argument as a Scenario (a shipped name or a path is loaded).
+
+    Raises:
+        TypeError: Neither a Scenario nor a string.
+        ScenarioError: No such scenario, or an invalid one.
+    """
+    sc = load_scenario(scenario) if isinstance(scenario, str) else scenario
+    if not isinstance(sc, Scenario):
+        raise TypeError(f"scenario must be a Scenario, a shipped scenario's name or a path; got {scenario!r}")
+    return sc
+
+
+def common_overrides(
+    sc: Scenario,
+    *,
+    task: str | None = None,
+    max_steps: int | None = None,
+    reward: Mapping[str, float] | None = None,
+) -> dict[str, Any]:
+    """The scenario changes that a game's ``task``, ``max_steps`` and ``reward`` arguments ask.
+
+    Raises:
+        ValueError: An invalid task or step limit (the message says what is valid).
+    """
+    overrides: dict[str, Any] = {}
+    if task is not None and task != sc.task.kind:
+        if task not in ("pursuit", "goto"):
+            raise ValueError(f"task = {task!r} is invalid; valid: 'pursuit', 'goto'")
+        overrides["task"] = {"kind": task}
+    if max_steps is not None:
+        if isinstance(max_steps, bool) or not float(max_steps).is_integer() or max_steps < 1:
+            raise ValueError(f"max_steps = {max_steps!r} is invalid; valid: an integer >= 1")
+        overrides["simulation"] = {"max_steps": int(max_steps)}
+    if reward:
+        overrides.setdefault("task", {})["reward"] = {k: float(v) for k, v in reward.items()}
+    return overrides
+
+
+# --- actions ---------------------------------------------------------------------------------------
+
+
+def action_box(low: npt.ArrayLike, high: npt.ArrayLike) -> gymnasium.spaces.Box:
+    """A float32 action (or observation) space with these bounds."""
+    return gymnasium.spaces.Box(
+        np.asarray(low, dtype=np.float32), np.asarray(high, dtype=np.float32), dtype=np.float32
+    )
+
+
+def _fields(game: Game) -> str:
+    return f"[{', '.join(game.command_fields)}]"
+
+
+def check_actions(game: Game, actions: npt.ArrayLike, *, out: F64 | None = None) -> F64:
+    """Every agent's actions ``(B, N, A)`` checked and clipped to the action spaces (in ``out``).
+
+    The one check of actions: every game's ``step`` runs it (the views check only the shapes of
+    what they are given, :func:`check_agent_action`, to name the agent in the message).
+
+    Args:
+        game: The game.
+        actions: ``(B, N, A)`` actions.
+        out: ``(B, N, A)`` float64 buffer for the result (default: a new array).
+
+    Returns:
+        The actions as float64, clipped to :attr:`~hptvsim.envs.protocol.Game.action_bounds`
+        (``max(low, min(high, a))``: a value within the bounds is kept as it is, signed zeros too).
+
+    Raises:
+        ValueError: A wrong shape, or a non-finite value (naming the agent and the environment).
+    """
+    low, high = game.action_bounds
+    b, n, k = game.num_envs, len(game.agents), low.shape[-1]
+    if np.shape(actions) != (b, n, k):
+        raise ValueError(
+            f"actions must have shape (B, N, {k}) = ({b}, {n}, {k}) of {_fields(game)}; "
+            f"got {np.shape(actions)}"
+        )
+    if out is None:
+        out = np.array(actions, dtype=np.float64)
+    else:
+        np.copyto(out, actions)
+    if not np.isfinite(out.sum()):  # one reduction; find the culprit only on failure
+        bad = np.nonzero(~np.isfinite(out).all(axis=-1))
+        if bad[0].size:  # (else finite values whose sum overflowed)
+            e, i = int(bad[0][0]), int(bad[1][0])
+            raise ValueError(
+                f"the action of {game.agents[i]} in environment {e} is not finite: {out[e, i].tolist()}"
+            )
+    np.maximum(out, low, out=out)
+    np.minimum(out, high, out=out)
+    return out
+
+
+def check_agent_action(game: Game, agent: int, action: npt.ArrayLike, *, num_envs: int | None = None) -> None:
+    """Check the shape of one agent's action ``(A,)`` (or, with ``num_envs``, its actions ``(B, A)``).
+
+    The views run it on what they are given before they assemble the game's actions; the game's
+    ``step`` checks the values (:func:`check_actions`).
+
+    Raises:
+        ValueError: A wrong shape (naming the agent and the action's fields).
+    """
+    k = game.action_bounds[0].shape[-1]
+    shape = np.shape(action)
+    if num_envs is None:
+        if shape != (k,):
+            raise ValueError(
+                f"the action of {game.agents[agent]} must have shape ({k},) = {_fields(game)}; got {shape}"
+            )
+    elif shape != (num_envs, k):
+        raise ValueError(
+            f"the actions of {game.agents[agent]} must have shape (num_envs, {k}) = ({num_envs}, {k}) "
+            f"of {_fields(game)}; got {shape}"
+        )
+
+
+# --- information -----------------------------------------------------------------------------------
+
+
+def agent_infos(game: Game, result: StepResult | None, env: int) -> list[dict[str, Any]]:
+    """Every agent's info in environment ``env`` (keys: :data:`~hptvsim.envs.protocol.INFO_KEYS`).
+
+    Args:
+        game: The game.
+        result: The step's result, or None right after a reset (then only the keys up to
+            ``step``: :data:`~hptvsim.envs.protocol.RESET_INFO_KEYS`).
+        env: The environment.
+
+    Returns:
+        One dict of Python scalars per agent, in agent order.
+    """
+    poses = game.poses[env].tolist()
+    altitude = game.altitude[env].tolist()
+    distance = game.distance[env].tolist()
+    min_range = game.ranges[env].min(axis=1).tolist()
+    step = int(game.steps[env])
+    if result is None:
+        return [
+            {
+                "x": p[0],
+                "y": p[1],
+                "z": p[2],
+                "phi": p[3],
+                "theta": p[4],
+                "psi": p[5],
+                "altitude": altitude[i],
+                "distance": distance[i],
+                "min_range": min_range[i],
+                "step": step,
+            }
+            for i, p in enumerate(poses)
+        ]
+    f, t = result.flags, result.terms
+    n = len(poses)
+    captured = bool(f.captured[env])
+    collision = f.collision[env].tolist()
+    causes = result.causes
+    seabed = causes["seabed"][env].tolist() if "seabed" in causes else [False] * n
+    surface = causes["surface"][env].tolist() if "surface" in causes else [False] * n
+    out_of_site = f.out_of_site[env].tolist()
+    reached = f.reached[env].tolist()
+    r_C, r_E1, r_E2 = t.r_C[env].tolist(), t.r_E1[env].tolist(), t.r_E2[env].tolist()
+    return [
+        {
+            "x": p[0],
+            "y": p[1],
+            "z": p[2],
+            "phi": p[3],
+            "theta": p[4],
+            "psi": p[5],
+            "altitude": altitude[i],
+            "distance": distance[i],
+            "min_range": min_range[i],
+            "step": step,
+            "captured": captured,
+            "collision": collision[i],
+            "seabed": seabed[i],
+            "surface": surface[i],
+            "out_of_site": out_of_site[i],
+            "reached": reached[i],
+            "r_C": r_C[i],
+            "r_E1": r_E1[i],
+            "r_E2": r_E2[i],
+        }
+        for i, p in enumerate(poses)
+    ]
+
+
+def info_arrays(game: Game, result: StepResult | None, agent: int) -> dict[str, npt.NDArray[Any]]:
+    """One agent's info in every environment, as ``(B,)`` arrays (keys as :func:`agent_infos`).
+
+    What the vector environments report; fresh arrays (not the game's buffers).
+    """
+    i = agent
+    poses = game.poses[:, i]
+    out: dict[str, npt.NDArray[Any]] = {k: poses[:, j].copy() for j, k in enumerate(POSE_FIELDS)}
+    out["altitude"] = game.altitude[:, i].copy()
+    out["distance"] = game.distance[:, i].copy()
+    out["min_range"] = game.ranges[:, i].min(axis=-1)
+    out["step"] = game.steps.copy()
+    if result is None:
+        assert tuple(out) == RESET_INFO_KEYS
+        return out
+    f, t = result.flags, result.terms
+    out["captured"] = f.captured.copy()
+    out["collision"] = f.collision[:, i].copy()
+    for c in _CAUSES:
+        out[c] = result.causes[c][:, i].copy() if c in result.causes else np.zeros(game.num_envs, dtype=bool)
+    out["out_of_site"] = f.out_of_site[:, i].copy()
+    out["reached"] = f.reached[:, i].copy()
+    out["r_C"] = t.r_C[:, i].copy()
+    out["r_E1"] = t.r_E1[:, i].copy()
+    out["r_E2"] = t.r_E2[:, i].copy()
+    assert tuple(out) == INFO_KEYS
+    return out
+
+
+# --- policies --------------------------------------------------------------------------------------
+
+
+def build_policies(
+    game: Game, agents: Sequence[str], given: Mapping[str, PolicySpec] | None, *, seed: int | None = None
+) -> dict[str, Policy]:
+    """Policies for ``agents``: the given ones (names or objects), the game's defaults otherwise.
+
+    A name is one of the game's scripted policies (``Game.policy_roles``; the zoo's spelling
+    ``scripted:<name>`` works too), built by ``Game.scripted_policy`` with seed ``seed + i`` for
+    agent ``i``; objects with ``act(obs, episode_start)`` are taken as they are. Defaults:
+    ``Game.default_policy``. The policies act in the agents' action spaces.
+
+    Raises:
+        ValueError: A given policy names an unknown agent, an unknown scripted policy or one made
+            for the other role (in pursuit; in goto every policy drives every agent).
+    """
+    given = dict(given or {})
+    unknown = sorted(set(given) - set(game.agents))
+    if unknown:
+        raise ValueError(f"policies given for unknown agents {unknown}; agents: {', '.join(game.agents)}")
+    roles = game.policy_roles
+    out: dict[str, Policy] = {}
+    for agent in agents:
+        i = game.agents.index(agent)
+        spec = given.get(agent, game.default_policy(agent))
+        if isinstance(spec, str):
+            role = "pursuer" if game.pursuer[i] else "evader"
+            name = spec.removeprefix("scripted:")
+            if name in roles and role not in roles[name] and not game.goto:
+                fits = [n for n, r in roles.items() if role in r]
+                raise ValueError(
+                    f"policy {spec!r} drives {' and '.join(roles[name])}, not {agent} ({role}); "
+                    f"valid for {agent}: {', '.join(fits)}"
+                )
+            out[agent] = game.scripted_policy(name, agent, seed=None if seed is None else seed + i)
+        elif isinstance(spec, Policy):
+            out[agent] = spec
+        else:
+            raise ValueError(
+                f"the policy of {agent} must be a scripted policy's name ({', '.join(roles)}) or have "
+                f"act(obs); got {spec!r}"
+            )
+    return out

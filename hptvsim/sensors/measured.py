@@ -1,0 +1,178 @@
+"""The sonar as the environments use it: ranges at the configured fidelity, plus Eq. 3 errors.
+
+:class:`Sonar` puts the pieces of this package together: the geometric ray casts
+(:class:`~hptvsim.sensors.sonar.GeometricSonar`), or at signal level the matched filter over
+them (:class:`~hptvsim.sensors.signal.SignalSonar`), then the Gauss-Markov errors
+(:class:`~hptvsim.sensors.errors.GaussMarkov`), fused with the clip and the no-echo rule into one
+C pass (``errors_kernel.c``) where the C backend is in use. It sits above both fidelities, so
+neither imports the other's user.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Literal
+
+import numpy as np
+import numpy.typing as npt
+
+from hptvsim.native import load_library
+from hptvsim.sensors.errors import GaussMarkov, as_generator
+from hptvsim.sensors.sonar import _CFLAGS, GeometricSonar
+from hptvsim.world.grid import OccupancyGrid
+from hptvsim.world.sensor_config import SonarConfig
+
+if TYPE_CHECKING:
+    from hptvsim.sensors.signal import SignalSonar  # scipy: imported where the signal level is used
+
+__all__ = ["Sonar"]
+
+F64 = npt.NDArray[np.float64]
+I64 = npt.NDArray[np.int64]
+
+
+def _declare(lib: ctypes.CDLL) -> None:
+    f = lib.hptv_gm_ranges
+    f.restype = None
+    pointers, doubles, flags = [ctypes.c_void_p] * 3, [ctypes.c_double] * 4, [ctypes.c_int64] * 3
+    f.argtypes = [ctypes.c_int64, *pointers, *doubles, *flags, ctypes.c_void_p]
+
+
+def _errors_kernel() -> ctypes.CDLL:
+    """The fused Gauss-Markov kernel (``errors_kernel.c``), compiled, loaded and typed once."""
+    source = Path(__file__).with_name("errors_kernel.c")
+    return load_library(source, flags=_CFLAGS, declare=_declare, what="the sonar error kernel")
+
+
+class Sonar:
+    """The sonar as the environments use it: ranges at the configured fidelity, plus Eq. 3 errors.
+
+    ``config.fidelity`` picks the ranges: ``"geometric"`` (exact ray casts) or ``"signal"``
+    (:class:`~hptvsim.sensors.signal.SignalSonar`: echo synthesis and the matched filter). The
+    Gauss-Markov model ``config.errors`` (one process per environment, sensing agent and beam)
+    is then added to every beam that hit something, and the result clipped to
+    ``[0, max_range]``; a beam that hit nothing keeps ``max_range`` (no echo, nothing to be
+    wrong about).
+
+    Args:
+        config: Sonar settings.
+        grid: Obstacle map, or ``None``.
+        num_envs: Environments ``B``.
+        num_agents: Vehicles ``N`` per environment.
+        radii: ``(N,)`` radius [m] of every agent's circle
+            (:func:`~hptvsim.sensors.sonar.vehicle_radii`), or ``None`` when vehicles are not
+            detected.
+        sensing: Indices of the agents that carry this sonar (``None``: all ``N``).
+        rng: Generator or seed for all noise (errors and, at signal level, echoes).
+        backend: Ray-cast backend, ``"c"`` or ``"numpy"``.
+        threads: Ray-cast threads (``None``: up to 2).
+    """
+
+    def __init__(
+        self,
+        config: SonarConfig,
+        grid: OccupancyGrid | None,
+        *,
+        num_envs: int,
+        num_agents: int,
+        radii: npt.ArrayLike | None = None,
+        sensing: Sequence[int] | None = None,
+        rng: np.random.Generator | int | None = None,
+        backend: Literal["c", "numpy"] = "c",
+        threads: int | None = None,
+    ) -> None:
+        self.config = config
+        self.rng = as_generator(rng)
+        self.radii: F64 | None = None if radii is None else np.asarray(radii, dtype=np.float64)
+        self.sensing: I64 | None = None if sensing is None else np.asarray(sensing, dtype=np.int64)
+        self.num_envs, self.num_agents = int(num_envs), int(num_agents)
+        if self.radii is not None and self.radii.shape != (self.num_agents,):
+            raise ValueError(
+                f"radii must hold {self.num_agents} radii, one per agent; got {self.radii.shape}"
+            )
+        if self.sensing is not None and not ((self.sensing >= 0) & (self.sensing < self.num_agents)).all():
+            raise ValueError(
+                f"sensing must hold agent indices in [0, {self.num_agents}); got {self.sensing.tolist()}"
+            )
+        n_sensing = self.num_agents if self.sensing is None else self.sensing.size
+        self.geometric = GeometricSonar(config, grid, backend=backend, threads=threads)
+        self.signal: SignalSonar | None = None
+        if config.fidelity == "signal":
+            from hptvsim.sensors.signal import SignalSonar
+
+            self.signal = SignalSonar(config, grid, rng=self.rng, backend=backend, threads=threads)
+            self.signal.geometric = self.geometric
+        self.shape = (self.num_envs, n_sensing, config.beams)
+        self.errors = GaussMarkov(config.errors, self.shape, rng=self.rng)
+        self._truth: F64 = np.empty(self.shape)
+        self._z: F64 = np.empty(0)
+        self._z_ptr = self._z.ctypes.data
+        self._truth_ptr = self._truth.ctypes.data
+        self._bias_ptr = self.errors.bias.ctypes.data  # GaussMarkov updates its bias in place
+        self._fused_dt = math.nan
+        self._fused_coef = (1.0, 0.0)
+        self._gm = _errors_kernel().hptv_gm_ranges if backend == "c" and config.errors.active else None
+
+    def reset(self, index: npt.ArrayLike | None = None) -> None:
+        """Draw fresh error biases for the environments in ``index`` (``None``: all)."""
+        self.errors.reset(index)
+
+    def truth(self, poses: npt.ArrayLike, *, active: npt.ArrayLike | None = None) -> F64:
+        """Error-free geometric ranges ``(B, S, K)`` [m] (for rewards and tests)."""
+        return self.geometric.ranges(poses, self.radii, sensing=self.sensing, active=active)
+
+    def measure(self, poses: npt.ArrayLike, dt: float, *, active: npt.ArrayLike | None = None) -> F64:
+        """Measured ranges ``(B, S, K)`` [m] for poses ``(B, N, 3)``; the error biases advance ``dt`` [s]."""
+        shape = np.shape(poses)
+        if shape != (self.num_envs, self.num_agents, 3):
+            raise ValueError(
+                f"this sonar was built for poses of shape {(self.num_envs, self.num_agents, 3)}, got {shape}"
+            )
+        truth = self.geometric.ranges(poses, self.radii, sensing=self.sensing, active=active, out=self._truth)
+        ranges = truth if self.signal is None else self.signal.estimate_ranges(truth)
+        if not self.config.errors.active:
+            return ranges.copy() if ranges is self._truth else ranges
+        if self._gm is not None:
+            return self._measure_fused(ranges, dt)
+        max_range = self.config.max_range
+        noisy = self.errors.measure(ranges, dt)
+        np.clip(noisy, 0.0, max_range, out=noisy)
+        result: F64 = np.where(ranges < max_range, noisy, max_range)
+        return result
+
+    def _measure_fused(self, ranges: F64, dt: float) -> F64:
+        """``errors.measure`` + clip + no-echo rule in one C pass (``errors_kernel.c``), same numbers.
+
+        The normals are drawn in one call, in the order the numpy path draws them (bias drive,
+        then white noise), so both paths consume the generator identically.
+        """
+        cfg = self.config.errors
+        if dt != self._fused_dt:
+            if not (dt >= 0.0 and math.isfinite(dt)):
+                raise ValueError(f"dt = {dt!r} is invalid; valid: a finite time step >= 0 s")
+            phi = math.exp(-dt / cfg.tau)
+            w_std = cfg.bias_std * math.sqrt(-math.expm1(-2.0 * dt / cfg.tau))
+            self._fused_coef = (phi, w_std)
+            self._fused_dt = dt
+        step_bias = cfg.bias_std != 0.0
+        add_noise = cfg.noise_std > 0.0
+        n = ranges.size
+        draws = (int(step_bias) + int(add_noise)) * n
+        if self._z.size != draws:
+            self._z = np.empty(draws)
+            self._z_ptr = self._z.ctypes.data
+        if draws:
+            self.rng.standard_normal(out=self._z)
+        src = ranges if ranges.flags.c_contiguous else np.ascontiguousarray(ranges)
+        src_ptr = self._truth_ptr if src is self._truth else src.ctypes.data
+        out = np.empty(self.shape)
+        phi, w_std = self._fused_coef
+        assert self._gm is not None
+        self._gm(
+            n, src_ptr, self._bias_ptr, self._z_ptr, phi, w_std, cfg.noise_std, self.config.max_range,
+            int(step_bias), int(cfg.bias_std > 0.0), int(add_noise), out.ctypes.data,
+        )  # fmt: skip
+        return out
