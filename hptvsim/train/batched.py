@@ -352,6 +352,21 @@ class _Batched:
         self.env_steps += 1
         return out
 
+    def policy(self, seed_index: int = 0) -> Callable[[F32], F64]:
+        """A deterministic batched policy of one seed's learners: ``(K, B, O) -> (K, B, A)``."""
+
+        def act(obs: F32) -> F64:
+            full = np.zeros((self.S, self.K, obs.shape[1], self.obs_size), np.float32)
+            full[seed_index] = obs
+            out: F64 = self.act(full, deterministic=True)[seed_index]
+            return out
+
+        return act
+
+    def act(self, obs: F32, *, deterministic: bool = True) -> F64:
+        """The learners' actions in their boxes for ``(S, K, B, O)`` observations."""
+        raise NotImplementedError
+
     def save_seed(self, k: int, folder: Any) -> None:
         """Write seed ``k``'s learners as SB3 zips into ``folder`` (created)."""
         from pathlib import Path
@@ -526,17 +541,6 @@ class FastMAISAC(_Batched):
         """One batched step of the games and its gradient steps."""
         self.collect()
         return self.train(self.config.updates_per_step)
-
-    def policy(self, seed_index: int = 0) -> Callable[[F32], F64]:
-        """A deterministic batched policy of one seed's learners: ``(K, B, O) -> (K, B, A)``."""
-
-        def act(obs: F32) -> F64:
-            full = np.zeros((self.S, self.K, obs.shape[1], self.obs_size), np.float32)
-            full[seed_index] = obs
-            out: F64 = self.act(full, deterministic=True)[seed_index]
-            return out
-
-        return act
 
     def save(self, folders: Sequence[Any]) -> None:
         """Write each seed's learners as SB3 zips into ``folders[s]/<agent>.zip``."""
@@ -854,17 +858,6 @@ class FastIPPO(_Batched):
                 break
         self.last = {k: float(np.mean(v)) for k, v in stats.items()}
         return self.last
-
-    def policy(self, seed_index: int = 0) -> Callable[[F32], F64]:
-        """A deterministic batched policy of one seed's learners: ``(K, B, O) -> (K, B, A)``."""
-
-        def act(obs: F32) -> F64:
-            full = np.zeros((self.S, self.K, obs.shape[1], self.obs_size), np.float32)
-            full[seed_index] = obs
-            out: F64 = self.act(full, deterministic=True)[seed_index]
-            return out
-
-        return act
 
     def save(self, folders: Sequence[Any]) -> None:
         """Write each seed's learners as SB3 PPO zips (``folders[s]/<agent>.zip``).
