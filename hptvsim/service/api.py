@@ -29,7 +29,6 @@ from hptvsim.service.db import ACTIVE, FINAL, STATUSES, EpisodeRow
 from hptvsim.service.hub import (
     ALL,
     KEEPALIVE,
-    SEND_TIMEOUT_S,
     EventStreamResponse,
     SubscriberDroppedError,
     SubscriberLimitError,
@@ -162,7 +161,7 @@ def trajectory_csv(table: Any) -> bytes:
     """A trajectory table as CSV; each row's sonar ranges become one space-separated field.
 
     The header names each column with its SI unit, ``x [m]`` (the Parquet file's fields carry
-    the same units as metadata, from :attr:`~hptvsim.viz.frames.Trajectories.UNITS`). The same
+    the same units as metadata, from :attr:`~hptvsim.episodes.frames.Trajectories.UNITS`). The same
     text the API streams (:func:`~hptvsim.service.downloads.csv_chunks`), for a table in memory.
     """
     from hptvsim.service.downloads import TableRows, csv_chunks
@@ -226,7 +225,7 @@ async def _events(svc: Service, key: str, frames: bool, static: bool) -> EventSt
             if key != ALL and e.final:
                 return
 
-    return EventStreamResponse(chunks(), sub, deadline=end)
+    return EventStreamResponse(chunks(), sub, deadline=end, send_timeout_s=svc.settings.send_timeout_s)
 
 
 SSE_OK: dict[int | str, dict[str, Any]] = {
@@ -387,6 +386,9 @@ def build_routers(settings: Settings) -> tuple[APIRouter, APIRouter]:
                 "idle_timeout_s": s.idle_timeout_s,
                 "disk_quota_mb": s.disk_quota_mb,
                 "retention_days": s.retention_days,
+                "max_downloads": s.max_downloads,
+                "max_subscribers": s.max_subscribers,
+                "max_subscribers_per_episode": s.max_subscribers_per_episode,
             },
         }
 
@@ -520,6 +522,7 @@ def build_routers(settings: Settings) -> tuple[APIRouter, APIRouter]:
             return downloads.StreamedDownload(
                 write[format](rows),
                 media_type=downloads.MEDIA_TYPES[format],
+                slots=svc.downloads,
                 headers=None if format == "json" else attachment,
             )
         except downloads.BusyError as exc:
@@ -680,8 +683,8 @@ async def _ws_stream(websocket: WebSocket, svc: Service, row: EpisodeRow) -> Non
 
     Over a cap on subscribers the socket closes with 1013 (try again later) before anything is
     sent. A subscriber that stops reading is dropped and closed with 1008: one that skipped
-    :data:`~hptvsim.service.hub.LAG_LIMIT` events in a row, or whose send waited longer than
-    :data:`~hptvsim.service.hub.SEND_TIMEOUT_S`. A client that leaves frees its slot at once.
+    ``HPTVSIM_SUBSCRIBER_LAG_LIMIT`` events in a row, or whose send waited longer than
+    ``HPTVSIM_SEND_TIMEOUT_S``. A client that leaves frees its slot at once.
     """
     try:
         sub = svc.hub.subscribe(row.id)
@@ -693,8 +696,10 @@ async def _ws_stream(websocket: WebSocket, svc: Service, row: EpisodeRow) -> Non
     if websocket.client_state == WebSocketState.CONNECTING:
         await websocket.accept()
 
+    timeout_s = svc.settings.send_timeout_s  # [s]
+
     async def send(text: str) -> None:
-        async with asyncio.timeout(SEND_TIMEOUT_S):
+        async with asyncio.timeout(timeout_s):
             await websocket.send_text(text)
 
     async def stream() -> None:
@@ -729,7 +734,7 @@ async def _ws_stream(websocket: WebSocket, svc: Service, row: EpisodeRow) -> Non
                 why = (
                     str(exc)
                     if isinstance(exc, SubscriberDroppedError)
-                    else f"a send waited > {SEND_TIMEOUT_S:g} s"
+                    else f"a send waited > {timeout_s:g} s (HPTVSIM_SEND_TIMEOUT_S)"
                 )
                 sub.drop(why)
                 with contextlib.suppress(Exception):

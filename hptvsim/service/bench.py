@@ -6,7 +6,7 @@ the ratios):
 * **interactive steps**: one agent-step through :class:`hptvsim.client.RemoteEnv` over a
   WebSocket and over HTTP, against :class:`hptvsim.envs.UPEGSingleAgentEnv` stepped in process;
 * **episode runs**: episodes submitted to the API at once and run by its workers (wall time per
-  episode, i.e. throughput), against :func:`hptvsim.viz.episode.run_episode` in process, one after
+  episode, i.e. throughput), against :func:`hptvsim.episodes.runner.run_episode` in process, one after
   another; the ``/healthz`` latency while they run is given in the notes;
 * **creating episodes**: ``POST /api/v1/episodes`` naming a shipped scenario, and giving a
   scenario as data (built and checked in a preparation process, off the API's threads), against
@@ -99,15 +99,16 @@ def _bench_steps(url: str, quick: bool) -> BenchResult:
 def _bench_episodes(url: str, quick: bool) -> BenchResult:
     import httpx
 
-    from hptvsim.viz.episode import run_episode
+    from hptvsim.episodes.runner import run_episode
+    from hptvsim.viz.recording import recorder
 
     n = 4 if quick else 40
     steps = 60 if quick else 400
     with tempfile.TemporaryDirectory() as tmp:
-        run_episode("target", seed=0, max_steps=20, recording_path=Path(tmp) / "warm.rrd")
+        run_episode("target", seed=0, max_steps=20, recorder=recorder(Path(tmp) / "warm.rrd"))
         t0 = time.perf_counter()
         for k in range(n):
-            run_episode("target", seed=k, max_steps=steps, recording_path=Path(tmp) / f"{k}.rrd")
+            run_episode("target", seed=k, max_steps=steps, recorder=recorder(Path(tmp) / f"{k}.rrd"))
         floor = (time.perf_counter() - t0) / n
     latencies: list[float] = []
     stop = threading.Event()

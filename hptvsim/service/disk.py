@@ -10,16 +10,37 @@ leaves the total (:meth:`DiskUsage.forget`). Sizes are the blocks the files take
 
 from __future__ import annotations
 
+import errno
 import os
 import stat
 import threading
 from collections.abc import Callable
 from pathlib import Path
 
-__all__ = ["MIB", "DiskUsage", "QuotaExceededError", "folder_bytes"]
+__all__ = [
+    "FULL_BELOW",
+    "MIB",
+    "NO_SPACE",
+    "DiskUsage",
+    "QuotaExceededError",
+    "folder_bytes",
+    "no_space_message",
+]
 
 MIB = 1024 * 1024
 """Bytes in a MiB (the unit of the ``*_mb`` settings)."""
+
+FULL_BELOW = MIB
+"""A file system with less room than this [B] is full: a write that failed there failed for room
+(a write to a full disk fills what is left before it fails, so what remains is less than a block
+or two)."""
+
+NO_SPACE = "the service could not write the episode's files (No space left on device)"
+"""What a client is told when an episode failed because its folder's file system is full (the
+words of :func:`hptvsim.service.engine.client_message` for any other write that failed)."""
+
+_NO_SPACE_TEXTS = ("No space left on device", "os error 28", "Disk quota exceeded", "os error 122")
+"""How the rerun recorder's errors name a full disk (its Rust writer names the OS error)."""
 
 
 class QuotaExceededError(Exception):
@@ -56,6 +77,52 @@ def folder_bytes(folder: Path) -> int:
             except OSError:
                 continue
     return total
+
+
+def _room(folder: Path) -> int | None:
+    """Bytes [B] this process may still write on ``folder``'s file system, or None if unknown.
+
+    The nearest folder above ``folder`` that exists is asked (the episode's own may not exist yet).
+    """
+    here = folder
+    while True:
+        try:
+            st = os.statvfs(here)
+        except FileNotFoundError:
+            if here.parent == here:
+                return None
+            here = here.parent
+            continue
+        except OSError:
+            return None
+        free = st.f_bfree if os.geteuid() == 0 else st.f_bavail  # root may use the reserved blocks
+        return int(free) * int(st.f_frsize)
+
+
+def no_space_message(exc: BaseException, folder: str | Path) -> str | None:
+    """The client's message when ``exc`` ended an episode because its disk is full, else None.
+
+    A full disk shows as an :class:`OSError` with ``ENOSPC`` (or ``EDQUOT``) from Python's own
+    writes, as a ``RuntimeError`` naming the OS error from the rerun recorder's writer, or, once
+    that writer has stopped, as a ``RuntimeError`` that names nothing ("File-writer thread shut
+    down prematurely"); so the exception and its causes are read, and then the file system of
+    the episode's folder is asked whether it is full (:data:`FULL_BELOW`).
+
+    Args:
+        exc: What ended the episode.
+        folder: The episode's folder.
+    """
+    seen: set[int] = set()
+    err: BaseException | None = exc
+    while err is not None and id(err) not in seen:
+        seen.add(id(err))
+        if isinstance(err, OSError) and err.errno in (errno.ENOSPC, errno.EDQUOT):
+            return NO_SPACE
+        if any(t in str(err) for t in _NO_SPACE_TEXTS):
+            return NO_SPACE
+        err = err.__cause__ or err.__context__
+    room = _room(Path(folder))
+    return NO_SPACE if room is not None and room < FULL_BELOW else None
 
 
 class DiskUsage:

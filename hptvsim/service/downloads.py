@@ -1,13 +1,13 @@
 """Trajectory downloads that stream from the stored Parquet file in bounded chunks.
 
 An episode's ``trajectory.parquet`` holds one row per step and agent, agent-major (every step of
-the first agent, then of the next; :meth:`~hptvsim.viz.frames.Trajectories.columns`). The API
+the first agent, then of the next; :meth:`~hptvsim.episodes.frames.Trajectories.columns`). The API
 serves it as CSV, as the frame schema's ``Trajectories`` JSON document, as JSON lines, or as the
 file itself, and never holds more than a few batches of rows: every format is written piece by
 piece while the file is read a batch at a time, so the API's memory does not grow with the
 episode (a 16-agent, 1024-beam, 20000-step episode is over 1 GB of JSON). Since every format
 streams, none has a size limit; what is bounded instead is how many stream at once
-(:data:`MAX_STREAMS`, :class:`StreamedDownload`: more are answered 503 with ``Retry-After``), so
+(``HPTVSIM_MAX_DOWNLOADS``, :class:`DownloadSlots`: more are answered 503 with ``Retry-After``), so
 that the API's memory is bounded whatever the episodes and the clients.
 
 * **CSV** (:func:`csv_chunks`): a header naming each column with its SI unit (``x [m]``), then
@@ -46,9 +46,9 @@ if TYPE_CHECKING:
     import pyarrow.parquet as pq
 
 __all__ = [
-    "MAX_STREAMS",
     "MEDIA_TYPES",
     "BusyError",
+    "DownloadSlots",
     "ParquetRows",
     "StreamedDownload",
     "TableRows",
@@ -75,14 +75,9 @@ READ_BUFFER_BYTES = 1 << 20
 CHUNK_BYTES = 256 << 10
 """Bytes [B] of text gathered before a chunk goes to the client."""
 
-MAX_STREAMS = 8
-"""Most trajectory downloads (json, jsonl, csv) one API process streams at once. Each holds a few
-MB while it runs (measured: 3 MB of Python objects, 6 MB of Arrow buffers; the allocators keep
-about 30 MB more per concurrent stream); Parquet files and recordings are sent from disk and not
-counted."""
 
 RETRY_AFTER_S = 5
-"""``Retry-After`` [s] of an answer over :data:`MAX_STREAMS`."""
+"""``Retry-After`` [s] of an answer when every download slot is taken."""
 
 MEDIA_TYPES = {
     "json": "application/json",
@@ -249,22 +244,46 @@ class TableRows:
 
 # --- a bounded number of streams ------------------------------------------------------------------
 
-_slots = threading.BoundedSemaphore(MAX_STREAMS)
-
 
 class BusyError(Exception):
-    """Every one of the :data:`MAX_STREAMS` download slots is taken."""
+    """Every download slot of the service is taken (:class:`DownloadSlots`)."""
+
+
+class DownloadSlots:
+    """The trajectory downloads (json, jsonl, csv) one API process streams at once, at most ``n``.
+
+    Each stream holds a few MB while it runs (measured: 3 MB of Python objects, 6 MB of Arrow
+    buffers; the allocators keep about 30 MB more per concurrent stream), so ``n`` bounds the
+    API's memory for downloads, whatever the episodes and the clients; Parquet files and
+    recordings are sent from disk and not counted.
+
+    Args:
+        n: The most streams at once (``HPTVSIM_MAX_DOWNLOADS``).
+    """
+
+    def __init__(self, n: int) -> None:
+        self.n = n
+        self._free = threading.BoundedSemaphore(n)
+
+    def take(self) -> _Slot:
+        """A slot, given back by :meth:`_Slot.release`.
+
+        Raises:
+            BusyError: All ``n`` are taken.
+        """
+        if not self._free.acquire(blocking=False):
+            raise BusyError(
+                f"{self.n} trajectory downloads are streaming (HPTVSIM_MAX_DOWNLOADS); retry in "
+                f"{RETRY_AFTER_S} s, or take format=parquet (sent from disk, no such limit)"
+            )
+        return _Slot(self._free)
 
 
 class _Slot:
-    """One of the :data:`MAX_STREAMS` slots, given back once."""
+    """One slot of a :class:`DownloadSlots`, given back once."""
 
-    def __init__(self) -> None:
-        if not _slots.acquire(blocking=False):
-            raise BusyError(
-                f"{MAX_STREAMS} trajectory downloads are streaming; retry in {RETRY_AFTER_S} s, or "
-                "take format=parquet (sent from disk, no such limit)"
-            )
+    def __init__(self, free: threading.BoundedSemaphore) -> None:
+        self._free = free
         self._lock = threading.Lock()
         self._held = True
 
@@ -273,11 +292,11 @@ class _Slot:
         with self._lock:
             if self._held:
                 self._held = False
-                _slots.release()
+                self._free.release()
 
 
 class StreamedDownload(StreamingResponse):
-    """A streamed trajectory download, holding one of :data:`MAX_STREAMS` slots while it runs.
+    """A streamed trajectory download, holding one of the service's download slots while it runs.
 
     The slot is taken when the answer is made (so that a busy service answers 503 before the
     download starts) and given back when the answer ends: sent, failed, or left by its client;
@@ -288,6 +307,7 @@ class StreamedDownload(StreamingResponse):
         chunks: What to send (a generator of :func:`csv_chunks`, :func:`json_chunks` or
             :func:`jsonl_chunks`).
         media_type: Its media type.
+        slots: The service's download slots.
         headers: More headers.
 
     Raises:
@@ -295,9 +315,13 @@ class StreamedDownload(StreamingResponse):
     """
 
     def __init__(
-        self, chunks: Iterator[bytes], media_type: str, headers: dict[str, str] | None = None
+        self,
+        chunks: Iterator[bytes],
+        media_type: str,
+        slots: DownloadSlots,
+        headers: dict[str, str] | None = None,
     ) -> None:
-        self._slot = _Slot()
+        self._slot = slots.take()
         self._chunks = chunks
         weakref.finalize(self, self._slot.release)
         super().__init__(chunks, media_type=media_type, headers=headers)
@@ -403,7 +427,7 @@ def csv_chunks(rows: TrajectoryRows) -> Iterator[bytes]:
     """The trajectory as CSV, in chunks.
 
     The header names each column with its SI unit, ``x [m]`` (the Parquet file's fields carry the
-    same units as metadata, from :attr:`~hptvsim.viz.frames.Trajectories.UNITS`); each row's
+    same units as metadata, from :attr:`~hptvsim.episodes.frames.Trajectories.UNITS`); each row's
     sonar ranges become one space-separated field. Values are written by Arrow's CSV writer,
     one batch of rows at a time.
 

@@ -1,16 +1,17 @@
-"""What a worker process does with an episode, on top of :mod:`hptvsim.viz.episode`.
+"""What a worker process does with an episode, on top of the episode engine (:mod:`hptvsim.episodes`).
 
 An episode is described by a :class:`JobSpec` (plain, picklable data the API validated). The
-simulation, the frames (the one frame schema, :mod:`hptvsim.viz.frames`) and the rerun recording
-come from the visualisation layer's runner; this module adds what the service needs around it:
+simulation and the frames (the one frame schema, :mod:`hptvsim.episodes.frames`) come from the
+episode engine, the rerun recording from :func:`hptvsim.viz.recording.recorder`; this module adds
+what the service needs around them:
 
-* ``run`` mode: :func:`run_job` plays the episode with :func:`hptvsim.viz.episode.run_episode`,
+* ``run`` mode: :func:`run_job` plays the episode with :func:`hptvsim.episodes.runner.run_episode`,
   forwarding frames and progress at a bounded rate and stopping on cancel or timeout;
 * ``interactive`` mode: :class:`InteractiveEpisode` wraps an
-  :class:`~hptvsim.viz.episode.EpisodeStepper` in which the client's agents are ``external``.
+  :class:`~hptvsim.episodes.stepper.EpisodeStepper` in which the client's agents are ``external``.
 
 When an episode ends the worker writes, in the episode's folder, ``static.json`` (the frames'
-static part), ``trajectory.parquet`` (:meth:`~hptvsim.viz.frames.Trajectories.columns`: one row
+static part), ``trajectory.parquet`` (:meth:`~hptvsim.episodes.frames.Trajectories.columns`: one row
 per step and agent), ``recording.rrd`` (when recording) and, last and atomically,
 ``result.json`` (the summary and the file names). ``result.json`` also lets a restarted API
 recover an episode whose worker completed while the API was down.
@@ -176,7 +177,7 @@ _PARTS: collections.OrderedDict[tuple[str, Any], Any] = collections.OrderedDict(
 
 
 def static_dict(static: Any) -> dict[str, Any]:
-    """``static.to_dict()`` of an :class:`~hptvsim.viz.frames.EpisodeStatic`, faster for repeats.
+    """``static.to_dict()`` of an :class:`~hptvsim.episodes.frames.EpisodeStatic`, faster for repeats.
 
     The terrain mesh and obstacle map are most of the work and the same for every episode of a
     scenario; their plain data is kept for the last few scenarios a process saw.
@@ -203,7 +204,7 @@ def static_dict(static: Any) -> dict[str, Any]:
 
 
 def summary_dict(summary: Any) -> dict[str, Any]:
-    """An :class:`~hptvsim.viz.frames.EpisodeSummary` as the API stores it (no server paths)."""
+    """An :class:`~hptvsim.episodes.frames.EpisodeSummary` as the API stores it (no server paths)."""
     data: dict[str, Any] = summary.to_dict()
     data.pop("recording", None)
     return data
@@ -212,7 +213,7 @@ def summary_dict(summary: Any) -> dict[str, Any]:
 def write_outputs(
     out_dir: Path, result: Any, *, error: str | None = None, static: dict[str, Any] | None = None
 ) -> dict[str, Any]:
-    """Write an :class:`~hptvsim.viz.episode.EpisodeResult`'s files; returns what ``result.json`` holds.
+    """Write an :class:`~hptvsim.episodes.stepper.EpisodeResult`'s files; returns what ``result.json`` holds.
 
     Args:
         out_dir: The episode's folder.
@@ -296,8 +297,9 @@ def run_job(spec: JobSpec, emit: Emit, should_stop: Callable[[], str | None]) ->
     Returns:
         What ``result.json`` holds (summary, steps, seed, file paths, error).
     """
+    from hptvsim.episodes.runner import run_episode
     from hptvsim.episodes.stepper import SimulationError
-    from hptvsim.viz.episode import run_episode  # the engine's, with recording_path
+    from hptvsim.viz.recording import recorder
 
     started = time.perf_counter()
     deadline = started + spec.timeout_s
@@ -337,7 +339,7 @@ def run_job(spec: JobSpec, emit: Emit, should_stop: Callable[[], str | None]) ->
             on_static=on_static,
             on_frame=on_frame,
             cancel=cancel,
-            recording_path=spec.recording_path,
+            recorder=recorder(spec.recording_path),
         )
     except SimulationError as exc:
         if exc.partial is None:
@@ -367,8 +369,8 @@ class InteractiveEpisode:
     """
 
     def __init__(self, spec: JobSpec) -> None:
-        from hptvsim.episodes.stepper import EXTERNAL
-        from hptvsim.viz.episode import EpisodeStepper  # the engine's, with recording_path
+        from hptvsim.episodes.stepper import EXTERNAL, EpisodeStepper
+        from hptvsim.viz.recording import recorder
 
         self.spec = spec
         policies = dict(spec.policies)
@@ -381,7 +383,7 @@ class InteractiveEpisode:
             max_steps=spec.max_steps,
             sensor_fidelity=spec.sensor_fidelity,  # type: ignore[arg-type]  # validated by the API
             backend=spec.backend,  # type: ignore[arg-type]  # validated by the API
-            recording_path=spec.recording_path,
+            recorder=recorder(spec.recording_path),
         )
         self.control = tuple(spec.control)
         self.started = time.perf_counter()

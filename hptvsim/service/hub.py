@@ -1,7 +1,7 @@
 """Publish/subscribe of episode events inside the API process (server-sent events, WebSockets).
 
 Events are plain dicts ``{"type": "status" | "static" | "progress" | "frame", "episode": id,
-"data": ...}``; ``static`` and ``frame`` data follow the frame schema (:mod:`hptvsim.viz.frames`).
+"data": ...}``; ``static`` and ``frame`` data follow the frame schema (:mod:`hptvsim.episodes.frames`).
 
 The fan-out scales with the number of subscribers:
 
@@ -15,10 +15,10 @@ The fan-out scales with the number of subscribers:
   ``status`` and ``static`` always go through, so a slow reader still sees the latest frame and
   the final status). One that takes none of ``lag_limit`` events in a row is dropped
   (:class:`SubscriberDroppedError`), and its slot and backlog are freed. The senders bound each
-  send in time too (:data:`SEND_TIMEOUT_S`, :class:`EventStreamResponse`), so a client that stops
+  send in time too (``send_timeout_s``, :class:`EventStreamResponse`), so a client that stops
   reading never holds more than its socket's buffers.
 * **Bounded in all.** Frames go to all subscribers together at most at ``frame_bytes_per_s``
-  (:data:`FRAME_BYTES_PER_S`): with many subscribers of large frames each gets fewer of them
+  (``HPTVSIM_EVENT_BYTES_PER_S``): with many subscribers of large frames each gets fewer of them
   (:meth:`Hub._pace`), never the loop's whole time. Each event wakes :data:`WAKE_BATCH`
   subscribers per turn of the loop, so requests are answered between the sends of one frame;
   and while the loop still runs late (:data:`SHED_LAG_S`, on a slow or busy machine) frames are
@@ -51,6 +51,8 @@ from fastapi.sse import format_sse_event
 from starlette.responses import Response
 from starlette.types import Receive, Scope, Send
 
+from hptvsim.service.settings import Settings
+
 __all__ = [
     "ALL",
     "BACKLOG",
@@ -70,13 +72,16 @@ log = logging.getLogger("hptvsim.service")
 
 ALL = "*"
 """The key of the all-episodes stream."""
-BACKLOG = 8
+BACKLOG: int = Settings.subscriber_backlog
 """Events a subscriber may have waiting; beyond it, the oldest waiting progress or frame is skipped
-(a live view wants the latest frame, not a queue of stale ones)."""
-LAG_LIMIT = 128
-"""Events a subscriber may skip in a row, taking none, before it is dropped."""
-SEND_TIMEOUT_S = 10.0
-"""Longest wait for one send to a subscriber's socket before it is dropped [s]."""
+(a live view wants the latest frame, not a queue of stale ones). The default of
+``HPTVSIM_SUBSCRIBER_BACKLOG``; the service passes its setting."""
+LAG_LIMIT: int = Settings.subscriber_lag_limit
+"""Events a subscriber may skip in a row, taking none, before it is dropped (the default of
+``HPTVSIM_SUBSCRIBER_LAG_LIMIT``)."""
+SEND_TIMEOUT_S: float = Settings.send_timeout_s
+"""Longest wait for one send to a subscriber's socket before it is dropped [s] (the default of
+``HPTVSIM_SEND_TIMEOUT_S``)."""
 RETRY_AFTER_S = 5
 """``Retry-After`` of an answer over a cap on subscribers [s]."""
 SSE_CHUNK = 256 * 1024
@@ -89,8 +94,9 @@ SHED_LAG_S = 0.1
 fan-out gives way to requests, whatever the machine's speed and the subscribers' number."""
 WAKE_BATCH = 16
 """Subscribers offered an event per turn of the event loop (see :meth:`Hub.publish`)."""
-FRAME_BYTES_PER_S = 50e6
-"""Frames sent to all subscribers together, at most [bytes/s] (see :meth:`Hub._pace`)."""
+FRAME_BYTES_PER_S: float = Settings.event_bytes_per_s
+"""Frames sent to all subscribers together, at most [bytes/s] (see :meth:`Hub._pace`; the default
+of ``HPTVSIM_EVENT_BYTES_PER_S``)."""
 SKIPPABLE = frozenset({"progress", "frame"})
 """Event types that later ones of the same type supersede (a slow subscriber may skip them)."""
 KEEPALIVE = format_sse_event(comment="keep-alive")
@@ -253,12 +259,12 @@ class Subscription:
                 self.skipped += 1
                 self._behind += 1
                 if self._behind >= self.lag_limit:
-                    self.drop(f"took none of the last {self._behind} events")
+                    self.drop(f"took none of the last {self._behind} events (HPTVSIM_SUBSCRIBER_LAG_LIMIT)")
                     return
                 if event.type in SKIPPABLE and len(self._queue) >= self.backlog:
                     return  # nothing older to skip: this one is
             elif len(self._queue) >= self.backlog + self.lag_limit:
-                self.drop(f"took none of {len(self._queue)} status events")
+                self.drop(f"took none of {len(self._queue)} status events (HPTVSIM_SUBSCRIBER_LAG_LIMIT)")
                 return
         self._queue.append(event)
         self._ready.set()
@@ -324,8 +330,8 @@ class Hub:
     def __init__(
         self,
         *,
-        max_total: int = 256,
-        max_per_key: int = 64,
+        max_total: int = Settings.max_subscribers,
+        max_per_key: int = Settings.max_subscribers_per_episode,
         backlog: int = BACKLOG,
         lag_limit: int = LAG_LIMIT,
         frame_bytes_per_s: float = FRAME_BYTES_PER_S,
@@ -586,7 +592,8 @@ class EventStreamResponse(Response):
         try:
             await asyncio.wait({streamer, listener}, return_when=asyncio.FIRST_COMPLETED)
             if streamer.done() and not streamer.cancelled() and streamer.result() is False:
-                self.subscription.drop(f"a send waited more than {self.send_timeout_s:g} s")
+                why = f"a send waited more than {self.send_timeout_s:g} s (HPTVSIM_SEND_TIMEOUT_S)"
+                self.subscription.drop(why)
                 left = self.deadline - loop.time()
                 if left > 0:
                     await asyncio.wait({listener}, timeout=left)

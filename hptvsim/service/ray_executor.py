@@ -2,10 +2,20 @@
 
 ``HPTVSIM_EXECUTOR=ray`` selects it; ``RAY_ADDRESS`` names a cluster (``ray://head:10001`` or
 ``head:6379``), else a local Ray starts. Each episode is a ``@ray.remote`` task running
-:func:`hptvsim.service.engine.run_job` in a scratch folder on whichever node it lands; its files come
-back with the task's result and the API writes them to its own data folder, so nodes need no
-shared disk. Events and cancel requests pass through one small actor (:class:`_Control`): tasks
-push their events in batches and poll for a cancel a few times a second.
+:func:`hptvsim.service.engine.run_job` in a scratch folder on whichever node it lands; its files
+come back as the objects of a streaming generator, :data:`CHUNK_BYTES` each (owned by the API,
+so they outlive the task's process), and the API writes them to its own data folder a chunk at a
+time, so nodes need no shared disk and the API's memory does not grow with an episode's files
+(before, each file came back whole in one object and in the API's memory). Events and cancel
+requests pass through one small actor (:class:`_Control`): tasks push their events in batches and
+poll for a cancel a few times a second.
+
+A task runs under the same hard limits as a local pool worker (:mod:`hptvsim.service.limits`): its
+process's private writable memory is limited to ``HPTVSIM_PROCESS_MEMORY_MB`` and its episode's CPU
+time to ``HPTVSIM_EPISODE_CPU_S``, and an episode past either fails naming the limit. Each Ray
+worker process runs one task and exits (``max_calls=1``), as a pool worker retires after a limit:
+the limits, which a process cannot raise again, never carry over to another episode. A failure
+is told to the client in a short message; the traceback goes to the log.
 """
 
 from __future__ import annotations
@@ -17,11 +27,12 @@ import shutil
 import tempfile
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
 from hptvsim.service.engine import RESULT_FILE, JobSpec, write_json_atomic
+from hptvsim.service.limits import MIMALLOC_ARENA_RESERVE_KIB
 from hptvsim.service.settings import Settings
 
 __all__ = ["RayExecutor"]
@@ -29,6 +40,11 @@ __all__ = ["RayExecutor"]
 log = logging.getLogger("hptvsim.service.ray")
 
 Event = tuple[Any, ...]
+
+CHUNK_BYTES = 8 << 20
+"""Bytes [B] of one object of an episode's file on its way back to the API."""
+STREAM_AHEAD = 4
+"""Objects a task yields ahead of what the API has taken (Ray's generator backpressure)."""
 
 
 class _Control:
@@ -55,12 +71,29 @@ class _Control:
         self.cancelled.discard(job_id)
 
 
-def _task(spec_dict: dict[str, Any], control: Any) -> dict[str, Any]:
-    """The remote task: run the job in a scratch folder, return its result and files."""
+def _task(
+    spec_dict: dict[str, Any], control: Any, memory_mb: int | None = None, cpu_s: float | None = None
+) -> Iterator[Any]:
+    """The remote task: run the job in a scratch folder under the workers' limits; yield the outcome.
+
+    Yields first ``{"result", "files", "failed"}``: its ``result.json`` data (None when it
+    failed before it wrote anything), ``{file name: chunks}`` and, when it failed, the client's
+    message; then each file's bytes, :data:`CHUNK_BYTES` at a time (each a Ray object owned by
+    the caller, read from the file one at a time: neither side holds a whole file).
+    """
     import ray
 
-    from hptvsim.service.engine import JobFailedError, run_job
+    from hptvsim.service.disk import no_space_message
+    from hptvsim.service.engine import JobFailedError, client_message, run_job
+    from hptvsim.service.limits import (
+        CpuTimeExceeded,
+        apply_process_limits,
+        memory_message,
+        start_cpu_budget,
+        stop_cpu_budget,
+    )
 
+    apply_process_limits(memory_mb, None)  # this process runs this one task (max_calls=1)
     scratch = Path(tempfile.mkdtemp(prefix="hptvsim-ray-"))
     spec = JobSpec(**{**spec_dict, "out_dir": str(scratch)})
     pending: list[tuple[Any, ...]] = [("started", spec.id, os.getpid())]
@@ -90,13 +123,35 @@ def _task(spec_dict: dict[str, Any], control: Any) -> dict[str, Any]:
     push(force=True)
     try:
         failed = None
+        result: dict[str, Any] | None = None
         try:
-            result = run_job(spec, emit, should_stop)
+            if cpu_s is not None:
+                start_cpu_budget(cpu_s)
+            try:
+                result = run_job(spec, emit, should_stop)
+            finally:
+                stop_cpu_budget()
         except JobFailedError as exc:  # failed after it started: its files are written
             result, failed = exc.result, exc.message
+        except CpuTimeExceeded as exc:
+            stop_cpu_budget()  # when it came inside the finally above
+            failed = str(exc)
+        except MemoryError:
+            failed = memory_message(memory_mb)
+        except Exception as exc:  # the client gets a short message, the log the traceback
+            log.exception("episode %s failed in its Ray task", spec.id)
+            failed = no_space_message(exc, scratch) or client_message(exc)
         push(force=True)
-        files = {p.name: p.read_bytes() for p in scratch.iterdir() if p.is_file() and p.name != RESULT_FILE}
-        return {"result": result, "files": files, "failed": failed}
+        files: dict[Path, int] = {}
+        if result is not None:
+            for path in scratch.iterdir():
+                if path.is_file() and path.name != RESULT_FILE:
+                    files[path] = -(-path.stat().st_size // CHUNK_BYTES)  # chunks, rounded up
+        yield {"result": result, "files": {p.name: n for p, n in files.items()}, "failed": failed}
+        for path, n in files.items():
+            with path.open("rb") as fh:
+                for _ in range(n):
+                    yield fh.read(CHUNK_BYTES)
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
 
@@ -127,7 +182,8 @@ class RayExecutor:
         if not ray.is_initialized():
             from hptvsim._paths import checkout_dir
 
-            env_vars = {"OMP_NUM_THREADS": "1"}
+            # rerun's allocator reserves 1 GiB arenas otherwise, counted by the memory limit
+            env_vars = {"OMP_NUM_THREADS": "1", "MIMALLOC_ARENA_RESERVE": str(MIMALLOC_ARENA_RESERVE_KIB)}
             top = checkout_dir()
             if top is not None:  # a checkout: workers import hptvsim from it (an install needs nothing)
                 env_vars["PYTHONPATH"] = str(top)
@@ -143,7 +199,9 @@ class RayExecutor:
                 kwargs["include_dashboard"] = False
             ray.init(**kwargs)
         self._control = ray.remote(num_cpus=0)(_Control).remote()
-        self._remote = ray.remote(num_cpus=1, max_retries=0)(_task)
+        # one task per worker process: the hard limits it takes never carry over to another episode
+        task = ray.remote(num_cpus=1, max_retries=0, max_calls=1, num_returns="streaming")(_task)
+        self._remote = task.options(_generator_backpressure_num_objects=STREAM_AHEAD)  # chunks ahead
         self._thread = threading.Thread(target=self._run, name="ray-monitor", daemon=True)
         self._thread.start()
 
@@ -151,7 +209,8 @@ class RayExecutor:
         """Submit a job as a task."""
         if self._closing:
             raise RuntimeError("the Ray executor is shutting down")
-        ref = self._remote.remote(spec.to_dict(), self._control)
+        s = self.settings
+        ref = self._remote.remote(spec.to_dict(), self._control, s.process_memory_mb, s.episode_cpu_s)
         with self._lock:
             self._refs[ref] = spec.id
 
@@ -211,27 +270,41 @@ class RayExecutor:
                 log.exception("handling a Ray event failed")
 
     def _finish(self, ref: Any, job_id: str) -> None:
+        """Take a task's outcome and files (``ref``: its generator, whose first object is ready)."""
         import ray
 
         self._deliver(ray.get(self._control.drain.remote()))
         try:
-            out = ray.get(ref)
+            out = ray.get(next(ref))
+            folder = self.settings.episodes_dir / job_id
+            if out["result"] is not None:
+                folder.mkdir(parents=True, exist_ok=True)
+            for name, n in out["files"].items():
+                with (folder / name).open("wb") as fh:
+                    for _ in range(n):  # one chunk in memory at a time
+                        fh.write(ray.get(next(ref)))
         except Exception as exc:
             cancelled = type(exc).__name__ == "TaskCancelledError"
             if cancelled:
                 self.on_event(("cancelled", job_id, "cancelled before it started"))
-            else:
-                self.on_event(("failed", job_id, f"{type(exc).__name__}: {exc}", ""))
+            else:  # its process died (a hard limit, the kernel's OOM killer) or Ray failed
+                log.warning("the Ray task of episode %s failed: %s", job_id, exc)
+                message = (
+                    f"the Ray worker running this episode died or failed ({type(exc).__name__}); "
+                    f"past its hard limits ({self.settings.process_memory_mb} MiB, "
+                    f"HPTVSIM_PROCESS_MEMORY_MB; {self.settings.episode_cpu_s:g} s of CPU, "
+                    "HPTVSIM_EPISODE_CPU_S) it is killed"
+                )
+                self.on_event(("failed", job_id, message, ""))
             return
         finally:
             self._control.forget.remote(job_id)
             with self._lock:
                 self._refs.pop(ref, None)
                 self._started.discard(job_id)
-        folder = self.settings.episodes_dir / job_id
-        folder.mkdir(parents=True, exist_ok=True)
-        for name, data in out["files"].items():
-            (folder / name).write_bytes(data)
+        if out["result"] is None:  # failed before it wrote anything
+            self.on_event(("failed", job_id, str(out["failed"]), ""))
+            return
         result = dict(out["result"])
         for key in ("trajectory_path", "recording_path"):
             if result.get(key):

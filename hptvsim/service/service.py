@@ -37,13 +37,14 @@ from typing import Any, Protocol
 
 from hptvsim.service.db import ACTIVE, FINAL, DatabaseUnavailableError, EpisodeRow, Store, utcnow
 from hptvsim.service.disk import MIB, DiskUsage, QuotaExceededError
+from hptvsim.service.downloads import DownloadSlots
 from hptvsim.service.engine import JobSpec, read_result, versions, write_json_atomic
 from hptvsim.service.hub import Hub
 from hptvsim.service.prep import PrepPool
 from hptvsim.service.schemas import EpisodeCreate
 from hptvsim.service.settings import Settings
 from hptvsim.service.validation import ApiError, Resolved, resolve_request, screen_inline
-from hptvsim.service.workers import HOST_START_TIMEOUT_S, HostError, HostPool, HostProcess, WorkerPool
+from hptvsim.service.workers import HostError, HostPool, HostProcess, WorkerPool
 
 __all__ = ["Executor", "Service"]
 
@@ -107,7 +108,14 @@ class Service:
     def __init__(self, settings: Settings) -> None:
         self.settings = settings
         self.store = Store(settings.db_url)
-        self.hub = Hub(max_total=settings.max_subscribers, max_per_key=settings.max_subscribers_per_episode)
+        self.hub = Hub(
+            max_total=settings.max_subscribers,
+            max_per_key=settings.max_subscribers_per_episode,
+            backlog=settings.subscriber_backlog,
+            lag_limit=settings.subscriber_lag_limit,
+            frame_bytes_per_s=settings.event_bytes_per_s,
+        )
+        self.downloads = DownloadSlots(settings.max_downloads)
         self.executor: Executor | None = None
         # a host process of its own per interactive episode, settings.hosts spares started ahead
         self.hosts = HostPool(settings.hosts, settings.process_memory_mb, settings.episode_cpu_s)
@@ -321,7 +329,7 @@ class Service:
         host.episodes.add(row.id)
         limit = self.settings.host_call_timeout_s  # [s]
         try:
-            await host.wait_ready(HOST_START_TIMEOUT_S)  # a new process imports first (seconds)
+            await host.wait_ready(self.settings.host_start_timeout_s)  # a new one imports first
             answer = await host.call("open", spec.to_dict(), limit)
         except HostError as exc:
             ended_elsewhere = self.live.get(row.id) is not live  # cancelled, or the service stops

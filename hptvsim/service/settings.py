@@ -58,6 +58,22 @@ variable                       meaning (default)
                                event streams and WebSockets open at once on one episode, or on
                                all episodes' stream (``64``)
 ``HPTVSIM_HOST_CALL_TIMEOUT_S`` longest wait for one interactive call (open, step) (``120``)
+``HPTVSIM_HOST_START_TIMEOUT_S``
+                               longest wait for a new interactive host process to start, before
+                               its first call (``120``)
+``HPTVSIM_MAX_DOWNLOADS``      trajectory downloads (json, jsonl, csv) streamed at once; more are
+                               answered 503 with ``Retry-After`` (``8``; parquet and recordings
+                               are sent from disk and not counted)
+``HPTVSIM_SUBSCRIBER_BACKLOG``
+                               events one subscriber may have waiting; beyond it the oldest
+                               progress or frame is skipped (``8``)
+``HPTVSIM_SUBSCRIBER_LAG_LIMIT``
+                               events one subscriber may skip in a row, taking none, before it
+                               is dropped (``128``)
+``HPTVSIM_SEND_TIMEOUT_S``     longest wait for one send to an event subscriber's socket before
+                               it is dropped (``10``)
+``HPTVSIM_EVENT_BYTES_PER_S``  frames sent to all event subscribers together, at most, in bytes
+                               per second (``50000000``)
 ``HPTVSIM_WEB_DIR``            dashboard files (the checkout's ``web/``)
 =============================  ===========================================================
 """
@@ -74,7 +90,43 @@ from typing import Literal
 
 from hptvsim._paths import shipped_dir
 
-__all__ = ["Settings", "SettingsError"]
+__all__ = ["LIMITS", "Settings", "SettingsError"]
+
+
+LIMITS: tuple[tuple[str, str, type[int] | type[float]], ...] = (
+    ("HPTVSIM_WORKERS", "workers", int),
+    ("HPTVSIM_HOSTS", "hosts", int),
+    ("HPTVSIM_MAX_STEPS", "max_steps", int),
+    ("HPTVSIM_MAX_AGENTS", "max_agents", int),
+    ("HPTVSIM_MAX_BODY_BYTES", "max_body_bytes", int),
+    ("HPTVSIM_MAX_JOBS", "max_jobs", int),
+    ("HPTVSIM_MAX_INTERACTIVE", "max_interactive", int),
+    ("HPTVSIM_MAX_GRID_CELLS", "max_grid_cells", int),
+    ("HPTVSIM_IDLE_TIMEOUT_S", "idle_timeout_s", float),
+    ("HPTVSIM_JOB_TIMEOUT_S", "job_timeout_s", float),
+    ("HPTVSIM_EVENT_HZ", "event_hz", float),
+    ("HPTVSIM_EVENT_STREAM_S", "event_stream_s", float),
+    ("HPTVSIM_PREP_WORKERS", "prep_workers", int),
+    ("HPTVSIM_PREP_TIMEOUT_S", "prep_timeout_s", float),
+    ("HPTVSIM_EPISODE_MEMORY_MB", "episode_memory_mb", int),
+    ("HPTVSIM_EPISODE_DISK_MB", "episode_disk_mb", int),
+    ("HPTVSIM_EPISODE_CPU_S", "episode_cpu_s", float),
+    ("HPTVSIM_PROCESS_MEMORY_MB", "process_memory_mb", int),
+    ("HPTVSIM_DISK_QUOTA_MB", "disk_quota_mb", int),
+    ("HPTVSIM_RETENTION_DAYS", "retention_days", float),
+    ("HPTVSIM_MAX_SUBSCRIBERS", "max_subscribers", int),
+    ("HPTVSIM_MAX_SUBSCRIBERS_PER_EPISODE", "max_subscribers_per_episode", int),
+    ("HPTVSIM_HOST_CALL_TIMEOUT_S", "host_call_timeout_s", float),
+    ("HPTVSIM_HOST_START_TIMEOUT_S", "host_start_timeout_s", float),
+    ("HPTVSIM_MAX_DOWNLOADS", "max_downloads", int),
+    ("HPTVSIM_SUBSCRIBER_BACKLOG", "subscriber_backlog", int),
+    ("HPTVSIM_SUBSCRIBER_LAG_LIMIT", "subscriber_lag_limit", int),
+    ("HPTVSIM_SEND_TIMEOUT_S", "send_timeout_s", float),
+    ("HPTVSIM_EVENT_BYTES_PER_S", "event_bytes_per_s", float),
+)
+"""Every setting that bounds a resource: its variable, its field and its type. Each is a finite
+number > 0 (checked however the settings are made: ``inf`` would switch a limit off, and ``nan``
+compares false with every bound); an integer one from the environment must be written as one."""
 
 
 class SettingsError(ValueError):
@@ -133,6 +185,13 @@ class Settings:
         max_subscribers_per_episode: Event streams and WebSockets open at once per episode
             (and on the all-episodes stream).
         host_call_timeout_s: Longest wait for one interactive call [s].
+        host_start_timeout_s: Longest wait for a new interactive host process to start [s].
+        max_downloads: Trajectory downloads (json, jsonl, csv) streamed at once.
+        subscriber_backlog: Events one subscriber may have waiting (the oldest skippable one
+            is skipped beyond it).
+        subscriber_lag_limit: Events one subscriber may skip in a row before it is dropped.
+        send_timeout_s: Longest wait for one send to an event subscriber [s].
+        event_bytes_per_s: Frames sent to all event subscribers together, at most [bytes/s].
     """
 
     host: str = "127.0.0.1"
@@ -172,37 +231,22 @@ class Settings:
     max_subscribers: int = 256
     max_subscribers_per_episode: int = 64
     host_call_timeout_s: float = 120.0
+    host_start_timeout_s: float = 120.0
+    max_downloads: int = 8
+    subscriber_backlog: int = 8
+    subscriber_lag_limit: int = 128
+    send_timeout_s: float = 10.0
+    event_bytes_per_s: float = 50e6
 
     def __post_init__(self) -> None:
-        positive = (
-            "workers",
-            "hosts",
-            "max_steps",
-            "max_agents",
-            "max_body_bytes",
-            "max_jobs",
-            "max_interactive",
-            "max_grid_cells",
-            "idle_timeout_s",
-            "job_timeout_s",
-            "event_hz",
-            "event_stream_s",
-            "prep_workers",
-            "prep_timeout_s",
-            "episode_memory_mb",
-            "episode_disk_mb",
-            "episode_cpu_s",
-            "process_memory_mb",
-            "disk_quota_mb",
-            "retention_days",
-            "max_subscribers",
-            "max_subscribers_per_episode",
-            "host_call_timeout_s",
-        )
-        for name in positive:
+        for _, name, kind in LIMITS:
             value = getattr(self, name)
-            if not (value > 0 and math.isfinite(value)):
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                raise SettingsError(f"{name} = {value!r} is invalid; valid: a number")
+            if not (math.isfinite(value) and value > 0):  # inf would switch a limit off
                 raise SettingsError(f"{name} = {value!r} is invalid; valid: a finite number > 0")
+            if kind is int and value != int(value):
+                raise SettingsError(f"{name} = {value!r} is invalid; valid: an integer > 0")
         for name in ("port", "viser_port"):
             if not 0 <= getattr(self, name) <= 65535:
                 raise SettingsError(f"{name} = {getattr(self, name)!r} is invalid; valid: 0..65535")
@@ -296,6 +340,11 @@ class Settings:
             if e.get(var):
                 kw[name] = e[var]
 
+        for var, name, kind in LIMITS:
+            (integer if kind is int else number)(var, name)
+            if name in kw and not kw[name] > 0:  # type: ignore[operator]  # a number, read above
+                valid = "an integer > 0" if kind is int else "a finite number > 0"
+                raise SettingsError(f"{var} = {e[var]!r} is invalid; valid: {valid}")
         text("HPTVSIM_HOST", "host")
         integer("HPTVSIM_PORT", "port")
         if e.get("HPTVSIM_DATA_DIR"):
@@ -310,20 +359,6 @@ class Settings:
                 raise SettingsError(f"HPTVSIM_EXECUTOR = {value!r} is invalid; valid: local, ray")
             kw["executor"] = value
         text("RAY_ADDRESS", "ray_address")
-        integer("HPTVSIM_WORKERS", "workers")
-        integer("HPTVSIM_HOSTS", "hosts")
-        integer("HPTVSIM_MAX_STEPS", "max_steps")
-        integer("HPTVSIM_MAX_AGENTS", "max_agents")
-        integer("HPTVSIM_MAX_BODY_BYTES", "max_body_bytes")
-        integer("HPTVSIM_MAX_JOBS", "max_jobs")
-        integer("HPTVSIM_MAX_INTERACTIVE", "max_interactive")
-        integer("HPTVSIM_MAX_GRID_CELLS", "max_grid_cells")
-        number("HPTVSIM_IDLE_TIMEOUT_S", "idle_timeout_s")
-        number("HPTVSIM_JOB_TIMEOUT_S", "job_timeout_s")
-        number("HPTVSIM_EVENT_HZ", "event_hz")
-        number("HPTVSIM_EVENT_STREAM_S", "event_stream_s")
-        integer("HPTVSIM_PREP_WORKERS", "prep_workers")
-        number("HPTVSIM_PREP_TIMEOUT_S", "prep_timeout_s")
 
         def flag(var: str, name: str) -> None:
             if var in e:
@@ -340,15 +375,6 @@ class Settings:
             kw["web_dir"] = Path(e["HPTVSIM_WEB_DIR"])
         if e.get("HPTVSIM_ALLOWED_HOSTS"):
             kw["allowed_hosts"] = tuple(h.strip() for h in e["HPTVSIM_ALLOWED_HOSTS"].split(",") if h.strip())
-        integer("HPTVSIM_EPISODE_MEMORY_MB", "episode_memory_mb")
-        integer("HPTVSIM_EPISODE_DISK_MB", "episode_disk_mb")
-        number("HPTVSIM_EPISODE_CPU_S", "episode_cpu_s")
-        integer("HPTVSIM_PROCESS_MEMORY_MB", "process_memory_mb")
-        integer("HPTVSIM_DISK_QUOTA_MB", "disk_quota_mb")
-        number("HPTVSIM_RETENTION_DAYS", "retention_days")
-        integer("HPTVSIM_MAX_SUBSCRIBERS", "max_subscribers")
-        integer("HPTVSIM_MAX_SUBSCRIBERS_PER_EPISODE", "max_subscribers_per_episode")
-        number("HPTVSIM_HOST_CALL_TIMEOUT_S", "host_call_timeout_s")
         try:
             return cls(**kw)  # type: ignore[arg-type]  # values were converted above
         except SettingsError as exc:

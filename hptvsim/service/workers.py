@@ -38,6 +38,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from hptvsim.service.engine import JobSpec
+from hptvsim.service.settings import Settings
 
 __all__ = ["HostError", "HostPool", "HostProcess", "WorkerPool"]
 
@@ -105,6 +106,7 @@ def _worker_main(
         cpu_s: CPU time each episode may use [s] (None: no limit).
     """
     _child_setup()
+    from hptvsim.service.disk import no_space_message
     from hptvsim.service.engine import JobFailedError, client_message, run_job
     from hptvsim.service.limits import (
         CpuTimeExceeded,
@@ -168,8 +170,9 @@ def _worker_main(
             final, retire = ("failed", spec.id, str(exc), trace()), True
         except MemoryError:
             final, retire = ("failed", spec.id, memory_message(memory_mb), trace()), True
-        except Exception as exc:
-            final = ("failed", spec.id, client_message(exc), traceback.format_exc())
+        except Exception as exc:  # a full disk is named as such (the recorder's errors do not say)
+            message = no_space_message(exc, spec.out_dir) or client_message(exc)
+            final = ("failed", spec.id, message, traceback.format_exc())
         else:
             final = ("done", spec.id, result)
         # its hard CPU limit, which cannot be raised again, would cut the next budget short
@@ -381,8 +384,9 @@ class WorkerPool:
 
 # --- interactive hosts --------------------------------------------------------------------------------
 
-HOST_START_TIMEOUT_S = 120.0
-"""Longest wait for a new host process to import the simulation and report ready [s]."""
+HOST_START_TIMEOUT_S: float = Settings.host_start_timeout_s
+"""Longest wait for a new host process to import the simulation and report ready [s] (the default
+of ``HPTVSIM_HOST_START_TIMEOUT_S``; the service passes its setting)."""
 HOST_REAP_TIMEOUT_S = 5.0
 """Longest wait for a killed host process to be gone [s] (it takes milliseconds)."""
 
@@ -448,6 +452,7 @@ def _host_main(
     _child_setup()
     _host_preload()
     from hptvsim.episodes.stepper import SimulationError
+    from hptvsim.service.disk import no_space_message
     from hptvsim.service.engine import InteractiveEpisode, client_message
     from hptvsim.service.limits import CpuTimeExceeded, apply_process_limits, memory_message, start_cpu_budget
 
@@ -516,7 +521,11 @@ def _host_main(
             conn.send((req_id, "value", (client_message(exc), "", None)))
         except Exception as exc:
             trace = traceback.format_exc()
-            message = client_message(exc)
+            folder = episodes[str(episode_id)].spec.out_dir if episode_id in episodes else None
+            if folder is None and op == "open" and isinstance(args, dict):
+                folder = args.get("out_dir")
+            full = no_space_message(exc, folder) if folder else None  # a full disk is named as such
+            message = full or client_message(exc)
             failed = op == "step" and episode_id in episodes
             if failed or isinstance(exc, SimulationError):
                 result = None

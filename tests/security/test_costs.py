@@ -20,6 +20,7 @@ and real processes):
 
 from __future__ import annotations
 
+import asyncio
 import os
 import signal
 import subprocess
@@ -45,7 +46,11 @@ def _tables(api: httpx.Client, name: str = "goto_tiny") -> dict[str, Any]:
 def _chase(api: httpx.Client, pursuers: int, **sonar: Any) -> tuple[dict[str, Any], dict[str, str]]:
     """``goto_tiny``'s tables made a pursuit of ``pursuers`` pursuers and one evader on a 400 m x
     300 m site, and scripted policies for all (nothing else to load)."""
-    t = _tables(api)
+    return _chase_of(_tables(api), pursuers, **sonar)
+
+
+def _chase_of(t: dict[str, Any], pursuers: int, **sonar: Any) -> tuple[dict[str, Any], dict[str, str]]:
+    """:func:`_chase` of ``goto_tiny``'s tables ``t``."""
     t["site"] = {**t["site"], "size": [400.0, 300.0]}
     t["task"] = {k: v for k, v in t["task"].items() if k != "goal"} | {"kind": "pursuit"}
     t["vehicles"] = [
@@ -382,3 +387,61 @@ def test_a_loop_stuck_in_c_code_is_killed_at_the_hard_cpu_limit() -> None:
     )
     proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, timeout=120, capture_output=True)
     assert proc.returncode == -signal.SIGKILL, proc
+
+
+# --- hard limits: the interactive hosts ---------------------------------------------------------
+
+
+def test_an_interactive_host_fails_its_episode_at_its_memory_and_cpu_limits(tmp_path: Path) -> None:
+    """An interactive host process takes the workers' hard limits (a real host process, no
+    service around it): with 650 MiB of memory (it holds ~450 MiB idle, torch preloaded) a
+    16-vehicle, 1024-beam episode stepped on and on answers ``"memory"`` naming
+    ``HPTVSIM_PROCESS_MEMORY_MB``; with a CPU budget of 4 s a signal-level episode answers
+    ``"cpu"`` naming ``HPTVSIM_EPISODE_CPU_S``. Either may come at the opening or at a step;
+    what matters is that the limit ends it with the client's message, not the machine."""
+    from hptvsim.catalog import shipped_scenario
+    from hptvsim.service.engine import JobSpec
+    from hptvsim.service.workers import HostError, HostProcess
+
+    heavy, _ = _chase_of(shipped_scenario("goto_tiny").to_dict(), 15, beams=1024)
+    cpu_heavy, _ = _chase_of(
+        shipped_scenario("goto_tiny").to_dict(), 3, beams=64, fidelity="signal", max_range=200.0
+    )
+    # pursuers that keep still never capture: the episode goes on until a limit ends it; the
+    # client steps the evader
+    policies = {f"pursuer_{i}": "scripted:stationary" for i in range(15)}
+    cpu_policies = {f"pursuer_{i}": "scripted:stationary" for i in range(3)}
+    cases = (  # (memory_mb, cpu_s), tables, policies, what the answer names
+        ((650, None), heavy, policies, ("memory", "650 MiB", "HPTVSIM_PROCESS_MEMORY_MB")),
+        ((None, 4.0), cpu_heavy, cpu_policies, ("cpu", "4 s", "HPTVSIM_EPISODE_CPU_S")),
+    )
+
+    async def drive(limits: tuple[int | None, float | None], tables: Any, drivers: Any) -> HostError:
+        host = HostProcess(0, args=limits)
+        host.start(asyncio.get_running_loop())
+        try:
+            await host.wait_ready(300.0)
+            spec = JobSpec(
+                id="limited",
+                mode="interactive",
+                scenario=tables,
+                policies=drivers,
+                control=("evader_0",),
+                max_steps=20000,
+                record=False,
+                out_dir=str(tmp_path / f"limited-{limits}"),
+            )
+            try:
+                await host.call("open", spec.to_dict(), 600.0)
+                for _ in range(20000):
+                    await host.call("step", {"id": "limited", "actions": {"evader_0": [0.0, 0.0]}}, 600.0)
+            except HostError as exc:
+                return exc
+            raise AssertionError(f"no limit was reached with {limits}")
+        finally:
+            await host.terminate()
+
+    for limits, tables, drivers, (kind, amount, setting) in cases:
+        err = asyncio.run(drive(limits, tables, drivers))
+        assert err.kind == kind, (err.kind, err.client)
+        assert amount in err.client and setting in err.client and "Traceback" not in err.client, err.client

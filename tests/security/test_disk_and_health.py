@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import json
 import os
 import shutil
 import subprocess
@@ -35,7 +36,7 @@ import httpx
 import pytest
 import sqlalchemy as sa
 from pg_cluster import REQUIRE_VARIABLE, PgCluster, PgUnavailable
-from service_helpers import Server, start_server, wait_final
+from service_helpers import Server, open_files_under, start_server, wait_final
 
 TINY = {"scenario": "goto_tiny", "max_steps": 40}
 # stationary pursuers never capture: this run goes on until it is cancelled
@@ -239,31 +240,46 @@ def _fill(folder: Path) -> Path:
 def test_an_episode_that_fills_the_disk_fails_cleanly_and_a_full_disk_refuses_new_ones(
     small_disk: Path, database_url: str
 ) -> None:
+    """Episodes that meet a full disk fail naming it, with and without a recording: the running
+    one whose recorder's writer stops on the full disk (a ``RuntimeError`` that names nothing),
+    a queued one whose recording cannot start, and a queued one that writes no recording; each
+    ends ``failed`` with its files closed in every process of the service (the recorder flushes
+    and disconnects within its own time limits, nothing hangs), and what was stored before is
+    intact."""
     env = {"DATABASE_URL": database_url, "HPTVSIM_WORKERS": "1", **LONG_ENV}
     with _server(small_disk, env) as srv, _api(srv) as api:
         kept = _run(api, {**TINY, "record": False})
         assert kept["status"] == "finished"
         kept_csv = api.get(f"/episodes/{kept['id']}/trajectory", params={"format": "csv"}).text
-        # the one worker runs a long episode; the next one is admitted and waits in the queue
-        blocker = api.post("/episodes", json=LONG).json()["id"]
+        # the one worker runs a long recorded episode; the next ones are admitted and wait
+        r = api.post("/episodes", json={**LONG, "record": True, "max_steps": 6000})  # ~21 MiB
+        assert r.status_code == 201, r.text
+        blocker = r.json()["id"]
         _until("the long episode to run", lambda: _running(api, blocker))
-        victim = api.post("/episodes", json={**TINY, "record": False, "seed": 5})
-        assert victim.status_code == 201, victim.text
-        assert victim.json()["status"] == "queued"
+        victims = []
+        for seed, record in ((5, True), (6, False)):
+            victim = api.post("/episodes", json={**TINY, "record": record, "seed": seed})
+            assert victim.status_code == 201, victim.text
+            assert victim.json()["status"] == "queued"
+            victims.append(victim.json()["id"])
         filler = _fill(small_disk / "episodes")
-        # both now write their files onto a full disk
-        api.post(f"/episodes/{blocker}/cancel").raise_for_status()
-        ended = {i: wait_final(api, i) for i in (blocker, victim.json()["id"])}
-        for ep in ended.values():
+        # all now write their files onto a full disk: the running one may fail at its next
+        # flush before the cancel arrives (409), or stop and fail writing its files
+        assert api.post(f"/episodes/{blocker}/cancel").status_code in (200, 409)
+        ended = {i: wait_final(api, i) for i in (blocker, *victims)}
+        for episode_id, ep in ended.items():
             assert ep["status"] == "failed", ep
             _short(ep["error"], srv)
             assert "No space left on device" in ep["error"], ep["error"]
+            held = open_files_under(srv, small_disk / "episodes" / episode_id)
+            assert not held, f"{episode_id} is failed but its files are open: {held}"
+        assert not ended[victims[0]]["has_recording"] and not ended[victims[1]]["has_recording"]
         # the database and the other episode are intact
         again = api.get(f"/episodes/{kept['id']}").json()
         assert again["status"] == "finished" and again["steps"] == kept["steps"]
         assert api.get(f"/episodes/{kept['id']}/trajectory", params={"format": "csv"}).text == kept_csv
         listed = api.get("/episodes").json()
-        assert listed["total"] == 3
+        assert listed["total"] == 4
         # the full disk: /healthz says so, and a new episode is refused with a clear message
         health = _until("/healthz to see the full disk", lambda: (h := _health(srv)).status_code == 503 and h)
         body = health.json()
@@ -273,10 +289,12 @@ def test_an_episode_that_fills_the_disk_fails_cleanly_and_a_full_disk_refuses_ne
         assert refused.status_code == 507, refused.text
         _short(refused.json()["detail"], srv)
         assert refused.json()["detail"].startswith("disk: the file system of the episodes' folders has")
-        # room again: healthy, and episodes run
+        # room again: healthy, and episodes run, recorded too
         filler.unlink()
         _until("/healthz to be ok again", lambda: _health(srv).status_code == 200)
-        assert _run(api, {**TINY, "record": False, "seed": 6})["status"] == "finished"
+        done = _run(api, {**TINY, "seed": 7})
+        assert done["status"] == "finished" and done["has_recording"]
+        assert api.get(f"/episodes/{done['id']}/recording").status_code == 200
 
 
 # --- 10. health that tells the truth --------------------------------------------------------------
@@ -365,13 +383,18 @@ def test_an_episode_ending_while_the_database_is_read_only_is_stored_later_or_at
             _immutable(sorted(data.glob("hptvsim.db*")), False)
 
 
-def test_a_stopped_postgresql_turns_health_degraded_and_requests_503(tmp_path: Path) -> None:
+def _pg_cluster() -> PgCluster:
+    """A throwaway PostgreSQL server of its own (skipped, or failed under ``REQUIRE_VARIABLE``)."""
     try:
-        cluster = PgCluster.start()
+        return PgCluster.start()
     except PgUnavailable as exc:
         if os.environ.get(REQUIRE_VARIABLE) == "1":
             pytest.fail(f"{REQUIRE_VARIABLE}=1, and {exc}", pytrace=False)
         pytest.skip(str(exc))
+
+
+def test_a_stopped_postgresql_turns_health_degraded_and_requests_503(tmp_path: Path) -> None:
+    cluster = _pg_cluster()
     try:
         url = cluster.create_database()
         with _server(tmp_path / "data", {"DATABASE_URL": url}) as srv, _api(srv) as api:
@@ -391,5 +414,65 @@ def test_a_stopped_postgresql_turns_health_degraded_and_requests_503(tmp_path: P
             assert listed.status_code == 503, listed.text
             assert "database" in listed.json()["detail"]
             assert api.get(f"/episodes/{done['id']}").status_code == 503
+    finally:
+        cluster.stop()
+
+
+@pytest.mark.slow
+def test_an_episode_ending_while_postgresql_is_down_is_stored_later_or_at_restart(tmp_path: Path) -> None:
+    """PostgreSQL's twin of the read-only SQLite test: the server goes away (stopped at once, as
+    a crash would) while an episode runs; the episode ends (its wall-clock limit), its end is
+    kept in its folder and named by ``/healthz``, new episodes get 503; once the server is back
+    the end is stored, or, when the service was killed meanwhile, read from the folder at the
+    next start: never left ``running`` or marked ``interrupted``."""
+    cluster = _pg_cluster()
+    data = tmp_path / "data"
+    # the run ends by its wall-clock limit, whatever the machine's speed
+    env = {"DATABASE_URL": cluster.create_database(), **LONG_ENV, "HPTVSIM_JOB_TIMEOUT_S": "60"}
+    kept: dict[str, Any] = {}
+    ep = ""
+    try:
+        for restart in (False, True):
+            with _server(data, env) as srv, _api(srv) as api:
+                ep = api.post("/episodes", json=LONG).json()["id"]
+                _until("the long episode to run", functools.partial(_running, api, ep))
+                cluster.pause()
+                body = _until(
+                    "/healthz to name the unstored end",
+                    lambda: (
+                        (h := _health(srv)).status_code == 503
+                        and any("not stored yet" in p for p in h.json()["problems"])
+                        and h.json()
+                    ),
+                    timeout=120.0,
+                )
+                assert any(p.startswith("database: a write failed") for p in body["problems"]), body
+                for p in body["problems"]:
+                    _short(p, srv)
+                outcome = data / "episodes" / ep / "outcome.json"
+                kept = json.loads(outcome.read_text())
+                assert kept["status"] in ("finished", "failed", "cancelled"), kept
+                created = api.post("/episodes", json=TINY)
+                assert created.status_code == 503, created.text
+                _short(created.json()["detail"], srv)
+                if not restart:  # the server is back: the kept end is stored, and all is well
+                    cluster.resume()
+                    _until(
+                        "the end to be stored",
+                        functools.partial(_has_status, api, ep, kept["status"]),
+                        timeout=120.0,
+                    )
+                    _until("/healthz to be ok again", lambda: _health(srv).status_code == 200)
+                    assert not outcome.exists()
+                    assert _run(api, {**TINY, "record": False})["status"] == "finished"
+                else:
+                    srv.kill()  # a crash while the database is away
+                    cluster.resume()
+        # the restart reads the kept end from the episode's folder
+        with _server(data, env) as srv, _api(srv) as api:
+            again = api.get(f"/episodes/{ep}").json()
+            assert again["status"] == kept["status"] and again["steps"] > 0, again
+            assert again["error"] == kept["error"], again
+            assert _health(srv).status_code == 200
     finally:
         cluster.stop()

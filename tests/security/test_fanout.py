@@ -286,9 +286,14 @@ def _events(raw: bytes) -> list[tuple[str, dict[str, Any]]]:
 def test_a_subscriber_that_does_not_read_is_dropped_while_a_reader_gets_the_final_status(
     tmp_path: Path,
 ) -> None:
-    srv = start_server(
-        tmp_path / "stall", {"HPTVSIM_WORKERS": "1", "HPTVSIM_MAX_STEPS": "400"}, log_level="info"
-    )
+    # the service's own settings, not the defaults (10 s, 128 events): the drop names the one used
+    env = {
+        "HPTVSIM_WORKERS": "1",
+        "HPTVSIM_MAX_STEPS": "400",
+        "HPTVSIM_SEND_TIMEOUT_S": "3",
+        "HPTVSIM_SUBSCRIBER_LAG_LIMIT": "40",
+    }
+    srv = start_server(tmp_path / "stall", env, log_level="info")
     try:
         with httpx.Client(base_url=f"{srv.url}/api/v1", timeout=120.0) as api:
             # 16 agents x 1024 beams: a frame is about 0.25 MB, so a socket nobody reads fills up in
@@ -318,6 +323,11 @@ def test_a_subscriber_that_does_not_read_is_dropped_while_a_reader_gets_the_fina
             while f"event subscriber of {ep['id']} dropped" not in srv.output():
                 assert time.monotonic() < deadline, "the stalled subscriber was never dropped"
                 time.sleep(0.5)
+            why = srv.output().split(f"event subscriber of {ep['id']} dropped: ", 1)[1].splitlines()[0]
+            assert why in (
+                "a send waited more than 3 s (HPTVSIM_SEND_TIMEOUT_S)",
+                "took none of the last 40 events (HPTVSIM_SUBSCRIBER_LAG_LIMIT)",
+            ), why
             # what the stalled socket was given, to its end
             stalled.settimeout(5.0)
             raw = b""

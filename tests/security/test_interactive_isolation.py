@@ -25,7 +25,7 @@ from typing import Any
 
 import httpx
 import pytest
-from service_helpers import Server, start_server
+from service_helpers import Server, open_files_under, start_server
 
 from hptvsim.service.bench_interactive import heavy_request
 
@@ -49,52 +49,12 @@ def _heavy(api: httpx.Client) -> dict[str, Any]:
     return {**heavy_request(api.get("/scenarios/source").json()), "label": "heavy"}
 
 
-def _family(pid: int) -> set[int]:
-    """``pid`` and its descendants (the service's process tree)."""
-    parents: dict[int, int] = {}
-    for entry in os.listdir("/proc"):
-        if entry.isdigit():
-            try:
-                stat = Path(f"/proc/{entry}/stat").read_text()
-            except OSError:
-                continue
-            parents[int(entry)] = int(stat.rsplit(")", 1)[1].split()[1])
-    family = {pid}
-    grew = True
-    while grew:
-        grew = False
-        for child, parent in parents.items():
-            if parent in family and child not in family:
-                family.add(child)
-                grew = True
-    return family
-
-
-def _open_files_under(srv: Server, folder: Path) -> list[str]:
-    """``pid: path`` of every file under ``folder`` that a process of the service's tree holds open."""
-    root = str(folder.resolve())
-    held = []
-    for pid in _family(srv.process.pid):
-        try:
-            fds = os.listdir(f"/proc/{pid}/fd")
-        except OSError:  # it ended meanwhile
-            continue
-        for fd in fds:
-            try:
-                target = os.readlink(f"/proc/{pid}/fd/{fd}")
-            except OSError:
-                continue
-            if target == root or target.startswith(root + os.sep):
-                held.append(f"{pid}: {target}")
-    return held
-
-
 def _ended_episodes_hold_no_files(srv: Server, api: httpx.Client) -> list[str]:
     """Checks every episode the database shows as ended; returns their ids."""
     items = api.get("/episodes", params={"limit": 500}).json()["items"]
     ended = [e["id"] for e in items if e["status"] in FINAL]
     for episode_id in ended:
-        held = _open_files_under(srv, srv.data_dir / "episodes" / episode_id)
+        held = open_files_under(srv, srv.data_dir / "episodes" / episode_id)
         assert not held, f"episode {episode_id} is ended but its files are open: {held}"
     return ended
 
@@ -174,7 +134,7 @@ def test_a_heavy_creation_in_flight_does_not_delay_light_steps(tmp_path: Path, a
         assert not creating.is_alive()
         assert heavy_answer["r"].status_code == 409, heavy_answer["r"].text
         assert "cancelled while it was being opened" in heavy_answer["r"].json()["detail"]
-        assert not _open_files_under(srv, srv.data_dir / "episodes" / heavy["id"])
+        assert not open_files_under(srv, srv.data_dir / "episodes" / heavy["id"])
 
         _step(api, light_id)  # the light episode went on undisturbed
         assert api.post(f"/episodes/{light_id}/cancel").json()["status"] == "cancelled"
@@ -211,7 +171,7 @@ def test_a_creation_that_overruns_the_call_limit_answers_503_and_is_closed_in_it
         heavy = [e for e in items if e["label"] == "heavy"]
         assert len(heavy) == 1 and heavy[0]["status"] == "failed", heavy
         assert "HPTVSIM_HOST_CALL_TIMEOUT_S" in heavy[0]["error"], heavy
-        assert not _open_files_under(srv, srv.data_dir / "episodes" / heavy[0]["id"])
+        assert not open_files_under(srv, srv.data_dir / "episodes" / heavy[0]["id"])
 
         assert _step(api, light_id)["step"] == 2  # killing the heavy host touched no other episode
         health = httpx.get(f"{srv.url}/healthz").json()
@@ -223,7 +183,7 @@ def test_a_creation_that_overruns_the_call_limit_answers_503_and_is_closed_in_it
         assert other.status_code == 201, other.text
         other_id = other.json()["id"]
         _step(api, other_id)
-        holders = _open_files_under(srv, srv.data_dir / "episodes" / other_id)
+        holders = open_files_under(srv, srv.data_dir / "episodes" / other_id)
         pids = {int(h.split(":", 1)[0]) for h in holders}
         assert len(pids) == 1, holders  # its own host holds its recording
         os.kill(pids.pop(), signal.SIGKILL)

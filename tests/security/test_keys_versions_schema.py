@@ -12,6 +12,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 import platform
 import shutil
@@ -24,7 +25,8 @@ import jsonschema  # type: ignore[import-untyped]  # no stubs installed
 import pytest
 from service_helpers import Server, start_server, wait_final
 
-from hptvsim.service.settings import Settings, SettingsError
+from hptvsim.service import settings as settings_module
+from hptvsim.service.settings import LIMITS, Settings, SettingsError
 
 KEY = "k3y-of-the-schema-tests"
 
@@ -45,20 +47,35 @@ def api(keyed: Server) -> Iterator[httpx.Client]:
 # --- 12: settings --------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize(
-    "var", ["HPTVSIM_JOB_TIMEOUT_S", "HPTVSIM_EVENT_HZ", "HPTVSIM_IDLE_TIMEOUT_S", "HPTVSIM_RETENTION_DAYS"]
-)
+@pytest.mark.parametrize("var", [var for var, _, kind in LIMITS if kind is float])
 @pytest.mark.parametrize("value", ["inf", "-inf", "nan", "Infinity"])
 def test_settings_refuse_non_finite_numbers(var: str, value: str) -> None:
     with pytest.raises(SettingsError, match=f"{var}.*finite"):
         Settings.from_env({var: value})
 
 
-def test_settings_refuse_non_finite_limits_given_directly() -> None:
-    with pytest.raises(SettingsError, match=r"job_timeout_s.*finite"):
-        Settings(job_timeout_s=float("inf"))
-    with pytest.raises(SettingsError, match=r"episode_cpu_s.*finite"):
-        Settings(episode_cpu_s=float("nan"))
+def test_every_limit_is_a_documented_finite_setting() -> None:
+    """Every setting that bounds a resource (:data:`~hptvsim.service.settings.LIMITS`) is read
+    from its variable, documented in the settings' table, finite by default, and refuses a
+    non-finite or non-positive value however it is given (an integer one also ``inf`` and a
+    fraction from the environment)."""
+    doc = settings_module.__doc__ or ""
+    defaults = Settings()
+    for var, name, kind in LIMITS:
+        assert f"``{var}``" in doc, f"{var} is not in the settings' table"
+        default = getattr(defaults, name)
+        assert isinstance(default, kind) and math.isfinite(default) and default > 0, (name, default)
+        value = "7" if kind is int else "7.5"
+        assert getattr(Settings.from_env({var: value}), name) == kind(value), var
+        for bad in ("inf", "nan", "0", "-1"):
+            with pytest.raises(SettingsError, match=var):
+                Settings.from_env({var: bad})
+        for direct in (math.inf, math.nan, 0, -1):
+            with pytest.raises(SettingsError, match=name):
+                Settings(**{name: direct})  # type: ignore[arg-type]  # every limit is a number
+        if kind is int:
+            with pytest.raises(SettingsError, match=var):
+                Settings.from_env({var: "2.5"})
 
 
 def test_allowed_hosts_follow_the_bind_address() -> None:
@@ -138,6 +155,21 @@ CASES: list[tuple[str, dict[str, Any], bool]] = [
     ("the default scenario's agents", {"policies": {"evader_0": "potential_field"}}, True),
     ("the default scenario lacks the agent", {"policies": {"evader_1": "potential_field"}}, False),
     ("a key outside the agent pattern", {"scenario": "source", "policies": {"boss": "pure_pursuit"}}, False),
+    (
+        "the one agent of a scenario both controlled and given a policy",
+        {
+            "scenario": "goto_tiny",
+            "mode": "interactive",
+            "control": ["evader_0"],
+            "policies": {"evader_0": "random"},
+        },
+        False,
+    ),
+    (
+        "the one agent controlled, no policy",
+        {"scenario": "goto_tiny", "mode": "interactive", "control": ["evader_0"], "policies": {}},
+        True,
+    ),
 ]
 
 
@@ -164,8 +196,9 @@ def test_the_schema_states_the_rules_between_fields(keyed: Server, api: httpx.Cl
             assert r.json()["errors"][0]["field"], name
     for episode_id in opened:
         api.post(f"/episodes/{episode_id}/cancel")
-    # the one rule left to the server (see shipped_scenario_rules): an agent both controlled and
-    # given a policy; the schema allows it, the server names the field
+    # the one rule left to the server (see shipped_scenario_rules and schemathesis.toml): in a
+    # scenario of several agents, one both controlled and given a policy; the schema allows it,
+    # the server names the field
     both = {
         "scenario": "source",
         "mode": "interactive",

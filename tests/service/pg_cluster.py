@@ -6,8 +6,10 @@ Debian's ``postgresql`` package (``/usr/lib/postgresql/<version>/bin``, or ``ini
 as root, every command runs as the ``postgres`` user (``runuser -u postgres --``), who owns the
 folder. It listens on 127.0.0.1 on a free port, puts its unix socket in its own folder, and lets
 in one superuser with a random password. :meth:`PgCluster.stop` stops it (``pg_ctl stop -m
-immediate``) and deletes the folder. Each pytest-xdist worker may start one: folders come from
-``mkdtemp`` and ports from the kernel, so they never collide.
+immediate``) and deletes the folder; :meth:`PgCluster.pause` and :meth:`PgCluster.resume` stop
+and start it again with its data (a database server that goes away for a while). Each
+pytest-xdist worker may start one: folders come from ``mkdtemp`` and ports from the kernel, so
+they never collide.
 
 The server is tuned for throwaway data (no fsync); it is not a place to keep anything.
 """
@@ -232,6 +234,17 @@ class PgCluster:
         ) as conn:
             conn.execute(f'CREATE DATABASE "{name}"')
         return self.url(name)
+
+    def pause(self) -> None:
+        """Stop the server at once (``-m immediate``, as a crash would), keeping its data."""
+        self._run(
+            [str(self.bindir / "pg_ctl"), "stop", "--pgdata", str(self.root / "data"), "-m", "immediate"],
+            timeout=60,
+        )
+
+    def resume(self) -> None:
+        """Start the server again after :meth:`pause`, on the same port with the same data."""
+        self._run([str(self.bindir / "pg_ctl"), *self._start_args()], timeout=60)
 
     def stop(self) -> None:
         """Stop the server at once (``-m immediate``) and delete its folder; safe to call twice."""

@@ -96,6 +96,41 @@ def start_server(
     raise RuntimeError(f"the service did not answer in {timeout} s:\n{log.read_text()}")
 
 
+def process_tree(pid: int) -> set[int]:
+    """``pid`` and its descendants (a service's API process, workers, hosts and helpers)."""
+    parents: dict[int, int] = {}
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                stat = Path(f"/proc/{entry}/stat").read_text()
+            except OSError:  # it ended meanwhile
+                continue
+            parents[int(entry)] = int(stat.rsplit(")", 1)[1].split()[1])
+    tree = {pid}
+    while grown := {p for p, parent in parents.items() if parent in tree} - tree:
+        tree |= grown
+    return tree
+
+
+def open_files_under(srv: Server, folder: Path) -> list[str]:
+    """``pid: path`` of every file under ``folder`` that a process of the service's tree holds open."""
+    root = str(folder.resolve())
+    held = []
+    for pid in process_tree(srv.process.pid):
+        try:
+            fds = os.listdir(f"/proc/{pid}/fd")
+        except OSError:  # it ended meanwhile
+            continue
+        for fd in fds:
+            try:
+                target = os.readlink(f"/proc/{pid}/fd/{fd}")
+            except OSError:
+                continue
+            if target == root or target.startswith(root + os.sep):
+                held.append(f"{pid}: {target}")
+    return held
+
+
 def wait_final(api: httpx.Client, episode_id: str, timeout: float = 120.0) -> dict[str, Any]:
     """Poll an episode until its status is final."""
     deadline = time.monotonic() + timeout

@@ -58,7 +58,7 @@ def test_settings_from_the_environment() -> None:
         Settings.from_env({"HPTVSIM_PORT": "eighty"})
     with pytest.raises(SettingsError, match="HPTVSIM_EXECUTOR"):
         Settings.from_env({"HPTVSIM_EXECUTOR": "dask"})
-    with pytest.raises(SettingsError, match="max_steps"):
+    with pytest.raises(SettingsError, match="HPTVSIM_MAX_STEPS"):  # the variable is named
         Settings.from_env({"HPTVSIM_MAX_STEPS": "0"})
     # nothing unauthenticated reachable from the network, no CORS for every site without a key
     with pytest.raises(SettingsError, match="HPTVSIM_API_KEY"):

@@ -1,9 +1,12 @@
-"""The Ray executor (``HPTVSIM_EXECUTOR=ray``): episodes run as Ray tasks and come back with their files."""
+"""The Ray executor (``HPTVSIM_EXECUTOR=ray``): episodes run as Ray tasks under the workers'
+hard limits and come back with their files."""
 
 from __future__ import annotations
 
+import threading
 import time
 from pathlib import Path
+from typing import Any
 
 import httpx
 import pytest
@@ -17,7 +20,7 @@ pytestmark = pytest.mark.slow
 def test_episodes_run_as_ray_tasks(tmp_path: Path) -> None:
     srv = start_server(
         tmp_path / "ray",
-        {"HPTVSIM_EXECUTOR": "ray", "RAY_AUTH_MODE": "disabled", "HPTVSIM_MAX_STEPS": "20000"},
+        {"HPTVSIM_EXECUTOR": "ray", "HPTVSIM_MAX_STEPS": "20000"},
         180,
     )
     try:
@@ -62,3 +65,84 @@ def test_episodes_run_as_ray_tasks(tmp_path: Path) -> None:
             assert ep["status"] == "cancelled" and ep["summary"]["status"] == "cancelled"
     finally:
         srv.stop()
+
+
+def _chase(pursuers: int, beams: int, **sonar: Any) -> dict[str, Any]:
+    """``source_goto``'s tables with ``pursuers`` pursuers and one evader, ``beams`` sonar beams."""
+    from hptvsim.catalog import shipped_scenario
+
+    tables: dict[str, Any] = shipped_scenario("source_goto").to_dict()
+    tables["sensors"]["sonar"] |= {"beams": beams, **sonar}
+    for group in tables["vehicles"]:
+        if group["role"] == "pursuer":
+            group["count"] = pursuers
+    return tables
+
+
+def test_ray_tasks_run_under_the_workers_limits(tmp_path: Path) -> None:
+    """A Ray task takes the hard limits of a local pool worker (issue 33): an episode past its
+    CPU-time budget fails naming ``HPTVSIM_EPISODE_CPU_S``, one past the memory limit fails naming
+    ``HPTVSIM_PROCESS_MEMORY_MB`` (its worker process measured 420 MiB of ``VmData`` idle), and
+    a small episode after them runs to its end with its files brought back (each task has a fresh
+    worker process: the limits never carry over)."""
+    from hptvsim.service.engine import JobSpec
+    from hptvsim.service.ray_executor import RayExecutor
+    from hptvsim.service.settings import Settings
+
+    events: list[tuple[Any, ...]] = []
+    ended = threading.Condition()
+
+    def on_event(msg: tuple[Any, ...]) -> None:
+        with ended:
+            events.append(msg)
+            ended.notify_all()
+
+    def final(job: str) -> tuple[Any, ...]:
+        def found() -> tuple[Any, ...] | None:
+            return next((e for e in events if e[0] in ("done", "failed", "cancelled") and e[1] == job), None)
+
+        with ended:
+            assert ended.wait_for(lambda: found() is not None, timeout=900), [e[:2] for e in events]
+            out = found()
+            assert out is not None
+            return out
+
+    signal_sonar = _chase(3, 64, fidelity="signal", max_range=200.0)  # ~0.3 s of CPU a step
+    big = _chase(15, 1024)  # 16 x 1024 ranges: 131 kB a step kept for the trajectory
+    scripted = {f"pursuer_{k}": "scripted:pure_pursuit" for k in range(15)}
+    scripted["evader_0"] = "scripted:potential_field"
+    few = {k: v for k, v in scripted.items() if k in ("pursuer_0", "pursuer_1", "pursuer_2", "evader_0")}
+    # out_dir: each task's own scratch folder
+    phases = (  # the limit reached, its settings, the heavy episode
+        (
+            "HPTVSIM_EPISODE_CPU_S",
+            {"episode_cpu_s": 4.0},
+            JobSpec(id="cpu", scenario=signal_sonar, policies=few, max_steps=200, record=False, out_dir="-"),
+        ),
+        (
+            "HPTVSIM_PROCESS_MEMORY_MB",
+            {"process_memory_mb": 1024},
+            JobSpec(id="memory", scenario=big, policies=scripted, max_steps=8000, record=False, out_dir="-"),
+        ),
+    )
+    for limit, values, heavy in phases:
+        settings = Settings(data_dir=tmp_path / heavy.id, executor="ray", workers=1, **values)
+        executor = RayExecutor(settings, on_event)
+        executor.start()
+        try:
+            light = JobSpec(
+                id=f"light-{heavy.id}", scenario="goto_tiny", policies={}, max_steps=20, out_dir="-"
+            )
+            executor.submit(heavy)
+            executor.submit(light)
+            failed = final(heavy.id)
+            assert failed[0] == "failed" and limit in failed[2], failed[:3]
+            assert ("4 s" if heavy.id == "cpu" else "1024 MiB") in failed[2], failed[:3]
+            assert "Traceback" not in failed[2] and "/tmp" not in failed[2], failed[:3]
+            done = final(light.id)
+            assert done[0] == "done", done[:3]
+            folder = settings.episodes_dir / light.id
+            assert read_recording(folder / "recording.rrd").summary is not None
+            assert (folder / "trajectory.parquet").stat().st_size > 0
+        finally:
+            executor.close()
