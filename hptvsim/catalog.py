@@ -5,7 +5,7 @@ service's REST and WebSocket API, the live view's controls) asks here. A name is
 against the lists below and never interpreted as a path: a scenario file, an SB3 zip or a
 torch checkpoint is code or reads files, so clients name shipped things, and the loaders
 behind the names (:func:`hptvsim.zoo.load_policy`,
-:func:`hptvsim.viz.episode.resolve_scenario`) refuse paths unless a local user's own command
+:func:`hptvsim.episodes.scenarios.resolve_scenario`) refuse paths unless a local user's own command
 allows them.
 
 The lists are those of :func:`hptvsim.world.scenario.list_scenarios` (the shipped scenario

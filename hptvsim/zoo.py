@@ -46,7 +46,6 @@ from hptvsim.train.policy import check_sb3, load_sb3  # SB3 itself is imported w
 __all__ = [
     "CHECKPOINT_GAMES",
     "GAMES",
-    "Commands3D",
     "GameCommands",
     "PolicyChecker",
     "PolicyInfo",
@@ -359,10 +358,6 @@ class GameCommands:
         """``(..., C)`` commands (e.g. ``[v, omega, w_z]`` [m/s, rad/s, m/s])."""
         a = np.asarray(self.policy.act(obs, episode_start), dtype=np.float64)
         return self.game.commands(a, self.index)
-
-
-Commands3D = GameCommands
-"""The earlier name of :class:`GameCommands` (the 3-D game's policies are the ones it wraps)."""
 
 
 def in_commands(policy: Policy, game: Game, agent: str) -> Policy:

@@ -165,7 +165,8 @@ def test_names_roles_and_refusals() -> None:
 
 
 def test_the_palette_is_the_one_the_other_modules_use() -> None:
-    from hptvsim.viz import frames, style
+    from hptvsim.episodes import frames
+    from hptvsim.viz import style
 
     assert frames.agent_color is palette.agent_color
     assert style.hex_rgb is palette.hex_rgb

@@ -39,20 +39,27 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any, Final, Literal
 
-import gymnasium
 import numpy as np
 import numpy.typing as npt
 
 from hptvsim.cosim.system import SystemSpec, VehicleSpec, VehicleSystem, make_system
 from hptvsim.envs.policies import POLICY_ROLES, Limits, Policy, make_policy
-from hptvsim.envs.protocol import Scene, StepResult
-from hptvsim.envs.shared import action_box, agent_infos, check_actions, common_overrides, scenario_argument
-from hptvsim.envs.task import ObsLayout
+from hptvsim.envs.protocol import Game, Scene, StepResult
+from hptvsim.envs.shared import (
+    Backend,
+    GameBase,
+    check_actions,
+    common_overrides,
+    scenario_argument,
+    sonar_groups,
+)
+from hptvsim.envs.task import EXTENDED_SIZE, ObsLayout, fill_extended
 from hptvsim.world.grid import OccupancyGrid
-from hptvsim.world.scenario import Scenario, Task, World
+from hptvsim.world.scenario import Scenario
 
 __all__ = [
     "Backend",
+    "ExtendedObservation",
     "GameCore",
     "Robots",
     "StepResult",
@@ -65,8 +72,6 @@ F64 = npt.NDArray[np.float64]
 F32 = npt.NDArray[np.float32]
 Bool = npt.NDArray[np.bool_]
 I64 = npt.NDArray[np.int64]
-
-Backend = Literal["batched", "fmu"]
 
 
 def _fenced(grid: OccupancyGrid) -> OccupancyGrid:
@@ -107,14 +112,7 @@ class Robots:
             dtype=np.float64,
         )
         # one Sonar per distinct configuration; each senses its agents and sees every vehicle
-        configs: list[Any] = []
-        members: list[list[int]] = []
-        for i, a in enumerate(agents):
-            if a.sonar in configs:
-                members[configs.index(a.sonar)].append(i)
-            else:
-                configs.append(a.sonar)
-                members.append([i])
+        configs, members = sonar_groups(agents)
         n = len(agents)
         radii = self.radii
         self.sonars = [
@@ -230,7 +228,59 @@ class _State:
     goals: F64 | None = field(default=None)
 
 
-class GameCore:
+class ExtendedObservation:
+    """Appends the extended values to Eq. 14 observations, for models trained with them.
+
+    A model trained with ``extended_obs=True`` can then drive an agent in a game that observes
+    plain Eq. 14 (a service episode, say): the six values (sin and cos of the bearing relative
+    to the heading, speed and yaw-rate fractions, position fractions; :mod:`hptvsim.envs.task`)
+    are computed as the task kernel computes them, from the observation's yaw and azimuth and
+    the game's state for this agent (the bearing from the float32 observation, where the kernel
+    uses double angles: equal to about a float32 ulp). What
+    :meth:`GameCore.observation_extension` returns
+    (:class:`~hptvsim.envs.protocol.ObservationExtension`).
+
+    Args:
+        core: The game whose state the rows come from (rows = its environments, in order).
+        agent: The agent index.
+        yaw: The slot of the (normalised) yaw in the observation.
+        azimuth: The slot of the (normalised) azimuth of the target in the observation.
+    """
+
+    size: Final = EXTENDED_SIZE
+
+    def __init__(self, core: Game, agent: int, *, yaw: int, azimuth: int) -> None:
+        self.core = core
+        self.agent = agent
+        self.yaw = yaw
+        self.azimuth = azimuth
+        high = core.action_bounds[1][agent]  # [v_max, omega_max] (Eq. 15)
+        self.v_max, self.omega_max = float(high[0]), float(high[1])
+        self.site = (float(core.scenario.site.size[0]), float(core.scenario.site.size[1]))
+
+    def __call__(self, obs: F32) -> F32:
+        """``(B, obs_size)`` Eq. 14 rows of this agent -> ``(B, obs_size + 6)``."""
+        core, i = self.core, self.agent
+        if obs.shape[0] != core.num_envs:
+            raise ValueError(
+                f"expected one observation row per environment ({core.num_envs}), got {obs.shape[0]}"
+            )
+        psi = obs[:, self.yaw].astype(np.float64) * np.pi
+        rel = obs[:, self.azimuth].astype(np.float64) * np.pi - psi
+        extra = np.empty((obs.shape[0], EXTENDED_SIZE), dtype=np.float32)
+        fill_extended(
+            extra,
+            relative_bearing=rel,
+            velocity=core.velocity[:, i][:, [0, 1, 5]],  # [u, v, r]
+            v_max=self.v_max,
+            omega_max=self.omega_max,
+            positions=core.poses[:, i, 0:2],
+            site=self.site,
+        )
+        return np.concatenate([obs, extra], axis=-1)
+
+
+class GameCore(GameBase[ObsLayout]):
     """B environments of one scenario: reset, step, observations, rewards, end rules.
 
     Implements :class:`~hptvsim.envs.protocol.Game` (kind ``"planar"``): actions ``[v, omega]``
@@ -305,33 +355,12 @@ class GameCore:
                         **dict(sc.vehicles[g].parameters),
                         **{k: float(v) for k, v in extra.items()},
                     }
-        if overrides:
-            sc = sc.with_overrides(overrides)
-        if num_envs < 1:
-            raise ValueError(f"num_envs = {num_envs} is invalid; valid: an integer >= 1")
-        if backend not in ("batched", "fmu"):
-            raise ValueError(f"backend = {backend!r} is invalid; valid: 'batched', 'fmu'")
-        self.scenario = sc
-        self.num_envs = int(num_envs)
-        self.backend: Backend = backend
-        self.task: Task = sc.task
-        self.goto = sc.task.kind == "goto"
-        self.dt = sc.simulation.dt  # s
-        self.max_steps = sc.simulation.max_steps
-        self.seed = sc.simulation.seed if seed is None else int(seed)
-        self.rng = np.random.default_rng(self.seed)
-        self.world: World = sc.build_world()
+        self._configure(sc, overrides, num_envs=num_envs, backend=backend, seed=seed)
+        sc = self.scenario
         self.fence = fence
         self.grid = _fenced(self.world.obstacles) if fence else self.world.obstacles
         agents = sc.agents
-        self.agents = tuple(a.name for a in agents)
         self.robots = Robots(sc, self.grid, num_envs=self.num_envs, rng=self.rng)
-        self.pursuer = self.robots.pursuer
-        if not self.goto and (not self.pursuer.any() or self.pursuer.all()):
-            raise ValueError(f"{sc.source}: the pursuit task needs at least one pursuer and one evader")
-        if self.goto and any(a.goal is None for a in agents):
-            missing = [a.name for a in agents if a.goal is None]
-            raise ValueError(f"{sc.source}: the goto task needs a goal for every agent; none for {missing}")
         site = sc.site.size
         self.site = (float(site[0]), float(site[1]))
         self.layout = ObsLayout(
@@ -412,7 +441,6 @@ class GameCore:
         self._poses6 = np.zeros((b, n, 6))
         self._poses6[..., 2] = self.depth
         self._velocity6 = np.zeros((b, n, 6))
-        self._spaces: dict[tuple[str, str], gymnasium.spaces.Box] = {}
         self._renderer: Any = None
         self._terms = self.kernel.out.terms()
         self._flags = self.kernel.out.flags()
@@ -436,11 +464,6 @@ class GameCore:
         )
 
     # -- helpers --------------------------------------------------------------------------------
-
-    @property
-    def num_agents(self) -> int:
-        """N."""
-        return len(self.agents)
 
     def _poses(self) -> F64:
         """``(B, N, 3)`` ``[x, y, psi]`` (a buffer refreshed from the state)."""
@@ -646,35 +669,18 @@ class GameCore:
         """``(N, 2)`` ``[v_min, -omega_max]`` and ``[v_max, omega_max]`` of each agent (Eq. 15)."""
         return self._action_bounds
 
-    def _agent(self, agent: str) -> int:
-        try:
-            return self.agents.index(agent)
-        except ValueError:
-            raise ValueError(f"unknown agent {agent!r}; agents: {', '.join(self.agents)}") from None
+    def observation_extension(self, agent: str) -> ExtendedObservation | None:
+        """The extended values (:class:`ExtendedObservation`), where the layout is plain Eq. 14.
 
-    def observation_space(self, agent: str) -> gymnasium.spaces.Box:
-        """An agent's observation space (Eq. 14; one object per agent)."""
-        key = ("obs", agent)
-        if key not in self._spaces:
-            self._agent(agent)
-            self._spaces[key] = action_box(*self.layout.bounds())
-        return self._spaces[key]
+        None with ``extended_obs=True``: the observations hold them already.
 
-    def action_space(self, agent: str) -> gymnasium.spaces.Box:
-        """An agent's action space ``[v_min, v_max] x [-omega_max, omega_max]`` (Eqs. 15-16)."""
-        key = ("act", agent)
-        if key not in self._spaces:
-            i = self._agent(agent)
-            self._spaces[key] = action_box(self._action_bounds[0][i], self._action_bounds[1][i])
-        return self._spaces[key]
-
-    def info(self, result: StepResult | None, env: int, agent: int) -> dict[str, Any]:
-        """One agent's info (:data:`~hptvsim.envs.protocol.INFO_KEYS`)."""
-        return agent_infos(self, result, env)[agent]
-
-    def infos(self, result: StepResult | None, env: int) -> list[dict[str, Any]]:
-        """Every agent's info in one environment (:data:`~hptvsim.envs.protocol.INFO_KEYS`)."""
-        return agent_infos(self, result, env)
+        Raises:
+            ValueError: Unknown agent.
+        """
+        i = self._agent(agent)
+        if self.layout.extended:
+            return None
+        return ExtendedObservation(self, i, yaw=self.layout.yaw, azimuth=self.layout.azimuth)
 
     def global_state(self, env: int) -> F64:
         """``x, y, psi, u, v, r`` of every vehicle, flattened (N * 6)."""
@@ -711,11 +717,6 @@ class GameCore:
             dt=self.dt,
             seed=seed,
         )
-
-    def default_policy(self, agent: str) -> str:
-        """Pursuers, and every agent in goto, ``pure_pursuit``; evaders ``potential_field``."""
-        i = self._agent(agent)
-        return "pure_pursuit" if self.goto or self.pursuer[i] else "potential_field"
 
     def render(self, env: int = 0) -> npt.NDArray[np.uint8]:
         """A top-down RGB image of environment ``env`` (:class:`~hptvsim.envs.render.TopDownRenderer`).

@@ -80,7 +80,6 @@ import math
 from collections.abc import Mapping
 from typing import Any, Final, Literal
 
-import gymnasium
 import numpy as np
 import numpy.typing as npt
 
@@ -89,18 +88,23 @@ from hptvsim.envs.obs3d import Obs3DLayout
 from hptvsim.envs.policies import Policy
 from hptvsim.envs.policies3d import POLICY_ROLES_3D, make_policy_3d
 from hptvsim.envs.protocol import Scene, StepResult
-from hptvsim.envs.shared import action_box, agent_infos, check_actions, common_overrides, scenario_argument
+from hptvsim.envs.shared import (
+    Backend,
+    GameBase,
+    check_actions,
+    common_overrides,
+    scenario_argument,
+    sonar_groups,
+)
 from hptvsim.envs.task import EndFlags, bookkeeping, reward_terms, wrap
 from hptvsim.world.grid import OccupancyGrid
-from hptvsim.world.scenario import Scenario, Task, World
+from hptvsim.world.scenario import Scenario
 
 __all__ = ["OVERRIDABLE", "SPAWN_MARGIN", "Game3DCore", "Obs3DLayout", "check_agents_3d"]
 
 F64 = npt.NDArray[np.float64]
 F32 = npt.NDArray[np.float32]
 Bool = npt.NDArray[np.bool_]
-
-Backend = Literal["batched", "fmu"]
 
 SPAWN_MARGIN: Final = 1.0
 """m: a vehicle starts at least its radius plus this above the seabed and below the surface."""
@@ -133,7 +137,7 @@ def check_agents_3d(sc: Scenario) -> list[dict[str, float]]:
     return out
 
 
-class Game3DCore:
+class Game3DCore(GameBase[Obs3DLayout]):
     """B environments of the 3-D game: reset, step, observations, rewards, end rules.
 
     Implements :class:`~hptvsim.envs.protocol.Game` (kind ``"3d"``): actions are the normalised
@@ -187,12 +191,8 @@ class Game3DCore:
 
         sc = scenario_argument(scenario)
         overrides = common_overrides(sc, task=task, max_steps=max_steps, reward=reward)
-        if overrides:
-            sc = sc.with_overrides(overrides)
-        if isinstance(num_envs, bool) or num_envs < 1:
-            raise ValueError(f"num_envs = {num_envs} is invalid; valid: an integer >= 1")
-        if backend not in ("batched", "fmu"):
-            raise ValueError(f"backend = {backend!r} is invalid; valid: 'batched', 'fmu'")
+        self._configure(sc, overrides, num_envs=num_envs, backend=backend, seed=seed)
+        sc = self.scenario
         layout3d = sc.sensors.sonar3d
         for name, value in (("azimuth_beams", azimuth_beams), ("elevation_beams", elevation_beams)):
             if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 1):
@@ -201,21 +201,7 @@ class Game3DCore:
         elevation_beams = layout3d.elevation_beams if elevation_beams is None else elevation_beams
         group_overrides = check_agents_3d(sc)
         agents = sc.agents
-        self.scenario = sc
-        self.num_envs = b = int(num_envs)
-        self.backend: Backend = backend
-        self.task: Task = sc.task
-        self.goto = sc.task.kind == "goto"
-        self.dt = sc.simulation.dt  # s
-        self.max_steps = sc.simulation.max_steps
-        self.seed = sc.simulation.seed if seed is None else int(seed)
-        self.rng = np.random.default_rng(self.seed)
-        self.world: World = sc.build_world()
-        self.agents = tuple(a.name for a in agents)
-        n = len(agents)
-        self.pursuer = np.array([a.role == "pursuer" for a in agents])
-        if not self.goto and (not self.pursuer.any() or self.pursuer.all()):
-            raise ValueError(f"{sc.source}: the pursuit task needs at least one pursuer and one evader")
+        b, n = self.num_envs, len(agents)
         self.radii = np.array([a.radius for a in agents], dtype=np.float64)  # m
         # command limits [v_min, v_max, omega_max, w_z_max] per agent (6-DOF defaults + overrides)
         lim = []
@@ -229,14 +215,7 @@ class Game3DCore:
         hm = self.world.heightmap
         depth_scale = float(np.max(hm.depth))
         # sonar: one 3-D sonar per distinct planar configuration (every group the same fan size)
-        configs: list[Any] = []
-        members: list[list[int]] = []
-        for i, a in enumerate(agents):
-            if a.sonar in configs:
-                members[configs.index(a.sonar)].append(i)
-            else:
-                configs.append(a.sonar)
-                members.append([i])
+        configs, members = sonar_groups(agents)
         ranges = {c.max_range for c in configs}
         if len(ranges) != 1:
             raise ValueError(
@@ -296,11 +275,6 @@ class Game3DCore:
         self.goals: F64 | None = None
         self.goal_depth_ranges: list[tuple[float, float]] = []
         if self.goto:
-            missing = [a.name for a in agents if a.goal is None]
-            if missing:
-                raise ValueError(
-                    f"{sc.source}: the goto task needs a goal for every agent; none for {missing}"
-                )
             goals = [a.goal for a in agents if a.goal is not None]
             xy = np.array([g.position for g in goals], dtype=np.float64)
             floor = hm.depth_at(xy)
@@ -360,7 +334,6 @@ class Game3DCore:
         )
         self._action_bounds = (np.full((n, 3), -1.0), np.ones((n, 3)))
         self._actions = np.zeros((b, n, 3))
-        self._spaces: dict[tuple[str, str], gymnasium.spaces.Box] = {}
 
     # -- helpers ---------------------------------------------------------------------------------
 
@@ -377,11 +350,6 @@ class Game3DCore:
             w = w * factor
         self.system.currents[envs, :, 0:2] = v
         self.system.currents[envs, :, 2] = w
-
-    @property
-    def num_agents(self) -> int:
-        """N."""
-        return len(self.agents)
 
     def commands(self, actions: npt.ArrayLike, agent: int | None = None) -> F64:
         """Map normalised actions in ``[-1, 1]`` (clipped) to commands.
@@ -685,35 +653,13 @@ class Game3DCore:
         """``(N, 3)`` lowest and highest actions: ``-1`` and ``1``."""
         return self._action_bounds
 
-    def _agent(self, agent: str) -> int:
-        try:
-            return self.agents.index(agent)
-        except ValueError:
-            raise ValueError(f"unknown agent {agent!r}; agents: {', '.join(self.agents)}") from None
+    def observation_extension(self, agent: str) -> None:
+        """None: the 3-D game has no richer observation than :class:`~hptvsim.envs.obs3d.Obs3DLayout`.
 
-    def observation_space(self, agent: str) -> gymnasium.spaces.Box:
-        """An agent's observation space (:class:`~hptvsim.envs.obs3d.Obs3DLayout`; one object per agent)."""
-        key = ("obs", agent)
-        if key not in self._spaces:
-            self._agent(agent)
-            self._spaces[key] = action_box(*self.layout.bounds())
-        return self._spaces[key]
-
-    def action_space(self, agent: str) -> gymnasium.spaces.Box:
-        """An agent's action space: ``Box(-1, 1, (3,), float32)`` (one object per agent)."""
-        key = ("act", agent)
-        if key not in self._spaces:
-            i = self._agent(agent)
-            self._spaces[key] = action_box(self._action_bounds[0][i], self._action_bounds[1][i])
-        return self._spaces[key]
-
-    def info(self, result: StepResult | None, env: int, agent: int) -> dict[str, Any]:
-        """One agent's info (:data:`~hptvsim.envs.protocol.INFO_KEYS`)."""
-        return agent_infos(self, result, env)[agent]
-
-    def infos(self, result: StepResult | None, env: int) -> list[dict[str, Any]]:
-        """Every agent's info in one environment (:data:`~hptvsim.envs.protocol.INFO_KEYS`)."""
-        return agent_infos(self, result, env)
+        Raises:
+            ValueError: Unknown agent.
+        """
+        self._agent(agent)
 
     def global_state(self, env: int) -> F64:
         """``x, y, z, phi, theta, psi, u, v, w, p, q, r`` of every vehicle (N * 12)."""
@@ -723,11 +669,6 @@ class Game3DCore:
         """A 3-D scripted policy (:data:`~hptvsim.envs.policies3d.POLICY_NAMES_3D`; no random numbers)."""
         self._agent(agent)
         return make_policy_3d(name, self.layout)
-
-    def default_policy(self, agent: str) -> str:
-        """Pursuers and every agent in goto ``pure_pursuit``, evaders ``potential_field``."""
-        i = self._agent(agent)
-        return "pure_pursuit" if self.goto or self.pursuer[i] else "potential_field"
 
     def render(self, env: int = 0) -> npt.NDArray[np.uint8]:
         """No renderer for the 3-D game yet.

@@ -43,7 +43,16 @@ from hptvsim.envs.task import EndFlags, RewardTerms
 from hptvsim.world.grid import OccupancyGrid
 from hptvsim.world.scenario import Scenario
 
-__all__ = ["INFO_KEYS", "POSE_FIELDS", "RESET_INFO_KEYS", "VELOCITY_FIELDS", "Game", "Scene", "StepResult"]
+__all__ = [
+    "INFO_KEYS",
+    "POSE_FIELDS",
+    "RESET_INFO_KEYS",
+    "VELOCITY_FIELDS",
+    "Game",
+    "ObservationExtension",
+    "Scene",
+    "StepResult",
+]
 
 F32 = npt.NDArray[np.float32]
 F64 = npt.NDArray[np.float64]
@@ -141,6 +150,27 @@ class Scene:
     fence: bool
     goals: F64 | None
     goal_radius: F64 | None
+
+
+class ObservationExtension(Protocol):
+    """Values a game appends to one agent's observations, computed from the game's state.
+
+    What :meth:`Game.observation_extension` returns: with it, a model trained on a richer
+    observation of a game (the planar game's ``extended_obs``) drives an agent of that game
+    where it observes less (a service episode, say).
+
+    Attributes:
+        size: How many values it appends.
+    """
+
+    @property
+    def size(self) -> int:
+        """How many values it appends."""
+        ...
+
+    def __call__(self, obs: F32) -> F32:
+        """``(B, obs_size)`` the agent's observations, one row per environment -> ``(B, obs_size + size)``."""
+        ...
 
 
 @runtime_checkable
@@ -278,6 +308,17 @@ class Game(Protocol):
 
     def action_space(self, agent: str) -> gymnasium.spaces.Box:
         """An agent's action space (what :meth:`step` takes for it)."""
+        ...
+
+    def observation_extension(self, agent: str) -> ObservationExtension | None:
+        """What a model trained on a richer observation needs appended to ``agent``'s observations.
+
+        None where the game appends nothing: its observations hold every value already, or it
+        has no richer observation.
+
+        Raises:
+            ValueError: Unknown agent.
+        """
         ...
 
     def reset(self, env_ids: npt.ArrayLike | None = None, *, seed: int | None = None) -> F32:

@@ -7,13 +7,16 @@
 * :func:`agent_infos` and :func:`info_arrays`: the per-agent info of :data:`~hptvsim.envs.protocol.INFO_KEYS`;
 * :func:`build_policies`: the other agents' scripted policies (by name) or given policy objects;
 * :func:`scenario_argument` and :func:`common_overrides`: a game's ``scenario``, ``task``,
-  ``max_steps`` and ``reward`` arguments.
+  ``max_steps`` and ``reward`` arguments;
+* :class:`GameBase`: what the planar and the 3-D game share in their own code (the settings
+  every game takes from its scenario and options, the agents, the spaces, the info and the
+  default policies); :func:`sonar_groups`: their agents grouped by sonar configuration.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import Any, Generic, Literal, Protocol, TypeVar, cast
 
 import gymnasium
 import numpy as np
@@ -21,9 +24,12 @@ import numpy.typing as npt
 
 from hptvsim.envs.policies import Policy
 from hptvsim.envs.protocol import INFO_KEYS, POSE_FIELDS, RESET_INFO_KEYS, Game, StepResult
-from hptvsim.world.scenario import Scenario, load_scenario
+from hptvsim.world.scenario import AgentSpec, Scenario, Task, World, load_scenario
+from hptvsim.world.sensor_config import SonarConfig
 
 __all__ = [
+    "Backend",
+    "GameBase",
     "PolicySpec",
     "action_box",
     "agent_infos",
@@ -33,10 +39,15 @@ __all__ = [
     "common_overrides",
     "info_arrays",
     "scenario_argument",
+    "sonar_groups",
 ]
 
 F32 = npt.NDArray[np.float32]
 F64 = npt.NDArray[np.float64]
+Bool = npt.NDArray[np.bool_]
+
+Backend = Literal["batched", "fmu"]
+"""The simulation backends of the planar and the 3-D game (the same numbers on both)."""
 
 PolicySpec = str | Policy
 """A policy: the name of one of the game's scripted policies (``Game.policy_roles``) or an object."""
@@ -85,6 +96,133 @@ def common_overrides(
     if reward:
         overrides.setdefault("task", {})["reward"] = {k: float(v) for k, v in reward.items()}
     return overrides
+
+
+def sonar_groups(agents: Sequence[AgentSpec]) -> tuple[list[SonarConfig], list[list[int]]]:
+    """The distinct sonar configurations of ``agents``, in order of appearance, and each one's agents.
+
+    Returns:
+        ``(configs, members)``: ``members[k]`` the indices of the agents with ``configs[k]``.
+    """
+    configs: list[SonarConfig] = []
+    members: list[list[int]] = []
+    for i, a in enumerate(agents):
+        if a.sonar in configs:
+            members[configs.index(a.sonar)].append(i)
+        else:
+            configs.append(a.sonar)
+            members.append([i])
+    return configs, members
+
+
+# --- the games' shared part ------------------------------------------------------------------------
+
+
+class _Layout(Protocol):
+    def bounds(self) -> tuple[F32, F32]: ...
+
+
+LayoutT = TypeVar("LayoutT", bound=_Layout)
+
+
+class GameBase(Generic[LayoutT]):
+    """What the planar and the 3-D game share in their own code (not the protocol: views use that).
+
+    A game calls :meth:`_configure` first in its constructor, sets :attr:`layout` (its observation
+    layout) and ``_action_bounds`` (``(N, A)`` lowest and highest actions), and gets agent lookup,
+    the spaces, the info and the default policies of :class:`~hptvsim.envs.protocol.Game`.
+
+    Attributes:
+        layout: The game's observation layout (its ``bounds()`` are the observation space's).
+    """
+
+    layout: LayoutT
+    _action_bounds: tuple[F64, F64]
+
+    def _configure(
+        self,
+        sc: Scenario,
+        overrides: Mapping[str, Any],
+        *,
+        num_envs: int,
+        backend: Backend,
+        seed: int | None,
+    ) -> None:
+        """Apply ``overrides`` to ``sc``, check the options, and set what every game takes from them.
+
+        Sets ``scenario`` (overridden), ``num_envs``, ``backend``, ``task``, ``goto``, ``dt`` [s],
+        ``max_steps``, ``seed``, ``rng`` (seeded with ``seed``, default the scenario's), ``world``,
+        ``agents`` and ``pursuer``.
+
+        Raises:
+            ValueError: An invalid ``num_envs`` or ``backend``, a pursuit scenario without both
+                roles, a goto scenario with an agent without a goal.
+        """
+        if overrides:
+            sc = sc.with_overrides(overrides)
+        if isinstance(num_envs, bool) or num_envs < 1:
+            raise ValueError(f"num_envs = {num_envs} is invalid; valid: an integer >= 1")
+        if backend not in ("batched", "fmu"):
+            raise ValueError(f"backend = {backend!r} is invalid; valid: 'batched', 'fmu'")
+        self.scenario = sc
+        self.num_envs = int(num_envs)
+        self.backend: Backend = backend
+        self.task: Task = sc.task
+        self.goto = sc.task.kind == "goto"
+        self.dt = sc.simulation.dt  # s
+        self.max_steps = sc.simulation.max_steps
+        self.seed = sc.simulation.seed if seed is None else int(seed)
+        self.rng = np.random.default_rng(self.seed)
+        self.world: World = sc.build_world()
+        agents = sc.agents
+        self.agents = tuple(a.name for a in agents)
+        self.pursuer: Bool = np.array([a.role == "pursuer" for a in agents])
+        if not self.goto and (not self.pursuer.any() or self.pursuer.all()):
+            raise ValueError(f"{sc.source}: the pursuit task needs at least one pursuer and one evader")
+        missing = [a.name for a in agents if a.goal is None]
+        if self.goto and missing:
+            raise ValueError(f"{sc.source}: the goto task needs a goal for every agent; none for {missing}")
+        self._spaces: dict[tuple[str, str], gymnasium.spaces.Box] = {}
+
+    @property
+    def num_agents(self) -> int:
+        """N."""
+        return len(self.agents)
+
+    def _agent(self, agent: str) -> int:
+        try:
+            return self.agents.index(agent)
+        except ValueError:
+            raise ValueError(f"unknown agent {agent!r}; agents: {', '.join(self.agents)}") from None
+
+    def observation_space(self, agent: str) -> gymnasium.spaces.Box:
+        """An agent's observation space (the bounds of :attr:`layout`; one object per agent)."""
+        key = ("obs", agent)
+        if key not in self._spaces:
+            self._agent(agent)
+            self._spaces[key] = action_box(*self.layout.bounds())
+        return self._spaces[key]
+
+    def action_space(self, agent: str) -> gymnasium.spaces.Box:
+        """An agent's action space: its row of the action bounds (one object per agent)."""
+        key = ("act", agent)
+        if key not in self._spaces:
+            i = self._agent(agent)
+            self._spaces[key] = action_box(self._action_bounds[0][i], self._action_bounds[1][i])
+        return self._spaces[key]
+
+    def info(self, result: StepResult | None, env: int, agent: int) -> dict[str, Any]:
+        """One agent's info (:data:`~hptvsim.envs.protocol.INFO_KEYS`)."""
+        return agent_infos(cast(Game, self), result, env)[agent]
+
+    def infos(self, result: StepResult | None, env: int) -> list[dict[str, Any]]:
+        """Every agent's info in one environment (:data:`~hptvsim.envs.protocol.INFO_KEYS`)."""
+        return agent_infos(cast(Game, self), result, env)
+
+    def default_policy(self, agent: str) -> str:
+        """Pursuers, and every agent in goto, ``pure_pursuit``; evaders ``potential_field``."""
+        i = self._agent(agent)
+        return "pure_pursuit" if self.goto or self.pursuer[i] else "potential_field"
 
 
 # --- actions ---------------------------------------------------------------------------------------

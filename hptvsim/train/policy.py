@@ -17,12 +17,10 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from hptvsim.envs.protocol import Game
-from hptvsim.envs.task import EXTENDED_SIZE, fill_extended
+from hptvsim.envs.protocol import Game, ObservationExtension
 
 __all__ = [
     "MODEL_CACHE_SIZE",
-    "ExtendedObservation",
     "SB3Policy",
     "cached_sb3_model",
     "check_observation",
@@ -88,54 +86,6 @@ def cached_sb3_model(path: Path) -> Any:
     return model
 
 
-class ExtendedObservation:
-    """Appends the extended values to Eq. 14 observations, for models trained with them.
-
-    A model trained with ``extended_obs=True`` can then drive an agent in a game that observes
-    plain Eq. 14 (a service episode, say): the six values (sin and cos of the bearing relative
-    to the heading, speed and yaw-rate fractions, position fractions; :mod:`hptvsim.envs.task`)
-    are computed as the task kernel computes them, from the observation's yaw and azimuth and
-    the game's state for this agent (the bearing from the float32 observation, where the kernel
-    uses double angles: equal to about a float32 ulp).
-
-    Args:
-        core: The game whose state the rows come from (rows = its environments, in order).
-        agent: The agent index.
-        yaw: The slot of the (normalised) yaw in the observation.
-        azimuth: The slot of the (normalised) azimuth of the target in the observation.
-    """
-
-    def __init__(self, core: Game, agent: int, *, yaw: int, azimuth: int) -> None:
-        self.core = core
-        self.agent = agent
-        self.yaw = yaw
-        self.azimuth = azimuth
-        high = core.action_bounds[1][agent]  # [v_max, omega_max] (Eq. 15)
-        self.v_max, self.omega_max = float(high[0]), float(high[1])
-        self.site = (float(core.scenario.site.size[0]), float(core.scenario.site.size[1]))
-
-    def __call__(self, obs: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
-        """``(B, size)`` Eq. 14 rows of this agent -> ``(B, size + 6)``."""
-        core, i = self.core, self.agent
-        if obs.shape[0] != core.num_envs:
-            raise ValueError(
-                f"expected one observation row per environment ({core.num_envs}), got {obs.shape[0]}"
-            )
-        psi = obs[:, self.yaw].astype(np.float64) * np.pi
-        rel = obs[:, self.azimuth].astype(np.float64) * np.pi - psi
-        extra = np.empty((obs.shape[0], EXTENDED_SIZE), dtype=np.float32)
-        fill_extended(
-            extra,
-            relative_bearing=rel,
-            velocity=core.velocity[:, i][:, [0, 1, 5]],  # [u, v, r]
-            v_max=self.v_max,
-            omega_max=self.omega_max,
-            positions=core.poses[:, i, 0:2],
-            site=self.site,
-        )
-        return np.concatenate([obs, extra], axis=-1)
-
-
 class SB3Policy:
     """A deterministic policy from an SB3 model; actions clipped to its action space.
 
@@ -147,14 +97,16 @@ class SB3Policy:
     """
 
     def __init__(
-        self, model: Any, *, obs_size: int | None = None, extend: ExtendedObservation | None = None
+        self, model: Any, *, obs_size: int | None = None, extend: ObservationExtension | None = None
     ) -> None:
         self.model = model
         self.low = np.asarray(model.action_space.low, dtype=np.float64)
         self.high = np.asarray(model.action_space.high, dtype=np.float64)
         self.extend = extend
         if obs_size is not None:
-            check_observation(tuple(model.observation_space.shape), obs_size, extended=extend is not None)
+            check_observation(
+                tuple(model.observation_space.shape), obs_size, extra=0 if extend is None else extend.size
+            )
 
     def act(self, obs: npt.ArrayLike, episode_start: npt.ArrayLike | None = None) -> npt.NDArray[np.float64]:
         """Actions for observations (deterministic)."""
@@ -168,18 +120,19 @@ class SB3Policy:
         return result
 
 
-def check_observation(shape: tuple[int, ...], obs_size: int, *, extended: bool) -> None:
+def check_observation(shape: tuple[int, ...], obs_size: int, *, extra: int = 0) -> None:
     """The one check of a model's observation shape against an agent's observation.
 
     Args:
         shape: The model's observation shape.
-        obs_size: Values in the agent's observation (Eq. 14 layout).
-        extended: Whether the extended values are appended to it for the model.
+        obs_size: Values in the agent's observation.
+        extra: Values appended to it for the model
+            (:meth:`~hptvsim.envs.protocol.Game.observation_extension`).
 
     Raises:
         ValueError: The shapes differ (the model was trained on another layout).
     """
-    expected = obs_size + (EXTENDED_SIZE if extended else 0)
+    expected = obs_size + extra
     if tuple(shape) != (expected,):
         raise ValueError(
             f"the model observes {tuple(shape)} but the agent's observation has {obs_size} values; it was "
@@ -188,23 +141,19 @@ def check_observation(shape: tuple[int, ...], obs_size: int, *, extended: bool) 
         )
 
 
-def _extension(game: Game, agent: str, observation: tuple[int, ...]) -> ExtendedObservation | None:
-    """The extended values to append for a model trained with them, on a game that observes plain Eq. 14.
+def _extension(game: Game, agent: str, observation: tuple[int, ...]) -> ObservationExtension | None:
+    """What to append to ``agent``'s observations for a model observing ``observation``.
 
-    None where the model observes what the game does. The one place this module reads a game
-    beyond the protocol: the observation layout's ``extended`` flag and its yaw and azimuth
-    slots (the planar game's :class:`~hptvsim.envs.task.ObsLayout`; a game without them, as the
-    3-D game, is never extended). To become ``Game.observation_extension(agent)``.
+    The game's :meth:`~hptvsim.envs.protocol.Game.observation_extension` where the model
+    observes that many more values (trained with the richer observation, e.g. the planar game's
+    ``extended_obs``); None where it observes what the game does (or anything else, which
+    :func:`check_observation` refuses).
     """
-    layout = getattr(game, "layout", None)
+    extension = game.observation_extension(agent)
     size = int(game.observation_space(agent).shape[0])
-    if layout is None or getattr(layout, "extended", True) or not observation:
+    if extension is None or not observation or observation[0] != size + extension.size:
         return None
-    if observation[0] != size + EXTENDED_SIZE:
-        return None
-    return ExtendedObservation(
-        game, game.agents.index(agent), yaw=int(layout.yaw), azimuth=int(layout.azimuth)
-    )
+    return extension
 
 
 def _fit(path: Path, observation: tuple[int, ...], action: tuple[int, ...], game: Game, agent: str) -> bool:
@@ -223,9 +172,9 @@ def _fit(path: Path, observation: tuple[int, ...], action: tuple[int, ...], game
             f"values [{', '.join(game.command_fields)}]; it was trained on another game"
         )
     size = int(game.observation_space(agent).shape[0])
-    extend = _extension(game, agent, observation) is not None
-    check_observation(observation, size, extended=extend)
-    return extend
+    extension = _extension(game, agent, observation)
+    check_observation(observation, size, extra=0 if extension is None else extension.size)
+    return extension is not None
 
 
 def sb3_spaces(path: Path) -> tuple[tuple[int, ...], tuple[int, ...]] | None:

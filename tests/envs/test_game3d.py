@@ -244,7 +244,7 @@ def test_sac_learns_to_reach_a_3d_goal() -> None:
     assert before[0] == 0.0 and before[1] > 50.0, before
     assert after[0] >= 0.8 and after[1] < 12.0, after
     # the trained model as a zoo policy (sb3:<zip>) in the episode runner reaches the goal too
-    from hptvsim.viz.episode import run_episode
+    from hptvsim.episodes.runner import run_episode
 
     with tempfile.TemporaryDirectory() as tmp:
         model.save(Path(tmp) / "diver.zip")
@@ -482,7 +482,7 @@ def test_goal_depth_ranges_are_drawn_at_every_reset() -> None:
 
 
 def test_the_episode_runner_shows_each_episodes_goal_depth() -> None:
-    from hptvsim.viz.episode import EpisodeStepper
+    from hptvsim.episodes.stepper import EpisodeStepper
 
     data = load_scenario("dive_goto").to_dict()
     data["task"]["goal"]["depth"] = [20.0, 40.0]
@@ -500,7 +500,7 @@ def test_the_episode_runner_shows_each_episodes_goal_depth() -> None:
 def test_the_scenario_sets_the_3d_sonar_beams_and_models_play_on_their_layout(tmp_path: Path) -> None:
     from stable_baselines3 import SAC
 
-    from hptvsim.viz.episode import run_episode
+    from hptvsim.episodes.runner import run_episode
 
     sc = load_scenario("dive_goto").with_overrides(
         {"sensors": {"sonar3d": {"azimuth_beams": 8, "elevation_beams": 3, "elevation_span": 1.0}}}

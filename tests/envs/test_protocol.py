@@ -68,6 +68,42 @@ def test_every_game_implements_the_protocol(kind: str, scenario: str) -> None:
         game.close()
 
 
+def test_the_planar_game_appends_to_plain_eq14_what_its_extended_layout_observes() -> None:
+    plain = make_game("target", num_envs=2, seed=4)
+    wide = make_game("target", num_envs=2, seed=4, extended_obs=True)
+    try:
+        plain.reset()
+        wide.reset()
+        high = plain.action_bounds[1]
+        for _ in range(5):
+            plain.step(np.broadcast_to(0.7 * high, (2, *high.shape)))
+            wide.step(np.broadcast_to(0.7 * high, (2, *high.shape)))
+        for i, agent in enumerate(plain.agents):
+            extension = plain.observation_extension(agent)
+            assert extension is not None and extension.size == wide.obs.shape[-1] - plain.obs.shape[-1] > 0
+            assert np.abs(wide.obs[:, i, -extension.size :]).max() > 0.1  # moving: values to get right
+            # the bearing from the float32 observation, where the kernel uses double angles
+            np.testing.assert_allclose(extension(plain.obs[:, i]), wide.obs[:, i], rtol=0, atol=1e-6)
+            assert wide.observation_extension(agent) is None  # it observes them already
+        with pytest.raises(ValueError, match="unknown agent 'nobody'"):
+            plain.observation_extension("nobody")
+    finally:
+        plain.close()
+        wide.close()
+
+
+@pytest.mark.parametrize(("kind", "scenario"), [("3d", "dive_flat"), ("escort", "source")])
+def test_a_game_without_a_richer_observation_appends_nothing(kind: str, scenario: str) -> None:
+    game = make_game(scenario, game=None if kind in GAMES else kind)
+    try:
+        assert game.kind == kind
+        assert all(game.observation_extension(agent) is None for agent in game.agents)
+        with pytest.raises(ValueError, match="unknown agent 'nobody'"):
+            game.observation_extension("nobody")
+    finally:
+        game.close()
+
+
 def test_the_registry_picks_the_scenarios_game_and_names_what_is_valid() -> None:
     assert {"planar", "3d", "escort"} <= set(game_kinds())
     flat = make_game("dive_flat", game="planar")  # a 3-D scenario played flat, at its operating depth

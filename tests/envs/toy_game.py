@@ -190,6 +190,9 @@ class EscortGame:
     def action_space(self, agent: str) -> gymnasium.spaces.Box:
         return self._act_space[self.agents[self._index(agent)]]
 
+    def observation_extension(self, agent: str) -> None:
+        self._index(agent)  # one observation only: nothing to append
+
     def _index(self, agent: str) -> int:
         if agent not in self.agents:
             raise ValueError(f"unknown agent {agent!r}; agents: {', '.join(self.agents)}")

@@ -73,7 +73,7 @@ def test_the_3d_run_evaluates_and_draws(run_3d: Path, tmp_path: Path) -> None:
 
 
 def test_the_3d_runs_model_plays_in_the_episode_runner(run_3d: Path, tmp_path: Path) -> None:
-    from hptvsim.viz.episode import run_episode
+    from hptvsim.episodes.runner import run_episode
 
     zip_ = run_3d / "stages" / "dive" / "evader_0.zip"
     result = run_episode("dive_goto", {"evader_0": f"sb3:{zip_}"}, seed=2, max_steps=40, allow_paths=True)

@@ -60,7 +60,7 @@ def test_a_model_of_the_3d_envs_drives_a_3d_episode_in_si_units(tmp_path: Path) 
     ``sb3:<zip>`` in the 3-D game: the zoo's SI actions are the model's mapped by the game's
     limits, and the episode runner plays it."""
     from hptvsim.envs.game3d import Game3DCore
-    from hptvsim.viz.episode import run_episode
+    from hptvsim.episodes.runner import run_episode
     from hptvsim.zoo import check_policy_spec
 
     core = Game3DCore("dive_goto", seed=3)

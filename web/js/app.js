@@ -1,7 +1,7 @@
 // The hptvsim dashboard: create, run, watch and cancel episodes; scrub finished ones; compare
 // episodes on one timeline; browse the episode list.
 // Talks to the service's REST API under /api/v1 and its server-sent events; live data follow the
-// frame schema (frames.gen.js, generated from hptvsim/viz/frames.py) and are checked against it.
+// frame schema (frames.gen.js, generated from hptvsim/episodes/frames.py) and are checked against it.
 
 import { validate, VERSION } from "./schema.js";
 import { TopDownMap, panelChart, lineChart, rangeColor, EPISODE_COLORS, EPISODE_DASHES } from "./draw.js";

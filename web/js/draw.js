@@ -8,7 +8,7 @@ const GRID = "#2a3a50";
 const AXIS = "#93a4b8";
 const TEXT = "#d0d7e0";
 const FONT = "11px system-ui, sans-serif";
-const HIT_FRACTION = 0.98; // as hptvsim.viz.episode.HIT_FRACTION: a beam this close to its maximum saw nothing
+const HIT_FRACTION = 0.98; // as hptvsim.episodes.stepper.HIT_FRACTION: a beam this close to its maximum saw nothing
 
 /** Colours of episodes compared on one timeline (distinct from the agents' warm palette). */
 export const EPISODE_COLORS = ["#e6edf5", "#4dd0e1", "#b388ff", "#9ccc65"];

@@ -1,4 +1,4 @@
-// Checks data from the API against the frame schema (generated from hptvsim/viz/frames.py).
+// Checks data from the API against the frame schema (generated from hptvsim/episodes/frames.py).
 // A small JSON Schema subset: $ref, anyOf, enum, type, properties, required,
 // additionalProperties, items, prefixItems. Enough for every type frames.py generates.
 
