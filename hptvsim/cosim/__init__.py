@@ -23,7 +23,7 @@ from hptvsim._lazy import lazy_getattr
 
 if TYPE_CHECKING:
     from hptvsim.cosim.batched import BatchedSnapshot, BatchedVehicleSystem, NonFiniteStateError
-    from hptvsim.cosim.fmi import FmuError, FmuVariableError, Variable
+    from hptvsim.cosim.fmi import FmuError, FmuLoadError, FmuVariableError, Variable
     from hptvsim.cosim.fmi2 import Fmu2Instance
     from hptvsim.cosim.fmu_model import FmuModel, load_model
     from hptvsim.cosim.graph import (
@@ -55,6 +55,7 @@ __all__ = [
     "ExternalOutput",
     "Fmu2Instance",
     "FmuError",
+    "FmuLoadError",
     "FmuModel",
     "FmuSystemSnapshot",
     "FmuVariableError",
@@ -87,6 +88,7 @@ _WHERE = {
     "ExternalOutput": "hptvsim.cosim.graph",
     "Fmu2Instance": "hptvsim.cosim.fmi2",
     "FmuError": "hptvsim.cosim.fmi",
+    "FmuLoadError": "hptvsim.cosim.fmi",
     "FmuModel": "hptvsim.cosim.fmu_model",
     "FmuSystemSnapshot": "hptvsim.cosim.system",
     "FmuVariableError": "hptvsim.cosim.fmi",

@@ -160,9 +160,11 @@ def register(main: click.Group) -> None:
         reason = ""
         try:
             orch = Orchestrator(graph)
-        except (GraphError, FmuError, SimulationFailedError) as exc:
+        except (GraphError, FmuError, SimulationFailedError, FileNotFoundError) as exc:
             raise click.ClickException(str(exc)) from None
-        except ValueError as exc:  # a --set or start value that does not fit its input's type
+        except KeyError as exc:  # an unknown shipped vehicle (vehicle:<type>)
+            raise click.ClickException(str(exc.args[0]) if exc.args else repr(exc)) from None
+        except ValueError as exc:  # an unreadable FMU (FmuLoadError), a value that does not fit its type
             raise click.ClickException(str(exc)) from None
         with orch:
             rows.append([0.0, *orch.output_values()])
@@ -196,8 +198,9 @@ def register(main: click.Group) -> None:
     @click.option(
         "--libcosim",
         is_flag=True,
-        help="Leave out the connections to system connectors, which OSP libcosim refuses (the "
-        "wiring then lives in the hptvsim annotation only).",
+        help="Write what OSP libcosim runs: no connections to system connectors (the wiring then "
+        "lives in the hptvsim annotation only) and no Enumeration connectors (libcosim aborts on "
+        "them; a graph that connects, sets or drives an Enumeration is refused).",
     )
     def cosim_export_ssp(graph_file: Path, out_file: Path | None, libcosim: bool) -> None:
         """Write GRAPH_FILE (.toml or .json) as an SSP 1.0 archive with its FMUs."""

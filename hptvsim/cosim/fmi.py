@@ -14,11 +14,12 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import math
+import os
 from collections import deque
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, ClassVar, Final, Protocol
+from typing import Any, ClassVar, Final, Protocol, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -31,12 +32,15 @@ __all__ = [
     "F64Array",
     "FmuDiscardError",
     "FmuError",
+    "FmuLoadError",
     "FmuVariableError",
     "LoadedFmu",
     "Value",
     "Variable",
+    "array_refusal",
     "coerce_value",
     "kind_of",
+    "load_binary",
     "units_compatible",
 ]
 
@@ -97,6 +101,28 @@ class FmuDiscardError(FmuError):
         self.last_time = last_time
 
 
+class FmuLoadError(ValueError):
+    """An FMU file cannot be used here.
+
+    It is not a zip archive, has no or a malformed ``modelDescription.xml``, is not FMI 2.0 or
+    3.0 Co-Simulation, or has no binary for this platform (or one that does not load). The
+    message is one line: ``[component '<name>': ]<file>: <what is wrong>``. A missing file
+    raises :class:`FileNotFoundError` instead.
+
+    Attributes:
+        path: The FMU file.
+        problem: What is wrong with it.
+        component: The graph component that uses it, if known.
+    """
+
+    def __init__(self, path: Path | str, problem: str, *, component: str | None = None) -> None:
+        self.path = Path(path)
+        self.problem = " ".join(problem.split())  # one line
+        self.component = component
+        where = f"component '{component}': " if component is not None else ""
+        super().__init__(f"{where}{self.path}: {self.problem}")
+
+
 class FmuVariableError(KeyError):
     """A variable name is not in the FMU's model description (the message lists valid ones)."""
 
@@ -122,7 +148,10 @@ class Variable:
         items: Enumeration items ``(name, value)`` of its declared type.
         kind: What the master exchanges it as: ``Real`` (FMI 3: ``Float32``, ``Float64``),
             ``Integer`` (FMI 3: ``Int8`` to ``UInt64``), ``Enumeration``, ``Boolean``, ``String``,
-            or the FMI type itself for what it does not exchange (``Binary``, ``Clock``, arrays).
+            or the FMI type itself for what it does not exchange (``Binary``, ``Clock``; an
+            array variable: ``"<type> array"``).
+        dimensions: An FMI 3.0 array variable's size in each dimension (its start size where a
+            structural parameter sets it); ``()`` for a scalar.
     """
 
     name: str
@@ -137,10 +166,30 @@ class Variable:
     declared_type: str | None = None
     items: tuple[tuple[str, int], ...] = ()
     kind: str = ""
+    dimensions: tuple[int, ...] = ()
 
     def __post_init__(self) -> None:
         if not self.kind:
             object.__setattr__(self, "kind", kind_of(self.type))
+
+
+def array_refusal(var: Variable, what: str = "exchanged", label: str = "") -> str:
+    """Why an array variable cannot be used: it names the variable, its type and dimensions.
+
+    Args:
+        var: An array variable (:attr:`Variable.dimensions` not empty).
+        what: What the master does not do with arrays (``exchanged``, ``set``, ``bound``).
+        label: How to name the variable (default: its quoted name).
+
+    Returns:
+        E.g. ``'y' is a Float64 array variable of dimensions [2, 3]; array variables are not
+        exchanged (valid: scalar variables)``.
+    """
+    dims = ", ".join(str(d) for d in var.dimensions)
+    return (
+        f"{label or repr(var.name)} is a {var.type} array variable of dimensions [{dims}]; "
+        f"array variables are not {what} (valid: scalar variables)"
+    )
 
 
 def kind_of(fmi_type: str) -> str:
@@ -179,6 +228,8 @@ def coerce_value(var: Variable, value: Any, where: str = "") -> Value:
             and what would be valid).
     """
     label = where or repr(var.name)
+    if var.dimensions:
+        raise ValueError(array_refusal(var, "set", label))
     if var.kind == "String":
         if not isinstance(value, str):
             raise ValueError(f"{label} is a String variable; {value!r} is not text")
@@ -252,6 +303,7 @@ class LoadedFmu(Protocol):
     them; they know it by this interface only.
     """
 
+    path: Path  # the .fmu file
     identifier: str
     guid: str
     fmi_version: str  # "2.0" or "3.0"
@@ -265,6 +317,26 @@ class LoadedFmu(Protocol):
     def variable(self, name: str, *, causality: Iterable[str] | None = None) -> Variable:
         """A variable by name (see :meth:`hptvsim.cosim.fmu_model.FmuModel.variable`)."""
         ...
+
+
+_Slave = TypeVar("_Slave")
+
+
+def load_binary(model: LoadedFmu, make: Callable[[], _Slave]) -> _Slave:
+    """Load ``model``'s binary through FMPy (``make`` builds the FMPy slave).
+
+    FMPy raises a bare ``Exception`` when the library cannot be loaded, and then leaves the
+    working directory in the library's folder; it is restored here.
+
+    Raises:
+        FmuLoadError: The binary does not load (names the FMU file and FMPy's reason).
+    """
+    cwd = os.getcwd()
+    try:
+        return make()
+    except Exception as exc:  # FMPy: Exception, OSError, AttributeError (missing symbol)
+        os.chdir(cwd)
+        raise FmuLoadError(model.path, f"its binary does not load: {exc}") from None
 
 
 def units_compatible(a: Variable, model_a: LoadedFmu, b: Variable, model_b: LoadedFmu) -> bool:
@@ -284,6 +356,8 @@ def units_compatible(a: Variable, model_a: LoadedFmu, b: Variable, model_b: Load
 
 def _require_numeric(model: LoadedFmu, variables: Sequence[Variable]) -> None:
     for v in variables:
+        if v.dimensions:
+            raise ValueError(f"{model.identifier}: {array_refusal(v, 'bound')}")
         if v.kind not in NUMERIC_TYPES:
             raise ValueError(
                 f"{model.identifier}: '{v.name}' is a {v.type} variable; only "

@@ -52,6 +52,7 @@ from hptvsim.cosim.fmi import (
     _own_or_check,
     _require_numeric,
     coerce_value,
+    load_binary,
 )
 
 __all__ = ["Fmu2Instance", "FmuError"]
@@ -162,11 +163,14 @@ class Fmu2Instance(_Lifecycle):
         self.name = name
         self.log: deque[str] = deque(maxlen=200)
         self._callbacks, self._env_id = _new_callbacks(self.log)
-        self._slave = FMU2Slave(
-            guid=model.guid,
-            unzipDirectory=str(model.unzip_dir),
-            modelIdentifier=model.identifier,
-            instanceName=name,
+        self._slave = load_binary(
+            model,
+            lambda: FMU2Slave(
+                guid=model.guid,
+                unzipDirectory=str(model.unzip_dir),
+                modelIdentifier=model.identifier,
+                instanceName=name,
+            ),
         )
         self._fn = self._slave._functions  # the FMI C functions FMPy loaded, with argtypes set
         self._slave.instantiate(callbacks=self._callbacks, loggingOn=logging_on)

@@ -44,6 +44,7 @@ from hptvsim.cosim.fmi import (
     _own_or_check,
     _require_numeric,
     coerce_value,
+    load_binary,
 )
 
 __all__ = ["FMI3_CTYPES", "Fmu3Instance"]
@@ -110,11 +111,14 @@ class Fmu3Instance(_Lifecycle):
         self.name = name
         self.log: deque[str] = deque(maxlen=200)
         self._log_cb = fmi3LogMessageCallback(self._on_log)
-        self._slave = FMU3Slave(
-            guid=model.guid,
-            unzipDirectory=str(model.unzip_dir),
-            modelIdentifier=model.identifier,
-            instanceName=name,
+        self._slave = load_binary(
+            model,
+            lambda: FMU3Slave(
+                guid=model.guid,
+                unzipDirectory=str(model.unzip_dir),
+                modelIdentifier=model.identifier,
+                instanceName=name,
+            ),
         )
         self._fn = self._slave._functions
         try:

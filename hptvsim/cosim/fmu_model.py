@@ -14,14 +14,16 @@ import shutil
 import tempfile
 import threading
 import weakref
+import zipfile
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any, Final
 
+import fmpy
 from fmpy import extract, read_model_description
 
 from hptvsim._process import pid_alive
-from hptvsim.cosim.fmi import FmuError, FmuVariableError, Variable, _parse_start
+from hptvsim.cosim.fmi import FmuError, FmuLoadError, FmuVariableError, Variable, _parse_start
 from hptvsim.cosim.fmi2 import Fmu2Instance
 
 __all__ = ["FmuModel", "load_model"]
@@ -65,6 +67,46 @@ def _remove_orphaned_extractions() -> None:
             shutil.rmtree(folder, ignore_errors=True)
 
 
+def _binary_name(fmi_version: str, identifier: str) -> str:
+    """The archive member of the FMU's binary for this platform (FMI 2.0 and 3.0 layouts)."""
+    folder = fmpy.platform_tuple if fmi_version == "3.0" else fmpy.platform
+    return f"binaries/{folder}/{identifier}{fmpy.sharedLibraryExtension}"
+
+
+def _read_description(path: Path) -> Any:
+    """Read ``path``'s model description, refusing what cannot be run here in one line.
+
+    Raises:
+        FmuLoadError: Not a zip archive, no or a malformed ``modelDescription.xml``, not FMI 2.0
+            or 3.0 Co-Simulation, or no binary for this platform.
+    """
+    try:
+        with zipfile.ZipFile(path) as zf:
+            members = set(zf.namelist())
+    except (zipfile.BadZipFile, OSError) as exc:
+        raise FmuLoadError(path, f"not an FMU: not a zip archive ({exc})") from None
+    if "modelDescription.xml" not in members:
+        raise FmuLoadError(path, "not an FMU: no modelDescription.xml at the root of the archive")
+    try:
+        md = read_model_description(str(path))
+    except Exception as exc:  # FMPy and lxml raise many kinds for a broken XML
+        raise FmuLoadError(path, f"malformed modelDescription.xml: {exc}") from None
+    if md.fmiVersion not in ("2.0", "3.0") or md.coSimulation is None:
+        raise FmuLoadError(
+            path,
+            "an FMI 2.0 or 3.0 Co-Simulation FMU is required "
+            f"(got FMI {md.fmiVersion}{'' if md.coSimulation else ' without Co-Simulation'})",
+        )
+    binary = _binary_name(md.fmiVersion, md.coSimulation.modelIdentifier)
+    if binary not in members:
+        present = sorted(m for m in members if m.startswith("binaries/") and not m.endswith("/"))
+        shown = ", ".join(present[:6]) + (f" and {len(present) - 6} more" if len(present) > 6 else "")
+        raise FmuLoadError(
+            path, f"no binary for this platform (looked for {binary}; the FMU's binaries: {shown or 'none'})"
+        )
+    return md
+
+
 class FmuModel:
     """An FMU loaded once: model description read, archive extracted (removed at exit).
 
@@ -73,20 +115,17 @@ class FmuModel:
 
     Raises:
         FileNotFoundError: ``path`` does not exist.
-        ValueError: The FMU is not FMI 2.0 Co-Simulation.
+        FmuLoadError: The file is not an FMI 2.0 or 3.0 Co-Simulation FMU that runs here: not a
+            zip archive, no or a malformed ``modelDescription.xml``, another FMI version or
+            interface, or no binary for this platform (one line naming the file and the problem).
     """
 
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
         if not self.path.is_file():
             raise FileNotFoundError(f"FMU not found: {self.path}")
-        self.model_description = read_model_description(str(self.path))
+        self.model_description = _read_description(self.path)
         md = self.model_description
-        if md.fmiVersion not in ("2.0", "3.0") or md.coSimulation is None:
-            raise ValueError(
-                f"{self.path}: an FMI 2.0 or 3.0 Co-Simulation FMU is required "
-                f"(got FMI {md.fmiVersion}{'' if md.coSimulation else ' without Co-Simulation'})"
-            )
         self.fmi_version: str = md.fmiVersion
         cs = md.coSimulation
         self.identifier: str = cs.modelIdentifier
@@ -103,7 +142,7 @@ class FmuModel:
         self.variables: dict[str, Variable] = {}
         for v in md.modelVariables:
             dt = v.declaredType
-            array = bool(getattr(v, "dimensions", None))
+            shape = tuple(int(d) for d in getattr(v, "shape", None) or ())
             self.variables[v.name] = Variable(
                 name=v.name,
                 value_reference=int(v.valueReference),
@@ -116,7 +155,8 @@ class FmuModel:
                 display_unit=getattr(v, "displayUnit", None) or (dt.displayUnit if dt is not None else None),
                 declared_type=dt.name if dt is not None else None,
                 items=tuple((i.name, int(i.value)) for i in (dt.items if dt is not None else []) or []),
-                kind=f"{v.type} array" if array else "",
+                kind=f"{v.type} array" if shape else "",
+                dimensions=shape,
             )
 
     def names(self, causality: str | None = None) -> list[str]:
@@ -144,7 +184,9 @@ class FmuModel:
         """Create an instance (see :class:`Fmu2Instance`).
 
         Raises:
-            FmuError: The FMU can be instantiated only once per process and already is.
+            FmuError: The FMU can be instantiated only once per process and already is, or
+                instantiation failed.
+            FmuLoadError: Its binary does not load (names the file and why).
         """
         name = name or self.identifier
         if self.once_per_process and self.live:
@@ -175,6 +217,10 @@ def load_model(path: str | Path) -> FmuModel:
 
     The cache key is the resolved path with the file's size and modification time, so an FMU
     rebuilt in place is loaded afresh.
+
+    Raises:
+        FileNotFoundError: ``path`` does not exist.
+        FmuLoadError: The file cannot be run here (see :class:`FmuModel`).
     """
     resolved = Path(path).resolve()
     if not resolved.is_file():

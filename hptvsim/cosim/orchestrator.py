@@ -17,9 +17,10 @@ Master algorithm
 Types
     Ports of every FMI 2.0 type: Real, Integer, Enumeration and Boolean values travel in the
     float64 signal array (integers and booleans exactly); Strings travel by name, outside the
-    hot path. A connection must join variables of one type (Enumerations of one declared type)
-    and compatible units (declared types' units included, see
-    :func:`~hptvsim.cosim.fmi.units_compatible`).
+    hot path (a graph may read Strings only). A connection must join variables of one type
+    (Enumerations of one declared type) and compatible units (declared types' units included,
+    see :func:`~hptvsim.cosim.fmi.units_compatible`). FMI 3.0 array variables are not
+    exchanged: a port naming one is refused with the variable's name and dimensions.
 
 Initialisation
     :meth:`Orchestrator.reset` follows FMI 2.0's order for every component: ``fmi2Reset`` (no
@@ -69,14 +70,16 @@ from hptvsim.cosim.fmi import (
     F64Array,
     FmuDiscardError,
     FmuError,
+    FmuLoadError,
     Value,
     Variable,
+    array_refusal,
     coerce_value,
     units_compatible,
 )
 from hptvsim.cosim.fmi2 import Fmu2Instance
 from hptvsim.cosim.fmu_model import load_model
-from hptvsim.cosim.graph import Graph, GraphError, Port
+from hptvsim.cosim.graph import Graph, GraphError, Port, resolve_fmu
 
 __all__ = [
     "INIT_ITERATIONS",
@@ -192,8 +195,14 @@ class Orchestrator:
         logging_on: Ask the FMUs for debug logging (errors are always logged).
 
     Raises:
-        GraphError: A port names a variable the FMU lacks, a connection goes from a non-output
-            or into a non-input, or units differ.
+        FileNotFoundError: A component's FMU file is missing (names the component and file).
+        KeyError: A component's FMU reference names an unknown shipped FMU
+            (:func:`~hptvsim.cosim.graph.resolve_fmu`).
+        FmuLoadError: A component's FMU cannot be run here: not a zip archive, no or a malformed
+            ``modelDescription.xml``, not FMI 2.0/3.0 Co-Simulation, no binary for this platform
+            or one that does not load (one line naming the component, the file and the problem).
+        GraphError: A port names a variable the FMU lacks or an array variable, a connection
+            goes from a non-output or into a non-input, or types or units differ.
         FmuError: Instantiation or initialisation failed (names the component).
     """
 
@@ -205,12 +214,16 @@ class Orchestrator:
         self._failure: FmuError | None = None
         self._steps = 0
         self._snapshots: weakref.WeakSet[Snapshot] = weakref.WeakSet()
-        paths = graph.fmu_paths()
         self._instances: list[Fmu2Instance] = []
         try:
             for comp in graph.components:
-                model = load_model(paths[comp.name])
-                inst = model.instantiate(comp.name, logging_on=logging_on)
+                try:
+                    model = load_model(resolve_fmu(comp.fmu, graph.base_dir))
+                    inst = model.instantiate(comp.name, logging_on=logging_on)
+                except FileNotFoundError as exc:
+                    raise FileNotFoundError(f"component '{comp.name}': {exc}") from None
+                except FmuLoadError as exc:
+                    raise FmuLoadError(exc.path, exc.problem, component=comp.name) from None
                 inst.keep_state = graph.retry_rejected_steps and model.can_get_set_state
                 self._instances.append(inst)
             self._wire()
@@ -225,11 +238,17 @@ class Orchestrator:
         inst = self._instances[self._index[port.component]]
         var = inst.model.variables.get(port.variable)
         if var is None or var.causality not in causalities:
-            valid = [f"{n} ({v.type})" for n, v in inst.model.variables.items() if v.causality in causalities]
+            valid = [
+                f"{n} ({v.type})"
+                for n, v in inst.model.variables.items()
+                if v.causality in causalities and not v.dimensions
+            ]
             raise GraphError(
                 f"{what} {port}: {inst.model.identifier} has no {'/'.join(causalities)} named "
                 f"{port.variable!r} (valid: {', '.join(valid)})"
             )
+        if var.dimensions:
+            raise GraphError(f"{what} {port}: {array_refusal(var)}")
         if var.causality == "parameter" and var.variability != "tunable":
             raise GraphError(
                 f"{what} {port}: parameter {port.variable!r} is not tunable, so it cannot be driven"
@@ -309,11 +328,12 @@ class Orchestrator:
         )
         self.input_names: tuple[str, ...] = tuple(i.name for i in g.inputs)
         self.output_names: tuple[str, ...] = tuple(o.name for o in g.outputs)
-        self._output_gather = np.array(
-            [position.get(o.source, 0) for o in g.outputs], dtype=np.intp
-        )  # String outputs: a placeholder, set to NaN after every gather
-        self._string_outputs = np.array([t == "String" for t in self.output_types], dtype=bool)
-        self._outputs: F64Array = np.zeros(len(g.outputs))
+        # String outputs travel by name (output_values); their slots in the outputs array hold NaN
+        numeric = [k for k, t in enumerate(self.output_types) if t != "String"]
+        self._numeric_outputs = np.array(numeric, dtype=np.intp)
+        self._output_gather = np.array([position[g.outputs[k].source] for k in numeric], dtype=np.intp)
+        self._all_numeric = len(numeric) == len(g.outputs)
+        self._outputs: F64Array = np.full(len(g.outputs), math.nan)
 
         # Inputs: each component's driven numeric inputs with the signal index that drives them.
         driven: list[list[tuple[str, int]]] = [[] for _ in g.components]
@@ -399,9 +419,10 @@ class Orchestrator:
             self._slots[k].instance.set_values(values)
 
     def _gather_outputs(self) -> None:
-        np.take(self._signals, self._output_gather, out=self._outputs)
-        if self._has_strings:
-            self._outputs[self._string_outputs] = math.nan
+        if self._all_numeric:  # the hot path: one take, no allocation
+            np.take(self._signals, self._output_gather, out=self._outputs)
+        else:
+            self._outputs[self._numeric_outputs] = self._signals[self._output_gather]
 
     # -- properties ---------------------------------------------------------------------------------
 
@@ -412,7 +433,10 @@ class Orchestrator:
 
     @property
     def outputs(self) -> F64Array:
-        """External output values (graph order), refreshed by :meth:`step` and :meth:`reset`."""
+        """External output values (graph order), refreshed by :meth:`step` and :meth:`reset`.
+
+        A String output's slot holds NaN; :meth:`output_values` has its text.
+        """
         return self._outputs
 
     @property

@@ -194,14 +194,20 @@ def export_ssp(graph: Graph, path: Path, *, libcosim: bool = False) -> Path:
     Args:
         graph: The graph; its FMUs are resolved with :meth:`Graph.fmu_paths` and copied in.
         path: The ``.ssp`` to write (written to a temporary file first, then renamed).
-        libcosim: Leave out the connections to and from system connectors (libcosim's SSP parser
-            requires ``startElement`` and ``endElement`` on every connection and refuses the
-            file otherwise); the external inputs' targets and outputs' sources are then only in
-            the hptvsim annotation (and the inputs' start values in the parameter bindings).
+        libcosim: Write what OSP libcosim (0.x) runs: leave out the connections to and from
+            system connectors (libcosim's SSP parser requires ``startElement`` and ``endElement``
+            on every connection and refuses the file otherwise), so the external inputs' targets
+            and outputs' sources are only in the hptvsim annotation (and the inputs' start values
+            in the parameter bindings); and leave out the components' Enumeration connectors
+            (libcosim aborts the whole process on ``ssc:Enumeration`` and ``ssv:Enumeration``:
+            "Don't know how to handle Enumeration type!", and ignores FMI 2.0 Enumeration
+            variables), so a graph that connects, sets or drives an Enumeration variable is
+            refused.
 
     Raises:
-        GraphError: An FMU that cannot be found or read, or a port naming a variable the FMU
-            does not have.
+        GraphError: An FMU that cannot be found or read, a port naming a variable the FMU
+            does not have, or (``libcosim``) a connection, parameter or external input on an
+            Enumeration variable.
     """
     path = Path(path)
     try:
@@ -213,13 +219,20 @@ def export_ssp(graph: Graph, path: Path, *, libcosim: bool = False) -> Path:
     for fmu_file in sources:
         variables[fmu_file] = _read_variables(fmu_file)
 
-    def var_of(port: Port, what: str) -> _Var:
+    def var_of(port: Port, what: str, *, used: bool = False) -> _Var:
         vs = variables[paths[port.component].resolve()]
         if port.variable not in vs:
             raise GraphError(
                 f"{what} {port}: the FMU {paths[port.component].name} has no variable {port.variable!r}"
             )
-        return vs[port.variable]
+        var = vs[port.variable]
+        if used and libcosim and var.ssp_type == "Enumeration":
+            raise GraphError(
+                f"{what} {port}: {port.variable!r} is an Enumeration variable, which OSP libcosim cannot "
+                "exchange or set (it ignores FMI 2.0 Enumerations and aborts on Enumeration connectors "
+                "and values); export without --libcosim (libcosim=False)"
+            )
+        return var
 
     root = ET.Element(_ssd("SystemStructureDescription"), {"version": "1.0", "name": graph.name})
     system = ET.SubElement(root, _ssd("System"), {"name": graph.name})
@@ -233,6 +246,7 @@ def export_ssp(graph: Graph, path: Path, *, libcosim: bool = False) -> Path:
             _type_element(c, var_of(out.source, f"external output {out.name!r} source"))
     elements = ET.SubElement(system, _ssd("Elements"))
     starts: dict[Port, Value] = {t: ext.start for ext in graph.inputs for t in ext.targets}
+    driver: dict[Port, str] = {t: ext.name for ext in graph.inputs for t in ext.targets}
     for comp in graph.components:
         fmu = paths[comp.name].resolve()
         vs = variables[fmu]
@@ -242,7 +256,7 @@ def export_ssp(graph: Graph, path: Path, *, libcosim: bool = False) -> Path:
         connectors = ET.SubElement(elem, _ssd("Connectors"))
         for name, var in vs.items():
             kind = _KINDS.get(var.causality)
-            if kind is not None:
+            if kind is not None and not (libcosim and var.ssp_type == "Enumeration"):
                 c = ET.SubElement(connectors, _ssd("Connector"), {"name": name, "kind": kind})
                 _type_element(c, var)
         values: dict[str, Value] = dict(comp.parameters)
@@ -256,7 +270,9 @@ def export_ssp(graph: Graph, path: Path, *, libcosim: bool = False) -> Path:
             pset = ET.SubElement(holder, _ssv("ParameterSet"), {"version": "1.0", "name": "parameters"})
             params = ET.SubElement(pset, _ssv("Parameters"))
             for name, value in values.items():
-                var = var_of(Port(component=comp.name, variable=name), "parameter")
+                port = Port(component=comp.name, variable=name)
+                what = f"external input {driver[port]!r} target" if port in driver else "parameter"
+                var = var_of(port, what, used=True)
                 p = ET.SubElement(params, _ssv("Parameter"), {"name": name})
                 attrs = {"value": _text(value, var.ssp_type, var)}
                 if var.ssp_type == "Enumeration" and var.declared:
@@ -264,8 +280,8 @@ def export_ssp(graph: Graph, path: Path, *, libcosim: bool = False) -> Path:
                 ET.SubElement(p, _ssv(var.ssp_type), attrs)
     conns = ET.SubElement(system, _ssd("Connections"))
     for conn in graph.connections:
-        var_of(conn.source, "connection source")
-        var_of(conn.target, "connection target")
+        var_of(conn.source, "connection source", used=True)
+        var_of(conn.target, "connection target", used=True)
         ET.SubElement(
             conns,
             _ssd("Connection"),

@@ -18,7 +18,7 @@ from hptvsim.cosim.interface import SystemSpec, VehicleSpec
 from hptvsim.cosim.system import FmuVehicleSystem
 from hptvsim.cosim.vehicles import ExternalVehicleType, VehicleFileError, load_vehicle_file
 from hptvsim.dynamics import ParameterError
-from hptvsim.viz.episode import run_episode
+from hptvsim.episodes.runner import run_episode
 from hptvsim.world.scenario import ScenarioError, load_scenario, scenario_dir
 
 __all__ = ["unicycle_fmu"]

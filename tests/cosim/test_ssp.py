@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import dataclasses
+import json
 import shutil
+import subprocess
+import sys
 import zipfile
 from pathlib import Path
 
@@ -11,9 +14,19 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 from cosim_fixtures import lowpass_fmu, lowpass_step
+from typed_fmus import build_typed_fmu
 
 from hptvsim.cli import main
-from hptvsim.cosim.graph import Graph, GraphError, load_graph
+from hptvsim.cosim.graph import (
+    Component,
+    Connection,
+    ExternalInput,
+    ExternalOutput,
+    Graph,
+    GraphError,
+    Port,
+    load_graph,
+)
 from hptvsim.cosim.orchestrator import Orchestrator
 from hptvsim.cosim.ssp import export_ssp, load_ssp
 
@@ -274,3 +287,128 @@ def test_not_a_zip(tmp_path: Path) -> None:
     bad.write_text("hello")
     with pytest.raises(GraphError, match="not an SSP archive"):
         load_ssp(bad)
+
+
+# --- the libcosim flavour and Enumeration variables ------------------------------------------------
+
+_LIBCOSIM_RUN = """
+import json, sys
+from libcosimpy.CosimExecution import CosimExecution
+from libcosimpy.CosimObserver import CosimObserver
+
+ssp, stop_ns, wanted = sys.argv[1], int(sys.argv[2]), json.loads(sys.argv[3])
+execution = CosimExecution.from_ssp_file(ssp)
+observer = CosimObserver.create_last_value()
+execution.add_observer(observer)
+assert execution.simulate_until(stop_ns)
+values = []
+for component, variable, kind in wanted:
+    index = execution.slave_index_from_instance_name(component)
+    refs = {v.name.decode(): v.reference for v in execution.slave_variables(index)}
+    read = getattr(observer, f"last_{kind}_values")
+    values += read(index, [refs[variable]])
+print("VALUES", json.dumps(values))  # libcosim logs to stdout as well
+"""
+
+
+def _in_libcosim(ssp: Path, stop_time: float, wanted: list[tuple[str, str, str]]) -> list[object]:
+    """Run ``ssp`` in OSP libcosim (libcosimpy) in a child process, which libcosim may abort.
+
+    Returns:
+        The last values of ``wanted`` (component, variable, ``real``/``integer``/``boolean``).
+    """
+    pytest.importorskip("libcosimpy.CosimExecution")
+    args = [sys.executable, "-c", _LIBCOSIM_RUN, str(ssp), str(round(stop_time * 1e9)), json.dumps(wanted)]
+    run = subprocess.run(args, capture_output=True, text=True, timeout=120, check=False)
+    assert run.returncode == 0, run.stderr[-2000:]
+    (line,) = [ln for ln in run.stdout.splitlines() if ln.startswith("VALUES ")]
+    return list(json.loads(line.removeprefix("VALUES ")))
+
+
+@pytest.fixture(scope="module")
+def types_fmu(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The Types test FMU (every FMI 2.0 type; ``e_in``, ``e_out`` are Enumerations)."""
+    return build_typed_fmu("Types", tmp_path_factory.mktemp("types"))
+
+
+def _types_and_filter(types: Path, lowpass: Path) -> Graph:
+    """Types (its Enumerations unused) feeding LowPass; Real, Integer and Boolean outputs."""
+    return Graph(
+        components=(
+            Component(name="t", fmu=str(types), parameters={"gain": 3.0, "offset": -4, "invert": True}),
+            Component(name="shaper", fmu=str(lowpass), parameters={"T": 0.5}),
+        ),
+        connections=(Connection(source=Port.parse("t.r_out"), target=Port.parse("shaper.u")),),
+        inputs=(ExternalInput(name="r", targets=(Port.parse("t.r_in"),), start=1.5),),
+        outputs=tuple(
+            ExternalOutput(name=p.replace(".", "_"), source=Port.parse(p))
+            for p in ("t.r_out", "t.i_out", "t.b_out", "shaper.y")
+        ),
+        step_size=0.1,
+    )
+
+
+def test_the_libcosim_export_has_no_enumeration_connectors_and_runs_there(
+    tmp_path: Path, lowpass_fmu: Path, types_fmu: Path
+) -> None:
+    graph = _types_and_filter(types_fmu, lowpass_fmu)
+    ssp = export_ssp(graph, tmp_path / "lc.ssp", libcosim=True)
+    wanted = [
+        ("t", "r_out", "real"),
+        ("t", "i_out", "integer"),
+        ("t", "b_out", "boolean"),
+        ("shaper", "y", "real"),
+    ]
+    theirs = _in_libcosim(ssp, 0.5, wanted)  # libcosim aborts on an ssc:Enumeration connector
+    with Orchestrator(graph) as orch:
+        orch.run(5)
+        ours = orch.output_values()
+    # after k = 5 steps: gain * r_in + t, i_in + offset + k, b_in XOR invert XOR (k odd)
+    assert ours[:3] == [3.0 * 1.5 + 0.5, 0 - 4 + 5, False]
+    assert theirs[:3] == ours[:3]
+    # libcosim keeps time in integer nanoseconds: from the third step on, the step size it passes
+    # to fmi2DoStep differs from 0.1 in the last bits (the filter's y and u still agree before
+    # that step), which the filter's exp(-h / T) shows
+    y_theirs, y_ours = theirs[3], ours[3]
+    assert isinstance(y_theirs, float) and isinstance(y_ours, float)
+    assert y_ours > 2.0  # the filter moved towards r_out
+    assert abs(y_theirs - y_ours) <= 1e-14 * y_ours
+    with zipfile.ZipFile(ssp) as zf:
+        ssd = zf.read("SystemStructure.ssd").decode()
+    assert "Enumeration" not in ssd
+    assert '<ssd:Connector name="i_out" kind="output">' in ssd
+    _same(graph, load_ssp(ssp))
+    # the standard flavour keeps them
+    with zipfile.ZipFile(export_ssp(graph, tmp_path / "std.ssp")) as zf:
+        assert zf.read("SystemStructure.ssd").decode().count('<ssc:Enumeration name="Mode" />') == 2
+
+
+def test_the_libcosim_export_refuses_enumerations_in_use(
+    tmp_path: Path, lowpass_fmu: Path, types_fmu: Path
+) -> None:
+    base = _types_and_filter(types_fmu, lowpass_fmu)
+    t, shaper = base.components
+    connected = dataclasses.replace(
+        base,
+        components=(t, shaper, Component(name="t2", fmu=str(types_fmu))),
+        connections=(Connection(source=Port.parse("t.e_out"), target=Port.parse("t2.e_in")),),
+    )
+    driven = dataclasses.replace(
+        base, inputs=(ExternalInput(name="mode", targets=(Port.parse("t.e_in"),), start=2),)
+    )
+    set_ = dataclasses.replace(base, components=(dataclasses.replace(t, parameters={"e_in": 3}), shaper))
+    for graph, message in (
+        (connected, "connection source t.e_out: 'e_out' is an Enumeration variable, which OSP libcosim"),
+        (driven, "external input 'mode' target t.e_in: 'e_in' is an Enumeration variable"),
+        (set_, "parameter t.e_in: 'e_in' is an Enumeration variable"),
+    ):
+        with pytest.raises(GraphError, match=message.replace(".", r"\.")):
+            export_ssp(graph, tmp_path / "x.ssp", libcosim=True)
+        export_ssp(graph, tmp_path / "std.ssp")  # the standard flavour writes them
+        path = tmp_path / "g.json"
+        path.write_text(graph.to_json())
+        res = CliRunner().invoke(main, ["cosim", "export-ssp", str(path), "--libcosim"])
+        assert res.exit_code == 1 and "Traceback" not in res.output
+        (line,) = res.output.strip().splitlines()
+        assert line.startswith(f"Error: {message}")
+        assert line.endswith("export without --libcosim (libcosim=False)")

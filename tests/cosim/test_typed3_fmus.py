@@ -33,7 +33,7 @@ from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi3 import FMU3Model, FMU3Slave
 from fmpy.validation import validate_fmu
-from typed3_fmus import INSTANTIATION_TOKENS3, TYPED3_FMUS, VALUE_REFERENCES3, typed3_fmus
+from typed3_fmus import INSTANTIATION_TOKENS3, TYPED3_FMUS, VALUE_REFERENCES3, build_typed3_fmu, typed3_fmus
 
 __all__ = ["typed3_fmus"]  # the fixture, imported for pytest
 
@@ -558,3 +558,53 @@ def test_inituser3_direct_feedthrough_in_initialization_and_step_mode(
     assert fmu.getFloat64([y]) == [0.0]
     fmu.freeInstance()
     assert log == []
+
+
+# --- Arrays3 ------------------------------------------------------------------------------------
+
+
+def test_arrays3_is_valid_and_simulates_its_arrays(tmp_path: Path) -> None:
+    """The array test FMU (not in TYPED3_FMUS): FMPy reads its dimensions and simulates it."""
+    path = str(build_typed3_fmu("Arrays3", tmp_path))
+    assert validate_fmu(path) == []
+    md = read_model_description(path)
+    assert {v.name: v.valueReference for v in md.modelVariables} == VALUE_REFERENCES3["Arrays3"]
+    assert {v.name: v.shape for v in md.modelVariables} == {
+        "time": (),
+        "u": (3,),
+        "x": (),
+        "gain": (),
+        "y": (3,),
+        "total": (),
+        "grid": (2, 3),
+    }
+    start = {"u": [0.5, -1.0, 4.0], "x": 2.0, "gain": 3.0}
+    result = simulate_fmu(path, start_values=start, stop_time=0.2, output_interval=0.1)
+    assert len(result) == 3
+    for row in result:
+        assert row["y"].tolist() == [1.5, -3.0, 12.0]
+        assert row["total"] == 0.5 - 1.0 + 4.0 + 2.0
+        assert row["grid"].tolist() == [[0.5, -1.0, 4.0], [1.0, -2.0, 8.0]]
+
+
+def test_arrays3_gets_and_sets_arrays_in_the_array_convention(tmp_path: Path, log: list[LogEntry]) -> None:
+    unzipdir = extract(str(build_typed3_fmu("Arrays3", tmp_path)), str(tmp_path / "unzipped"))
+    vr = VALUE_REFERENCES3["Arrays3"]
+    fmu = slave(unzipdir, "Arrays3", log)
+    fmu.enterInitializationMode(startTime=0.0)
+    # y (3 values), total (1), grid (2 x 3, row-major) from the start values u = 1 2 3, gain = 2
+    assert fmu.getFloat64([vr["y"], vr["total"], vr["grid"]], nValues=10) == [2, 4, 6, 6, 1, 2, 3, 2, 4, 6]
+    fmu.setFloat64([vr["u"], vr["x"]], [1.0, 0.0, -1.0, 5.0])  # u: 3 values, then x
+    assert fmu.getFloat64([vr["total"], vr["y"]], nValues=4) == [5.0, 2.0, 0.0, -2.0]
+    state = fmu.getFMUState()
+    expect_error(
+        lambda: fmu.getFloat64([vr["y"]], nValues=1),
+        log,
+        "nValues = 1 but the 1 value reference(s) refer to 3 scalar value(s)",
+    )
+    fmu.setFMUState(state)
+    fmu.freeFMUState(state)
+    expect_error(
+        lambda: fmu.setFloat64([vr["u"]], [1.0]), log, "nValues = 1 but the 1 value reference(s) refer to 3"
+    )
+    fmu.freeInstance()

@@ -14,8 +14,8 @@ from hptvsim.cosim.interface import SystemSpec, VehicleSpec
 from hptvsim.cosim.system import FmuVehicleSystem
 from hptvsim.cosim.vehicles import VehicleFileError, load_vehicle_file
 from hptvsim.dynamics import BUILTIN_VEHICLES, ParameterError, VehicleType
+from hptvsim.episodes.runner import run_episode
 from hptvsim.fmu import fmu_for
-from hptvsim.viz.episode import run_episode
 from hptvsim.world.scenario import ScenarioError, load_scenario, scenario_dir
 
 BLUEROV = scenario_dir() / "vehicles" / "bluerov2_heavy.toml"

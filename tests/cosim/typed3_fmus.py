@@ -13,6 +13,9 @@ packed with its sources by :func:`build_typed3_fmu`:
   Mode too.
 * ``Terminator3``: ends the simulation itself: fmi3DoStep returns fmi3OK with
   ``terminateSimulation = fmi3True`` and ``lastSuccessfulTime = stop_at``.
+* ``Arrays3`` (not in :data:`TYPED3_FMUS`; built on its own with :func:`build_typed3_fmu`):
+  array variables (``<Dimension>``) beside scalars, which a master exchanging scalars only must
+  refuse by name.
 
 Every FMU can get, set and serialize its FMU state (a struct copy). The FMI 3.0 layout: the
 binary is ``binaries/<fmpy.platform_tuple>/<id>.so`` (``x86_64-linux`` here), the sources are
@@ -64,6 +67,7 @@ VALUE_REFERENCES3: dict[str, dict[str, int]] = {
     },
     "InitUser3": {"time": 0, "u": 1, "a": 2, "b": 3, "y": 4},
     "Terminator3": {"time": 0, "y": 1, "stop_at": 2},
+    "Arrays3": {"time": 0, "u": 1, "x": 2, "gain": 3, "y": 4, "total": 5, "grid": 6},
 }
 """Each FMU's value references by variable name (the C files use the same numbers)."""
 
@@ -206,6 +210,37 @@ _SPECS: dict[str, _Spec] = {
     ),
 }
 
+_SPECS["Arrays3"] = _Spec(
+    source="arrays3.c",
+    token="{b4e81f3a-5c27-4d90-a6e2-93f0d7c1b58e}",
+    description="Array variables beside scalars: y = gain * u, total = sum(u) + x, grid[i][j] = (i + 1) u[j]",
+    stop_time=1.0,
+    step_size=0.1,
+    units=_UNIT_S,
+    variables=_TIME
+    + """
+    <Float64 name="u" valueReference="1" causality="input" variability="continuous" start="1 2 3"
+      description="Input, an array of 3"><Dimension start="3"/></Float64>
+    <Float64 name="x" valueReference="2" causality="input" variability="continuous" start="0.0"
+      description="Scalar input"/>
+    <Float64 name="gain" valueReference="3" causality="parameter" variability="tunable" start="2.0"
+      description="Gain of y"/>
+    <Float64 name="y" valueReference="4" causality="output" variability="continuous" initial="calculated"
+      description="gain * u, an array of 3"><Dimension start="3"/></Float64>
+    <Float64 name="total" valueReference="5" causality="output" variability="continuous"
+      initial="calculated" description="u[0] + u[1] + u[2] + x"/>
+    <Float64 name="grid" valueReference="6" causality="output" variability="continuous"
+      initial="calculated" description="grid[i][j] = (i + 1) * u[j], an array of 2 x 3">
+      <Dimension start="2"/><Dimension start="3"/></Float64>""",
+    structure="""
+    <Output valueReference="4" dependencies="1"/>
+    <Output valueReference="5" dependencies="1 2"/>
+    <Output valueReference="6" dependencies="1"/>
+    <InitialUnknown valueReference="4" dependencies="1 3"/>
+    <InitialUnknown valueReference="5" dependencies="1 2"/>
+    <InitialUnknown valueReference="6" dependencies="1"/>""",
+)
+
 INSTANTIATION_TOKENS3: dict[str, str] = {name: spec.token for name, spec in _SPECS.items()}
 """Each FMU's instantiationToken (the C files check the same strings)."""
 
@@ -214,7 +249,7 @@ def model_description_xml3(name: str) -> str:
     """The ``modelDescription.xml`` (FMI 3.0) of the test FMU ``name``.
 
     Args:
-        name: One of :data:`TYPED3_FMUS`.
+        name: One of :data:`TYPED3_FMUS`, or ``Arrays3``.
 
     Returns:
         The XML text.
@@ -244,7 +279,7 @@ def build_description_xml3(name: str) -> str:
     """The ``sources/buildDescription.xml`` (FMI 3.0) of the test FMU ``name``.
 
     Args:
-        name: One of :data:`TYPED3_FMUS`.
+        name: One of :data:`TYPED3_FMUS`, or ``Arrays3``.
 
     Returns:
         The XML text: one build configuration, the model's C file (which includes the header
@@ -268,14 +303,14 @@ def build_typed3_fmu(name: str, out_dir: Path) -> Path:
     under ``sources/``, the C sources and ``buildDescription.xml``.
 
     Args:
-        name: One of :data:`TYPED3_FMUS`.
+        name: One of :data:`TYPED3_FMUS`, or ``Arrays3``.
         out_dir: Directory for the FMU and its unpacked build tree (``out_dir/<name>``).
 
     Returns:
         The path of the FMU.
 
     Raises:
-        KeyError: ``name`` is not one of :data:`TYPED3_FMUS`.
+        KeyError: ``name`` is not one of :data:`TYPED3_FMUS` or ``Arrays3``.
         subprocess.CalledProcessError: gcc failed.
     """
     spec = _SPECS[name]

@@ -1,7 +1,8 @@
 /*
  * typed3_fmu.h: the FMI 3.0 Co-Simulation interface shared by hptvsim's hand-written FMI 3 test
- * FMUs (Types3, InitUser3, Terminator3; see tests/cosim/typed3_fmus.py), built against the FMI 3.0
- * headers shipped with FMPy (fmi3Functions.h, fmi3FunctionTypes.h, fmi3PlatformTypes.h).
+ * FMUs (Types3, InitUser3, Terminator3, Arrays3; see tests/cosim/typed3_fmus.py), built against
+ * the FMI 3.0 headers shipped with FMPy (fmi3Functions.h, fmi3FunctionTypes.h,
+ * fmi3PlatformTypes.h).
  *
  * A model file defines, before it includes this header:
  *   MODEL_NAME    the model's name (its modelIdentifier), for log messages and FMU states;
@@ -11,10 +12,13 @@
  * and, after it, the hooks declared below (model_variables, model_start, model_refresh,
  * model_exit_init, model_do_step).
  *
- * Every variable is a scalar. Values are get and set with the FMI 3.0 array convention
- * (nValueReferences value references, nValues values): for scalars nValues must equal
- * nValueReferences. Enumerations are accessed with fmi3GetInt64 / fmi3SetInt64 and stored as
- * int64_t; the independent variable (time) can be read as Float64.
+ * A numeric variable (Float, Int, UInt, Boolean, Enumeration) is a scalar or, when its field in
+ * model_data is a C array, an array variable of that many values in row-major order (FMI 3.0,
+ * section 2.2.9); Strings and Binaries are scalars. Values are get and set with the FMI 3.0 array
+ * convention (nValueReferences value references, nValues values): nValues must equal the number
+ * of scalar values the value references refer to (nValueReferences for scalars). Enumerations
+ * are accessed with fmi3GetInt64 / fmi3SetInt64 and stored as int64_t; the independent variable
+ * (time) can be read as Float64.
  *
  * State machine (FMI 3.0, Co-Simulation without Event Mode, clocks or intermediate update):
  *   fmi3InstantiateCoSimulation -> Instantiated -> fmi3EnterInitializationMode
@@ -64,14 +68,15 @@ typedef enum {
 } var_type;
 typedef enum { K_INDEPENDENT, K_INPUT, K_TUNABLE, K_OUTPUT } var_kind;
 
-/* One scalar variable: where it lives in the FMU state, who may set it, and its legal range. */
+/* One variable (a scalar or an array, see above): where it lives in the FMU state, who may set
+ * it, and the legal range of its values. */
 typedef struct {
     const char *name;
     fmi3ValueReference vr;
     var_type type;
     var_kind kind;
     size_t offset; /* into fmu_snapshot */
-    size_t size;   /* of the field: the capacity of a String buffer */
+    size_t size;   /* of the field: the capacity of a String buffer, the bytes of an array */
     double min, max;
 } var_info;
 
@@ -389,13 +394,31 @@ static fmi3Status check_settable(fmu_instance *in, const char *fn, const var_inf
     return fmi3OK;
 }
 
-/* The checks every fmi3Get and fmi3Set starts with: state, arguments, nValues. */
+/* The number of scalar values of variable v: 1 for a scalar, the number of elements of an array
+ * (its field's size over the size of one value); Strings and Binaries are scalars. */
+static size_t values_of(const var_info *v) {
+    static const size_t value_size[] = {sizeof(fmi3Float32), sizeof(fmi3Float64), sizeof(fmi3Int8),
+                                        sizeof(fmi3UInt8),   sizeof(fmi3Int16),   sizeof(fmi3UInt16),
+                                        sizeof(fmi3Int32),   sizeof(fmi3UInt32),  sizeof(fmi3Int64),
+                                        sizeof(fmi3UInt64),  sizeof(fmi3Boolean), 0 /* String */,
+                                        0 /* Binary */,      sizeof(int64_t) /* Enumeration */};
+    return value_size[v->type] ? v->size / value_size[v->type] : 1;
+}
+
+/* The checks every fmi3Get and fmi3Set of type t starts with: state, arguments, nValues (the
+ * number of scalar values the value references refer to; an unknown one counts as one and is
+ * reported by the caller). */
 static fmi3Status check_access(fmu_instance *in, const char *fn, const fmi3ValueReference vr[], size_t nvr,
-                               const void *values, size_t n_values) {
+                               const void *values, size_t n_values, var_type t) {
+    size_t i, total = 0;
     if (nvr > 0 && (!vr || !values)) return fail(in, "%s: NULL argument", fn);
-    if (n_values != nvr) /* every variable is a scalar: one value each */
+    for (i = 0; i < nvr; i++) {
+        const var_info *v = find_var(vr[i], t);
+        total += v ? values_of(v) : 1;
+    }
+    if (n_values != total)
         return fail(in, "%s: nValues = %u but the %u value reference(s) refer to %u scalar value(s)", fn,
-                    (unsigned)n_values, (unsigned)nvr, (unsigned)nvr);
+                    (unsigned)n_values, (unsigned)nvr, (unsigned)total);
     return fmi3OK;
 }
 
@@ -408,14 +431,15 @@ static fmi3Status no_such_variable(fmu_instance *in, const char *fn, var_type t,
     FMI3_Export fmi3Status fmi3Get##Name(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,        \
                                          fmi3##Name values[], size_t n_values) {                                  \
         fmu_instance *in = (fmu_instance *)instance;                                                              \
-        size_t i;                                                                                                 \
+        size_t i, j = 0; /* j: index of the variable's first value in values[] */                                \
         CHECK_STATE("fmi3Get" #Name, M_GET);                                                                      \
-        if (check_access(in, "fmi3Get" #Name, vr, nvr, values, n_values) != fmi3OK) return fmi3Error;            \
+        if (check_access(in, "fmi3Get" #Name, vr, nvr, values, n_values, T) != fmi3OK) return fmi3Error;         \
         model_refresh(in);                                                                                        \
         for (i = 0; i < nvr; i++) {                                                                               \
             const var_info *v = find_var(vr[i], T);                                                               \
             if (!v) return no_such_variable(in, "fmi3Get" #Name, T, vr[i]);                                      \
-            memcpy(&values[i], field_of(in, v), sizeof values[i]);                                                \
+            memcpy(&values[j], field_of(in, v), values_of(v) * sizeof values[0]);                                 \
+            j += values_of(v);                                                                                    \
         }                                                                                                         \
         return fmi3OK;                                                                                            \
     }
@@ -425,17 +449,21 @@ static fmi3Status no_such_variable(fmu_instance *in, const char *fn, var_type t,
     FMI3_Export fmi3Status fmi3Set##Name(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,        \
                                          const fmi3##Name values[], size_t n_values) {                            \
         fmu_instance *in = (fmu_instance *)instance;                                                              \
-        size_t i;                                                                                                 \
+        size_t i, j = 0; /* j: index of the variable's first value in values[] */                                \
         CHECK_STATE("fmi3Set" #Name, M_SET);                                                                      \
-        if (check_access(in, "fmi3Set" #Name, vr, nvr, values, n_values) != fmi3OK) return fmi3Error;            \
+        if (check_access(in, "fmi3Set" #Name, vr, nvr, values, n_values, T) != fmi3OK) return fmi3Error;         \
         for (i = 0; i < nvr; i++) {                                                                               \
             const var_info *v = find_var(vr[i], T);                                                               \
-            double x = (double)values[i];                                                                         \
+            size_t e;                                                                                             \
             if (!v) return no_such_variable(in, "fmi3Set" #Name, T, vr[i]);                                      \
             if (check_settable(in, "fmi3Set" #Name, v) != fmi3OK) return fmi3Error;                               \
-            if (!(x >= v->min && x <= v->max))                                                                    \
-                return fail(in, "fmi3Set" #Name ": %s = %g is outside [%g, %g]", v->name, x, v->min, v->max);     \
-            memcpy(field_of(in, v), &values[i], sizeof values[i]);                                                \
+            for (e = 0; e < values_of(v); e++) {                                                                  \
+                double x = (double)values[j + e];                                                                 \
+                if (!(x >= v->min && x <= v->max))                                                                \
+                    return fail(in, "fmi3Set" #Name ": %s = %g is outside [%g, %g]", v->name, x, v->min, v->max); \
+            }                                                                                                     \
+            memcpy(field_of(in, v), &values[j], values_of(v) * sizeof values[0]);                                 \
+            j += values_of(v);                                                                                    \
         }                                                                                                         \
         return fmi3OK;                                                                                            \
     }
@@ -470,7 +498,7 @@ FMI3_Export fmi3Status fmi3GetString(fmi3Instance instance, const fmi3ValueRefer
     fmu_instance *in = (fmu_instance *)instance;
     size_t i;
     CHECK_STATE("fmi3GetString", M_GET);
-    if (check_access(in, "fmi3GetString", vr, nvr, values, n_values) != fmi3OK) return fmi3Error;
+    if (check_access(in, "fmi3GetString", vr, nvr, values, n_values, T_STRING) != fmi3OK) return fmi3Error;
     model_refresh(in);
     for (i = 0; i < nvr; i++) {
         const var_info *v = find_var(vr[i], T_STRING);
@@ -486,7 +514,7 @@ FMI3_Export fmi3Status fmi3SetString(fmi3Instance instance, const fmi3ValueRefer
     fmu_instance *in = (fmu_instance *)instance;
     size_t i;
     CHECK_STATE("fmi3SetString", M_SET);
-    if (check_access(in, "fmi3SetString", vr, nvr, values, n_values) != fmi3OK) return fmi3Error;
+    if (check_access(in, "fmi3SetString", vr, nvr, values, n_values, T_STRING) != fmi3OK) return fmi3Error;
     for (i = 0; i < nvr; i++) {
         const var_info *v = find_var(vr[i], T_STRING);
         if (!v) return no_such_variable(in, "fmi3SetString", T_STRING, vr[i]);
@@ -505,7 +533,7 @@ FMI3_Export fmi3Status fmi3GetBinary(fmi3Instance instance, const fmi3ValueRefer
     fmu_instance *in = (fmu_instance *)instance;
     CHECK_STATE("fmi3GetBinary", M_GET);
     if (nvr > 0 && !value_sizes) return fail(in, "fmi3GetBinary: NULL argument");
-    if (check_access(in, "fmi3GetBinary", vr, nvr, values, n_values) != fmi3OK) return fmi3Error;
+    if (check_access(in, "fmi3GetBinary", vr, nvr, values, n_values, T_BINARY) != fmi3OK) return fmi3Error;
     if (nvr > 0) return no_such_variable(in, "fmi3GetBinary", T_BINARY, vr[0]);
     return fmi3OK;
 }
@@ -515,7 +543,7 @@ FMI3_Export fmi3Status fmi3SetBinary(fmi3Instance instance, const fmi3ValueRefer
     fmu_instance *in = (fmu_instance *)instance;
     CHECK_STATE("fmi3SetBinary", M_SET);
     if (nvr > 0 && !value_sizes) return fail(in, "fmi3SetBinary: NULL argument");
-    if (check_access(in, "fmi3SetBinary", vr, nvr, values, n_values) != fmi3OK) return fmi3Error;
+    if (check_access(in, "fmi3SetBinary", vr, nvr, values, n_values, T_BINARY) != fmi3OK) return fmi3Error;
     if (nvr > 0) return no_such_variable(in, "fmi3SetBinary", T_BINARY, vr[0]);
     return fmi3OK;
 }
