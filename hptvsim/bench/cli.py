@@ -128,6 +128,13 @@ def bench_train_cmd(quick: bool, as_json: bool, env_kind: str) -> None:
 @click.option("--cap", "cap_min", type=float, default=None, help="Training-time cap per row [min].")
 @click.option("--target", type=float, default=None, help="Capture rate of competence (default 0.70).")
 @click.option(
+    "--jobs",
+    type=click.IntRange(1, 4),
+    default=1,
+    show_default=True,
+    help="Rows trained at once, each in its own process on one thread (2 uses both cores here).",
+)
+@click.option(
     "--out",
     type=click.Path(file_okay=False, path_type=Path),
     default=Path("hptvsim-out/bench-learn"),
@@ -147,6 +154,7 @@ def bench_learn_cmd(
     trainers: tuple[str, ...],
     cap_min: float | None,
     target: float | None,
+    jobs: int,
     out: Path,
     seeds_s: float | None,
     as_json: bool,
@@ -176,6 +184,7 @@ def bench_learn_cmd(
         trainers=trainers or TRAINERS,
         cap_s=None if cap_min is None else 60.0 * cap_min,
         target=target,
+        jobs=jobs,
     )
     if as_json:
         click.echo(json.dumps(report, indent=2))

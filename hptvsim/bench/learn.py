@@ -29,6 +29,7 @@ import contextlib
 import csv
 import json
 import math
+import os
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -314,6 +315,7 @@ def bench_learn(
     trainers: Sequence[str] = TRAINERS,
     cap_s: float | None = None,
     target: float | None = None,
+    jobs: int = 1,
 ) -> dict[str, Any]:
     """Run the rows, write ``learn.csv``, ``learn.json`` and ``learn.png`` into ``out``; return the table.
 
@@ -323,30 +325,48 @@ def bench_learn(
         trainers: Rows to run (:data:`TRAINERS`).
         cap_s: Training-time cap per row [s] (default: 40 min; quick: 3 min).
         target: Capture rate of competence (default 0.70; quick 0.2).
+        jobs: Rows trained at once, each in its own process on one torch thread (2 on a
+            2-core machine: each row then has a core of its own, as a row alone would).
     """
     unknown = sorted(set(trainers) - set(TRAINERS))
     if unknown:
         raise ValueError(f"unknown trainer(s) {unknown}; valid: {', '.join(TRAINERS)}")
+    if not 1 <= jobs <= len(TRAINERS):
+        raise ValueError(f"jobs is {jobs}; valid: 1..{len(TRAINERS)} rows at once")
     target = (0.2 if quick else 0.70) if target is None else target
     cap = (180.0 if quick else 2400.0) if cap_s is None else cap_s
     episodes = 40 if quick else 100
     out.mkdir(parents=True, exist_ok=True)
-    curves: list[LearnCurve] = []
-    for name in TRAINERS:
-        if name not in trainers:
-            continue
-        if name == "fast ippo":
-            curves.append(run_fast("ippo", cap, target, episodes, out, every_s=10.0 if quick else 20.0))
-        elif name == "fast maisac":
-            curves.append(run_fast("maisac", cap, target, episodes, out, every_s=20.0 if quick else 60.0))
-        elif name == "sb3 one game":
-            curves.append(run_sb3(cap, target, episodes, out, chunk=1000 if quick else 5000))
-        else:
-            curves.append(run_benchmarl(cap, target, episodes, out, every_iters=1 if quick else 3))
-    return _report(curves, target, out, quick=quick)
+    rows = [(name, cap, target, episodes, out, quick) for name in TRAINERS if name in trainers]
+    if jobs == 1:
+        curves = [_run_row(row) for row in rows]
+    else:
+        import multiprocessing as mp
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(max_workers=jobs, mp_context=mp.get_context("spawn")) as pool:
+            curves = list(pool.map(_run_row, rows))
+    return _report(curves, target, out, quick=quick, jobs=jobs)
 
 
-def _report(curves: Sequence[LearnCurve], target: float, out: Path, *, quick: bool) -> dict[str, Any]:
+def _run_row(row: tuple[str, float, float, int, Path, bool]) -> LearnCurve:
+    """One row, from scratch, on one torch thread (in this process or a pool's)."""
+    import torch
+
+    name, cap, target, episodes, out, quick = row
+    torch.set_num_threads(1)
+    if name == "fast ippo":
+        return run_fast("ippo", cap, target, episodes, out, every_s=10.0 if quick else 20.0)
+    if name == "fast maisac":
+        return run_fast("maisac", cap, target, episodes, out, every_s=20.0 if quick else 60.0)
+    if name == "sb3 one game":
+        return run_sb3(cap, target, episodes, out, chunk=1000 if quick else 5000)
+    return run_benchmarl(cap, target, episodes, out, every_iters=1 if quick else 3)
+
+
+def _report(
+    curves: Sequence[LearnCurve], target: float, out: Path, *, quick: bool, jobs: int = 1
+) -> dict[str, Any]:
     ref = next((c for c in curves if c.trainer == "fast ippo"), curves[0])
     ref_hit = ref.reached(target)
     rows = []
@@ -376,7 +396,15 @@ def _report(curves: Sequence[LearnCurve], target: float, out: Path, *, quick: bo
         for c in curves:
             for s, n, cap in c.points:
                 w.writerow([c.trainer, f"{s:.1f}", n, f"{cap:.3f}"])
-    report = {"target": target, "quick": quick, "rows": rows}
+    load = os.getloadavg()
+    report = {
+        "target": target,
+        "quick": quick,
+        "jobs": jobs,
+        "cpus": os.cpu_count(),
+        "load_after": load,
+        "rows": rows,
+    }
     (out / "learn.json").write_text(json.dumps(report, indent=2))
     _figure(curves, target, out / "learn.png")
     return report
@@ -415,8 +443,10 @@ def _figure(curves: Sequence[LearnCurve], target: float, path: Path) -> None:
 
 def table(report: dict[str, Any]) -> str:
     """The report as a Markdown table."""
+    load = report.get("load_after")
     lines = [
-        f"target capture {report['target']:.2f}",
+        f"target capture {report['target']:.2f}; rows {report.get('jobs', 1)} at a time on "
+        f"{report.get('cpus')} CPUs" + ("" if load is None else f"; load average after {load[0]:.2f}"),
         "| trainer | time to target [s] | env steps to target | best capture | trained [s] "
         "| time / fast ippo |",
         "|---|---|---|---|---|---|",

@@ -1,0 +1,37 @@
+"""``hptvsim bench learn`` runs its rows for real: two rows at once, a table, a CSV and a figure."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+from click.testing import CliRunner
+from PIL import Image
+
+from hptvsim.cli import main
+
+
+def test_bench_learn_runs_two_rows_side_by_side_and_reports_them(tmp_path: Path) -> None:
+    out = tmp_path / "learn"
+    args = ["bench", "learn", "--quick", "--cap", "0.25", "--jobs", "2", "--out", str(out)]
+    args += ["--trainer", "fast ippo", "--trainer", "fast maisac", "--json"]
+    res = CliRunner().invoke(main, args)
+    assert res.exit_code == 0, res.output
+    report = json.loads(res.output)
+    assert report["jobs"] == 2 and report["quick"] and report["target"] == 0.2
+    assert [r["trainer"] for r in report["rows"]] == ["fast ippo", "fast maisac"]
+    with (out / "learn.csv").open() as fh:
+        points = list(csv.DictReader(fh))
+    for row in report["rows"]:
+        mine = [p for p in points if p["trainer"] == row["trainer"]]
+        assert mine, f"no evaluation of {row['trainer']}"  # each row was evaluated while it trained
+        assert all(0.0 <= float(p["capture"]) <= 1.0 for p in mine)
+        steps = [int(p["env_steps"]) for p in mine]
+        assert steps == sorted(steps) and steps[-1] > 0  # evaluated as it trained
+        assert abs(row["best_capture"] - max(float(p["capture"]) for p in mine)) < 1e-3
+        assert float(row["trained_s"]) <= 0.25 * 60 + 60  # stopped at its cap (plus the last iteration)
+    with Image.open(out / "learn.png") as im:
+        assert im.size[0] > 800
+    bad = CliRunner().invoke(main, ["bench", "learn", "--trainer", "sb3", "--out", str(tmp_path / "x")])
+    assert bad.exit_code == 2 and "sb3 one game" in bad.output and "Traceback" not in bad.output
