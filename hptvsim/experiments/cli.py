@@ -351,12 +351,12 @@ def register(main: click.Group) -> None:
         final rewards' mean and variance per setting (Fig. 11) and one episode's trajectories
         per stage (Figs. 12-13). DT runs (a folder with dt.pt): Figs. 14-17.
         """
-        from hptvsim.experiments.figures import WindowError, make_figures
+        from hptvsim.experiments.figures import RunFileError, WindowError, make_figures
 
         out = out_dir if out_dir is not None else paths[0] / "figures"
         try:
             written = make_figures(list(paths), out, with_trajectories=not no_trajectories, smooth=smooth)
-        except (FileNotFoundError, WindowError) as exc:
+        except (FileNotFoundError, RunFileError, WindowError) as exc:
             raise click.ClickException(str(exc)) from None
         for p in written:
             click.echo(str(p))
@@ -483,7 +483,7 @@ def register(main: click.Group) -> None:
             ) from None
         out = out_dir if out_dir is not None else Path("hptvsim-out") / "reproduce" / plan.name
         if status_only:
-            rows = sweep_status(plan, out, archive_dir(report))
+            rows = sweep_status(plan, out, archive_dir(report, plan))
             width = max(len(j.run_dir) for j, *_ in rows)
             for job, state, done, total in rows:
                 click.echo(f"{job.run_dir:<{width}}  {done:>9,} / {total:,} env steps  {state}")
@@ -492,7 +492,8 @@ def register(main: click.Group) -> None:
             all_steps = sum(total for *_, total in rows)
             click.echo(
                 f"{n_done} of {len(rows)} runs finished; {steps:,} of {all_steps:,} env steps "
-                f"({100.0 * steps / max(all_steps, 1):.1f} %); runs in {out}, archive {archive_dir(report)}"
+                f"({100.0 * steps / max(all_steps, 1):.1f} %); runs in {out}, "
+                f"archive {archive_dir(report, plan)}"
             )
             click.echo(sweep_eta(out, all_steps - steps))
             return

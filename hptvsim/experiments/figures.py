@@ -40,6 +40,7 @@ __all__ = [
     "finished_stages",
     "make_figures",
     "reward_curve_figures",
+    "reward_curve_figures_by_steps",
     "reward_curves",
     "run_label",
     "trajectories",
@@ -120,7 +121,7 @@ def _stack(series: Sequence[Sequence[float]], smooth: int) -> np.ndarray:
     return np.stack([_smooth(np.asarray(s[:n], dtype=np.float64), smooth) for s in series])
 
 
-def _stage_labels(ax: Any, marks: Sequence[tuple[int, int, str]], *, fontsize: float) -> float:
+def _stage_labels(ax: Any, marks: Sequence[tuple[float, float, str]], *, fontsize: float) -> float:
     """Each stage's name above the middle of its span; one that would touch its left neighbour rises.
 
     Returns:
@@ -252,9 +253,16 @@ def reward_curves(
     labels: Sequence[str] | None = None,
     stages: Sequence[str] | None = None,
     caption: str = "",
+    x: str = "steps",
 ) -> list[Path]:
-    """:func:`reward_curve_figures` as ``reward_<role>.png`` files in ``out``; returns them."""
-    figures = reward_curve_figures(run_dirs, smooth=smooth, labels=labels, stages=stages, caption=caption)
+    """Reward curves as ``reward_<role>.png`` files in ``out``; returns them.
+
+    ``x = "steps"`` (default): against env steps (:func:`reward_curve_figures_by_steps`), which
+    puts every algorithm's stage boundaries at its budget; ``"episodes"``: against training
+    episodes (:func:`reward_curve_figures`), the paper's axis.
+    """
+    make = reward_curve_figures_by_steps if x == "steps" else reward_curve_figures
+    figures = make(run_dirs, smooth=smooth, labels=labels, stages=stages, caption=caption)
     import matplotlib.pyplot as plt  # after the figures chose the Agg backend
 
     out.mkdir(parents=True, exist_ok=True)
@@ -375,6 +383,164 @@ def reward_curve_figures(
         ax.legend(loc="best", fontsize=8)
         ax.grid(alpha=0.3)
         text = "; ".join(t for t in (caption, BAND_CUT if cut else "", UNEVEN if uneven else "") if t)
+        _layout_with_caption(fig, text, width=150, line=0.03)
+        figures[role] = fig
+    return figures
+
+
+def episode_steps(run_dir: Path) -> dict[tuple[int, str], dict[str, tuple[np.ndarray, np.ndarray]]]:
+    """(stage index, stage) -> role -> (env step at each episode's end, the role's mean return), in order."""
+    per: dict[tuple[int, str], dict[int, dict[str, Any]]] = defaultdict(dict)
+    path = run_dir / "episodes.csv"
+    with path.open(newline="") as f:
+        reader = csv.DictReader(f)
+        missing = sorted(set(EPISODE_COLUMNS) - set(reader.fieldnames or ()))
+        if missing:
+            raise RunFileError(
+                f"{path}: no column {', '.join(missing)}; a training run's episodes.csv has "
+                f"{', '.join(EPISODE_COLUMNS)} (written by hptvsim train)"
+            )
+        for row in reader:
+            ep = per[(int(row["stage_index"]), row["stage"])].setdefault(
+                int(row["episode"]), {"step": int(row["env_step"]), "roles": defaultdict(list)}
+            )
+            ep["roles"][row["agent"].split("_")[0]].append(float(row["return"]))
+    out: dict[tuple[int, str], dict[str, tuple[np.ndarray, np.ndarray]]] = {}
+    for key, episodes in per.items():
+        roles: dict[str, tuple[list[int], list[float]]] = defaultdict(lambda: ([], []))
+        for e in sorted(episodes):
+            for role, values in episodes[e]["roles"].items():
+                roles[role][0].append(episodes[e]["step"])
+                roles[role][1].append(float(np.mean(values)))
+        out[key] = {r: (np.asarray(x, np.float64), np.asarray(y, np.float64)) for r, (x, y) in roles.items()}
+    return out
+
+
+def _stage_starts(runs: Mapping[tuple[int, str], Any]) -> dict[str, float]:
+    """A run's env step at the start of each stage: the end of the previous stage's last episode."""
+    starts: dict[str, float] = {}
+    previous_end = 0.0
+    for index, name in sorted(runs):
+        starts[name] = previous_end
+        ends = [x[-1] for x, _ in runs[(index, name)].values() if len(x)]
+        previous_end = max(ends) if ends else previous_end
+    return starts
+
+
+def reward_curve_figures_by_steps(
+    run_dirs: Sequence[Path],
+    *,
+    smooth: int = 5,
+    labels: Sequence[str] | None = None,
+    stages: Sequence[str] | None = None,
+    caption: str = "",
+    points: int = 80,
+) -> dict[str, Any]:
+    """Average total reward per episode against env steps, one figure per role (Figs. 7-10).
+
+    The x axis is env steps (one step moves every agent of a game), so runs that spend the same
+    budget in episodes of different lengths (MAISAC and IPPO, say) share their stage boundaries,
+    and budgets compare directly. Each stage is drawn from its start in every run (a run trained
+    in the target scenario alone is drawn over the STT runs' target stage); each seed's smoothed
+    curve is interpolated onto a common grid of ``points`` steps over the span every seed of the
+    group covers, and the group's mean is drawn with its 95 % t band. A stage still training is
+    drawn dotted per run, outside the band.
+
+    Args:
+        run_dirs: Training runs.
+        smooth: Moving-average window (episodes).
+        labels: The group of each run (default: :func:`run_label`).
+        stages: Only these stages (default: all).
+        caption: A line under the figure naming the runs.
+        points: Grid points per stage.
+
+    Returns:
+        Role -> its matplotlib figure.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    groups: dict[str, list[tuple[dict[tuple[int, str], Any], set[str], dict[str, float]]]] = defaultdict(list)
+    for run, label in zip(run_dirs, _labels(run_dirs, labels), strict=True):
+        data = episode_steps(run)
+        groups[label].append((data, finished_stages(run), _stage_starts(data)))
+    all_stages = stage_segments([r for runs in groups.values() for r, _, _ in runs])
+    if stages is not None:
+        all_stages = [name for name in all_stages if name in stages]
+
+    def of(r: Mapping[tuple[int, str], Any], name: str) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        return next((v for (_, n), v in r.items() if n == name), {})
+
+    roles = sorted(
+        {role for runs in groups.values() for r, _, _ in runs for k in all_stages for role in of(r, k)}
+    )
+    names = {"pursuer": "UUVs (pursuers)", "evader": "spherical robot (evader)"}
+    figures: dict[str, Any] = {}
+    for role in roles:
+        fig, ax = plt.subplots(figsize=(8, 4.4))
+        offset = 0.0
+        marks: list[tuple[float, float, str]] = []
+        counts = {
+            label: [sum(1 for r, done, _ in runs if k in done and role in of(r, k)) for k in all_stages]
+            for label, runs in groups.items()
+        }
+        labelled: set[str] = set()
+        drawn: list[np.ndarray] = []
+        for s_idx, stage in enumerate(all_stages):
+            width = 0.0
+            for g_idx, (label, runs) in enumerate(groups.items()):
+                color = f"C{g_idx}"
+                finished: list[tuple[np.ndarray, np.ndarray]] = []
+                partial: list[tuple[np.ndarray, np.ndarray]] = []
+                for r, done, starts in runs:
+                    if role not in of(r, stage):
+                        continue
+                    x, y = of(r, stage)[role]
+                    curve = (x - starts[stage], _smooth(y, smooth))
+                    width = max(width, float(curve[0][-1]) if len(x) else 0.0)
+                    (finished if stage in done else partial).append(curve)
+                if finished:
+                    lo = max(float(c[0][0]) for c in finished)
+                    hi = min(float(c[0][-1]) for c in finished)
+                    grid = np.linspace(lo, hi, points) if hi > lo else np.array([lo])
+                    arr = np.stack([np.interp(grid, cx, cy) for cx, cy in finished])
+                    mean, half = arr.mean(0), _t_half(arr)
+                    drawn.append(mean)
+                    ax.plot(
+                        offset + grid,
+                        mean,
+                        color=color,
+                        label=None if label in labelled else _seeds_text(label, counts[label]),
+                    )
+                    labelled.add(label)
+                    if len(finished) > 1:
+                        ax.fill_between(offset + grid, mean - half, mean + half, color=color, alpha=0.2, lw=0)
+                for cx, cy in partial:
+                    drawn.append(cy)
+                    ax.plot(offset + cx, cy, color=color, linestyle=":", linewidth=1.0)
+                if partial and f"{label}:partial" not in labelled:
+                    labelled.add(f"{label}:partial")
+                    ax.plot(
+                        [], [], color=color, linestyle=":", label=f"{label}, still training (not counted)"
+                    )
+            if s_idx > 0:
+                ax.axvline(offset, color="grey", linestyle="--", linewidth=0.8)
+            marks.append(
+                (offset, max(width, 1.0), f"STT {s_idx + 1}\n{stage}" if len(all_stages) > 1 else stage)
+            )
+            offset += width
+        raised = _stage_labels(ax, marks, fontsize=7)
+        only = f"env steps in stage {all_stages[0]}" if len(all_stages) == 1 else ""
+        ax.set_xlabel(only or "env steps (all stages in order; one step moves every agent)")
+        ax.set_ylabel("average total reward per episode (dimensionless)")
+        fig_no = {"pursuer": "Figs. 7, 9", "evader": "Figs. 8, 10"}.get(role, "")
+        ax.set_title(f"{names.get(role, role)}: mean over seeds, 95 % band (paper {fig_no})", pad=22 + raised)
+        cut = _fit_ylim(ax, drawn)
+        ax.legend(loc="best", fontsize=8)
+        ax.grid(alpha=0.3)
+        text = "; ".join(t for t in (caption, BAND_CUT if cut else "") if t)
         _layout_with_caption(fig, text, width=150, line=0.03)
         figures[role] = fig
     return figures
@@ -824,6 +990,14 @@ def _expand(
         f" ({training} still training)" if training else ""
     )
     return runs, labels, stages, caption, windows
+
+
+EPISODE_COLUMNS = ("stage_index", "stage", "episode", "agent", "env_step", "return")
+"""The columns of a run's ``episodes.csv`` that the reward figures read."""
+
+
+class RunFileError(ValueError):
+    """A run's file that the figures read lacks what a training run writes into it."""
 
 
 class WindowError(ValueError):

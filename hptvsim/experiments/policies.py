@@ -18,7 +18,7 @@ import numpy as np
 
 from hptvsim.train import evaluate as train_evaluate
 from hptvsim.train.evaluate import Policy
-from hptvsim.zoo import Commands3D, UnknownPolicyError, load_policy
+from hptvsim.zoo import GameCommands, UnknownPolicyError, load_policy
 
 if TYPE_CHECKING:
     from hptvsim.envs.protocol import Game
@@ -49,9 +49,9 @@ def _in_env_units(policy: Any) -> Any:
 
     The zoo's policies act in SI units (``[v, omega]``, ``[v, omega, w_z]``), as the planar envs
     take them; the 3-D envs take normalised actions, which the zoo's 3-D policies wrap
-    (:class:`~hptvsim.zoo.Commands3D`): the wrapped policy is the one the env takes.
+    (:class:`~hptvsim.zoo.GameCommands`): the wrapped policy is the one the env takes.
     """
-    return policy.policy if isinstance(policy, Commands3D) else policy
+    return policy.policy if isinstance(policy, GameCommands) else policy
 
 
 def named_policy(spec: str, env: Any, agent: str) -> Policy:

@@ -77,6 +77,12 @@ import numpy as np
 
 from hptvsim._process import pid_alive, usable_cores
 from hptvsim.experiments.stats import Interval, difference, mean_interval, slope, verdict
+from hptvsim.train.batched_run import (
+    BatchedRunConfig,
+    batched_config_from_dict,
+    batched_config_to_dict,
+    is_batched_config,
+)
 from hptvsim.train.config import (
     ConfigError,
     TrainConfig,
@@ -92,6 +98,7 @@ __all__ = [
     "EvalSpec",
     "Experiment",
     "Plan",
+    "ReproGroup",
     "ReproJob",
     "Setting",
     "archive_dir",
@@ -105,7 +112,9 @@ __all__ = [
     "reproduce",
     "resolve_plan_path",
     "restore_archived",
+    "run_group",
     "run_job",
+    "run_unit",
     "sweep_status",
     "workers_warning",
     "write_report",
@@ -115,6 +124,8 @@ ROLES = ("pursuer", "evader")
 MATCHUPS = ("self", "vs_scripted_evader", "vs_scripted_pursuers")
 EVAL_METRICS = ("capture_rate", "collision_rate", "time_to_capture_s", "return_pursuer", "return_evader")
 TRAIN_METRICS = ("train_final", "train_mean", "train_var")
+RunConfig = TrainConfig | BatchedRunConfig
+"""A run's config: one game (the ``paper`` regime) or batched games (``fast``)."""
 PAPER_BUDGET_STEPS = 100 * 6000  # env steps per stage in the paper: 100 episodes x T = 6000
 
 
@@ -241,6 +252,8 @@ class Plan:
     evaluation: EvalSpec
     budget_note: str = ""
     fixed: Mapping[str, Any] = field(default_factory=dict)
+    regime: Literal["paper", "fast"] = "paper"
+    beside: Path | None = None
 
     def experiment(self, exp_id: str) -> Experiment:
         """The experiment named ``exp_id``."""
@@ -313,7 +326,7 @@ def load_plan(path: Path | str) -> Plan:
         "plan",
         data,
         {"name", "config", "seeds", "workers", "evaluation", "setting", "experiment", "claim"}
-        | {"budget_note", "set"},
+        | {"budget_note", "set", "regime", "beside"},
     )
     if "config" not in data:
         raise _err(path, "'config' (the base training config) is required")
@@ -340,6 +353,9 @@ def load_plan(path: Path | str) -> Plan:
     workers = data.get("workers", 2)
     if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
         raise _err(path, f"workers must be an integer >= 1, got {workers!r}")
+    regime = data.get("regime", "paper")
+    if regime not in ("paper", "fast"):
+        raise _err(path, f"regime must be 'paper' (one game) or 'fast' (batched games), got {regime!r}")
     ev_raw = data.get("evaluation", {})
     _keys(path, "[evaluation]", ev_raw, {f.name for f in dataclasses.fields(EvalSpec)})
     try:
@@ -457,9 +473,17 @@ def load_plan(path: Path | str) -> Plan:
         evaluation=evaluation,
         budget_note=str(data.get("budget_note", "")),
         fixed=dict(data.get("set", {})),
+        regime=regime,
+        beside=_beside_path(path, data.get("beside")),
     )
     for s in settings.values():  # fail now, not in a worker an hour later
         cfg = build_config(s, plan.seeds[0], plan.fixed)
+        if is_batched(cfg) != (regime == "fast"):
+            raise _err(
+                path,
+                f"setting {s.id}: its config {s.config.name} is a {'fast' if is_batched(cfg) else 'paper'}"
+                f"-regime config but the plan's regime is {regime!r}",
+            )
         names = [st.name for st in cfg.stages]
         for e in plan.experiments:
             for st in e.stages:
@@ -477,6 +501,23 @@ def load_plan(path: Path | str) -> Plan:
     return plan
 
 
+def _beside_path(path: Path, value: Any) -> Path | None:
+    """The plan of the other regime that the report shows beside this one (``beside = ...``)."""
+    if value is None:
+        return None
+    p = path.parent / str(value)
+    if not p.is_file():
+        try:
+            p = resolve_plan_path(str(value))
+        except ConfigError:
+            raise _err(
+                path, f"beside: plan {value!r} not found (relative to the plan or a shipped name)"
+            ) from None
+    if p.resolve() == path.resolve():
+        raise _err(path, "beside: names this plan itself; name the other regime's plan")
+    return p.resolve()
+
+
 def _check_metric(path: Path, cid: str, metric: str) -> None:
     parts = metric.split(".")
     ok = (len(parts) == 2 and parts[0] in TRAIN_METRICS and parts[1] in ROLES) or (
@@ -491,11 +532,13 @@ def _check_metric(path: Path, cid: str, metric: str) -> None:
         )
 
 
-def build_config(setting: Setting, seed: int, fixed: Mapping[str, Any] | None = None) -> TrainConfig:
+def build_config(setting: Setting, seed: int, fixed: Mapping[str, Any] | None = None) -> RunConfig:
     """The training config of ``setting`` at ``seed`` (checkpoints at episode ends).
 
     Order: the base config, the plan's ``[set]`` overrides (``fixed``), the setting's stage
-    choice, the setting's overrides.
+    choice, the setting's overrides. A ``regime = "fast"`` base config gives a
+    :class:`~hptvsim.train.batched_run.BatchedRunConfig` of the one seed, named after the
+    setting (its seeds train together: :func:`run_group`).
 
     Raises:
         ConfigError: A kept stage the base config does not have, or an invalid result.
@@ -513,9 +556,71 @@ def build_config(setting: Setting, seed: int, fixed: Mapping[str, Any] | None = 
             )
         data["stage"] = [dict(stages[s]) for s in setting.stages]
         data["stage"][0].pop("carry", None)
+    if is_batched_config(data):
+        data = apply_overrides(data, {**setting.overrides, "seeds": [seed]})
+        data["name"] = setting.id
+        return batched_config_from_dict(data, f"setting {setting.id} ({setting.config})")
     data = apply_overrides(data, {**setting.overrides, "seed": seed, "checkpoint_at_episode_end": True})
     data["name"] = f"{setting.id}-seed{seed}"
     return config_from_dict(data, f"setting {setting.id} ({setting.config})")
+
+
+def is_batched(cfg: RunConfig) -> bool:
+    """Whether ``cfg`` trains on batched games (the ``fast`` regime)."""
+    return isinstance(cfg, BatchedRunConfig)
+
+
+def config_dict(cfg: RunConfig) -> dict[str, Any]:
+    """A config as its file's mapping (either regime), to compare two configs."""
+    if isinstance(cfg, BatchedRunConfig):
+        return batched_config_to_dict(cfg)
+    from hptvsim.train.config import config_to_dict
+
+    out: dict[str, Any] = config_to_dict(cfg)
+    return out
+
+
+def load_saved_config(run_dir: Path) -> RunConfig:
+    """The config a run was trained with (``RUN/config.toml``, either regime)."""
+    from hptvsim.train.config import load_run_config
+
+    path = run_dir / "config.toml"
+    if path.is_file():
+        with path.open("rb") as f:
+            data = tomllib.load(f)
+        if is_batched_config(data):
+            return batched_config_from_dict(data, str(path))
+    return load_run_config(run_dir)
+
+
+@dataclass(frozen=True)
+class _EnvOf:
+    """A batched stage's game as :func:`evaluate_stage` reads a one-game stage's ``env``."""
+
+    scenario: str
+    task: str
+    options: Mapping[str, Any]
+    kind: str = "hptvsim"
+
+
+@dataclass(frozen=True)
+class _StageOf:
+    name: str
+    env: _EnvOf
+    budget_steps: int
+
+
+def eval_stages(cfg: RunConfig) -> list[Any]:
+    """A config's stages, each with ``name``, ``budget_steps`` and ``env`` (kind, scenario, task, options)."""
+    if isinstance(cfg, BatchedRunConfig):
+        out = []
+        for st in cfg.stages:
+            options = dict(st.options)
+            task = str(options.pop("task", "pursuit"))
+            options.pop("threads", None)
+            out.append(_StageOf(st.name, _EnvOf(st.scenario, task, options), st.budget_steps))
+        return out
+    return list(cfg.stages)
 
 
 @dataclass(frozen=True)
@@ -544,6 +649,39 @@ def plan_jobs(
             if en.setting not in order:
                 order.append(en.setting)
     return [ReproJob(s, seed, f"runs/{s}-seed{seed}") for seed in (seeds or plan.seeds) for s in order]
+
+
+@dataclass(frozen=True)
+class ReproGroup:
+    """The seeds of one setting trained together in one process (the ``fast`` regime).
+
+    Each seed still writes its own run folder, the one :class:`ReproJob` names.
+    """
+
+    setting: str
+    seeds: tuple[int, ...]
+    run_dirs: tuple[str, ...]
+
+    @property
+    def run_dir(self) -> str:
+        """A name for logs: ``runs/<setting>-seed<first>..<last>``."""
+        return f"runs/{self.setting}-seed{self.seeds[0]}..{self.seeds[-1]}"
+
+
+def _run_dirs(unit: ReproJob | ReproGroup) -> tuple[str, ...]:
+    return unit.run_dirs if isinstance(unit, ReproGroup) else (unit.run_dir,)
+
+
+def plan_units(plan: Plan, jobs: Sequence[ReproJob]) -> list[ReproJob | ReproGroup]:
+    """What the sweep's workers run: the jobs one by one, or in the ``fast`` regime one group per setting."""
+    if plan.regime != "fast":
+        return list(jobs)
+    groups: dict[str, list[ReproJob]] = {}
+    for j in jobs:
+        groups.setdefault(j.setting, []).append(j)
+    return [
+        ReproGroup(sid, tuple(j.seed for j in js), tuple(j.run_dir for j in js)) for sid, js in groups.items()
+    ]
 
 
 # --- one job: train, then evaluate -------------------------------------------------------------
@@ -621,6 +759,7 @@ def run_job(plan_path: str, job: ReproJob, out: str) -> dict[str, Any]:
         status = "done before"
         if not (run_dir / "summary.json").is_file():
             cfg = build_config(setting, job.seed, plan.fixed)
+            assert isinstance(cfg, TrainConfig)
             status = "resumed" if has_checkpoint(run_dir) else "trained"
             result = train(
                 cfg,
@@ -646,17 +785,79 @@ def run_job(plan_path: str, job: ReproJob, out: str) -> dict[str, Any]:
     }
 
 
-def _saved_config(run_dir: Path) -> TrainConfig:
-    from hptvsim.train.config import load_run_config
+def run_unit(plan_path: str, unit: ReproJob | ReproGroup, out: str) -> dict[str, Any]:
+    """Run a job (:func:`run_job`) or a group of seeds (:func:`run_group`) in a worker."""
+    if isinstance(unit, ReproGroup):
+        return run_group(plan_path, unit, out)
+    return run_job(plan_path, unit, out)
 
-    return load_run_config(run_dir)
+
+def run_group(plan_path: str, group: ReproGroup, out: str) -> dict[str, Any]:
+    """Train a setting's unfinished seeds together (resuming those with a checkpoint), then evaluate.
+
+    Seeds with a checkpoint resume together, then seeds without one start together; a finished
+    seed is skipped. Each seed's run folder is the one its :class:`ReproJob` names. When every
+    seed is finished and evaluated, the replay buffers in the checkpoints are deleted (hundreds
+    of MB per seed; the models stay).
+    """
+    from contextlib import ExitStack
+
+    from hptvsim.experiments.policies import zoo_fixed
+    from hptvsim.train.batched_run import train_batched
+
+    plan = load_plan(plan_path)
+    setting = plan.settings[group.setting]
+    dirs = [Path(out) / d for d in group.run_dirs]
+    t0 = time.perf_counter()
+    status = "done before"
+    with ExitStack() as stack:
+        for d in dirs:
+            stack.enter_context(_run_lock(d))
+        todo = [(s, d) for s, d in zip(group.seeds, dirs, strict=True) if not (d / "summary.json").is_file()]
+        resumable = [(s, d) for s, d in todo if (d / "checkpoint" / "state.pt").is_file()]
+        fresh = [(s, d) for s, d in todo if (s, d) not in resumable]
+        for part, resume in ((resumable, True), (fresh, False)):
+            if not part:
+                continue
+            one = build_config(setting, part[0][0], plan.fixed)
+            assert isinstance(one, BatchedRunConfig)
+            cfg = dataclasses.replace(one, seeds=tuple(s for s, _ in part))
+            status = "resumed" if resume else "trained"
+            result = train_batched(
+                cfg,
+                None,
+                Path(out),
+                fixed=zoo_fixed(cfg.fixed) if cfg.fixed else None,
+                resume=resume,
+                progress=False,
+                folders=[d for _, d in part],
+                stop_requested=_stop_requested,
+            )
+            if not result.finished:
+                note = f"at {result.game_steps:,} game steps per seed, checkpoint written"
+                return {"run_dir": group.run_dir, "status": "stopped", "note": note}
+        if _stop_requested():
+            return {"run_dir": group.run_dir, "status": "stopped", "note": "before its evaluation"}
+        evaluated = []
+        for d in dirs:
+            evaluated += [f"{d.name}/{st}" for st in evaluate_run(d, plan.evaluation)]
+            if _stop_requested():
+                return {"run_dir": group.run_dir, "status": "stopped", "note": "during its evaluation"}
+        for d in dirs:
+            (d / "checkpoint" / "replay.npz").unlink(missing_ok=True)
+    return {
+        "run_dir": group.run_dir,
+        "status": status,
+        "evaluated": evaluated,
+        "seconds": time.perf_counter() - t0,
+    }
 
 
 def evaluate_run(run_dir: Path, spec: EvalSpec) -> list[str]:
     """Evaluate every finished stage of a run without an ``eval/<stage>.json`` yet; returns them."""
-    cfg = _saved_config(run_dir)
+    cfg = load_saved_config(run_dir)
     done = []
-    for stage in cfg.stages:
+    for stage in eval_stages(cfg):
         models = run_dir / "stages" / stage.name
         out = run_dir / "eval" / f"{stage.name}.json"
         if out.is_file() or not models.is_dir():
@@ -806,7 +1007,7 @@ def budget_steps(stages: Sequence[Any]) -> int:
     return sum(st.budget_steps or 0 for st in stages)
 
 
-def _progress_of(run_dir: Path, cfg: TrainConfig) -> str:
+def _progress_of(run_dir: Path, cfg: RunConfig) -> str:
     total = budget_steps(cfg.stages)
     if (run_dir / "summary.json").is_file():
         n_eval = len(list((run_dir / "eval").glob("*.json"))) if (run_dir / "eval").is_dir() else 0
@@ -815,11 +1016,13 @@ def _progress_of(run_dir: Path, cfg: TrainConfig) -> str:
             if n_eval >= len(cfg.stages)
             else f"trained, {n_eval}/{len(cfg.stages)} stages evaluated"
         )
+    if (run_dir / "checkpoint" / "state.pt").is_file():  # a batched run's checkpoint
+        return f"training ({steps_done(run_dir):,}/{total:,} game steps logged)"
     state = run_dir / "checkpoint" / "state.json"
     if state.is_file():
         step = json.loads(state.read_text()).get("global_step", 0)
         return f"training ({step:,}/{total:,} env steps at the last checkpoint)"
-    if (run_dir / "run.json").is_file():  # written when it starts; the first checkpoint comes later
+    if (run_dir / "run.json").is_file() or (run_dir / "run.toml").is_file():  # at its start
         return "training (no checkpoint yet: a restart begins at env step 0)"
     return "not started"
 
@@ -844,13 +1047,25 @@ def collect(plan: Plan, out: Path) -> Results:
 
 # --- the archive of finished runs' results ------------------------------------------------------
 
-ARCHIVE_FILES = ("config.toml", "run.json", "episodes.csv", "updates.csv")
+ARCHIVE_FILES = ("config.toml", "run.json", "run.toml", "episodes.csv", "updates.csv", "curve.csv")
 ARCHIVE_GLOBS = ("stages/*/stage.json", "eval/*.json")
 
 
-def archive_dir(report: Path) -> Path:
-    """Where the finished runs' results of the report ``report`` are archived: ``<report stem>/results``."""
+def archive_dir(report: Path, plan: Plan | None = None) -> Path:
+    """Where the finished runs' results of the report ``report`` are archived.
+
+    ``<report stem>/results`` for a ``paper``-regime plan, ``<report stem>/results-<plan name>``
+    for a ``fast`` one, so one report can hold both regimes' runs (whose folders share names).
+    """
+    if plan is not None and plan.regime == "fast":
+        return report.parent / report.stem / f"results-{plan.name}"
     return report.parent / report.stem / "results"
+
+
+def figure_dir(report: Path, plan: Plan) -> Path:
+    """Where a plan's figures go: ``<report stem>/`` (``paper`` regime) or ``<report stem>/<plan name>/``."""
+    root = report.parent / report.stem
+    return root / plan.name if plan.regime == "fast" else root
 
 
 def _result_files(run_dir: Path) -> list[Path]:
@@ -911,8 +1126,6 @@ def restore_archived(plan: Plan, out: Path, archive: Path, log: Callable[[str], 
     Returns:
         The runs restored.
     """
-    from hptvsim.train.config import config_to_dict, load_run_config
-
     restored = []
     for job in plan_jobs(plan):
         name = Path(job.run_dir).name
@@ -920,7 +1133,7 @@ def restore_archived(plan: Plan, out: Path, archive: Path, log: Callable[[str], 
         cfg = build_config(plan.settings[job.setting], job.seed, plan.fixed)
         if _progress_of(src, cfg) != "finished" or _progress_of(dst, cfg) == "finished":
             continue
-        if config_to_dict(load_run_config(src)) != config_to_dict(cfg):
+        if config_dict(load_saved_config(src)) != config_dict(cfg):
             log(f"{src} was trained with another config than the plan builds now: {name} trains again")
             continue
         try:
@@ -1084,35 +1297,206 @@ def write_report(
 ) -> Path:
     """Write the Markdown report (and its figures beside it) from the results under ``out``.
 
-    Figures go to ``<report stem>/<experiment>/`` next to the report. A partial set of results
-    gives a partial report that lists what is missing. First the archive beside the report
+    Figures go to :func:`figure_dir` next to the report. A partial set of results gives a
+    partial report that lists what is missing. First the archive beside the report
     (:func:`archive_dir`) and ``out`` are brought level: archived runs missing under ``out`` are
     restored, finished runs missing from the archive are archived.
+
+    A plan with ``beside`` (the other regime's plan) gives one report of both regimes: the
+    verdicts side by side per claim, then each regime's budget, verdicts, seeds, experiments and
+    runs. The other plan's runs are read from ``<out's parent>/<its name>`` (its sweep's default
+    folder), restored from its archive beside the report.
     """
     from hptvsim._output import machine_summary
 
-    archive = archive_dir(report)
-    restore_archived(plan, out, archive)
-    archive_finished(plan, out, archive)
-    results = collect(plan, out)
+    parts = [(plan, out, command)]
+    if plan.beside is not None:
+        other = load_plan(plan.beside)
+        parts.append((other, out.parent / other.name, None))
+    parts.sort(key=lambda p: p[0].regime != "paper")  # the Table II runs first
+    regimes: list[_Regime] = []
+    for p, o, c in parts:
+        archive = archive_dir(report, p)
+        restore_archived(p, o, archive)
+        archive_finished(p, o, archive)
+        results = collect(p, o)
+        jobs = plan_jobs(p)
+        cmd = c or f"hptvsim reproduce --plan {_rel(p.path)} --out {_rel(o)} --report {_rel(report)}"
+        regimes.append(
+            _Regime(
+                plan=p,
+                out=o,
+                archive=archive,
+                results=results,
+                cmd=cmd,
+                done=sum(1 for j in jobs if results.progress[(j.setting, j.seed)] == "finished"),
+                jobs=len(jobs),
+                verdicts={cl.id: claim_result(p, results, cl) for cl in p.claims},
+            )
+        )
     report.parent.mkdir(parents=True, exist_ok=True)
-    fig_root = report.parent / report.stem
-    cmd = command or f"hptvsim reproduce --plan {_rel(plan.path)} --out {_rel(out)} --report {_rel(report)}"
-    jobs = plan_jobs(plan)
-    n_done = sum(1 for j in jobs if results.progress[(j.setting, j.seed)] == "finished")
     lines: list[str] = []
     w = lines.append
-    w(f"# Reproducing the paper's section V on the pursuit game ({plan.name})")
+    two = len(regimes) == 2
+    title = " and ".join(r.plan.name for r in regimes)
+    w(f"# Reproducing the paper's section V on the pursuit game ({title})")
     w("")
     w("Generated by `hptvsim reproduce` from the run folders; do not edit by hand. Regenerate with:")
     w("")
     w("```")
-    w(cmd)
+    for r in regimes:
+        w(r.cmd + (" --report-only" if two else ""))
     w("```")
     w("")
+    if two:
+        w(
+            f"Two regimes train the same settings and are judged by the same evaluation, statistics and "
+            f"verdict rule: {', '.join(f'**{_regime_title(r)}**' for r in regimes)}. "
+            f"Machine: {machine_summary()}. Written {time.strftime('%Y-%m-%d %H:%M')}."
+        )
+        w("")
+    w(_STATS_TEXT.format(n=len(plan.claims)))
+    w("")
+    if two:
+        _side_by_side(regimes, w)
+        for r in regimes:
+            w(f"## {_regime_title(r)}")
+            w("")
+            _regime_body(r, report, figures, w, level=3)
+    else:
+        _regime_body(regimes[0], report, figures, w, level=2, machine=machine_summary())
+    report.write_text("\n".join(lines).rstrip() + "\n")
+    return report
+
+
+_STATS_TEXT = (
+    "- Statistics: every number is a mean over training seeds with its 95 % Student-t interval "
+    "`[low, high]`; differences use Welch's interval, trends the least-squares slope's t interval "
+    "(`hptvsim.experiments.stats`); an interval is cut to the range its quantity cannot leave (a "
+    "rate to [0, 1], a difference of rates to [-1, 1], a variance or a time to capture to "
+    ">= 0), which keeps its coverage. A claim **holds** only when the whole interval lies on the claimed "
+    "side of zero, **does not hold** when it lies wholly on the other side, and is **not "
+    "resolved** otherwise; for a claim not resolved, *excludes* gives the smallest effect the data "
+    "rule out at 95 %: no difference (or slope) of either sign larger in size than it. Each "
+    "interval is 95 % on its own, with no correction for testing {n} claims at once: where no "
+    "effect exists, about one claim in twenty still comes out holding or not holding by chance."
+)
+
+
+@dataclass
+class _Regime:
+    """One plan's results as the report shows them."""
+
+    plan: Plan
+    out: Path
+    archive: Path
+    results: Results
+    cmd: str
+    done: int
+    jobs: int
+    verdicts: dict[str, tuple[Interval, str]]
+
+
+def _regime_title(r: _Regime) -> str:
+    p = r.plan
+    budget = max(budget_steps(build_config(s, p.seeds[0], p.fixed).stages) for s in p.settings.values())
+    kind = "one game, Table II" if p.regime == "paper" else "batched games, fast regime"
+    return f"{p.name}: {kind}, {len(p.seeds)} seeds, up to {budget:,} env steps per run"
+
+
+def excluded_effect(iv: Interval, what: str = "difference") -> str:
+    """The smallest effect an unresolved interval rules out: ``no difference larger than X`` (``-`` if none).
+
+    At 95 %, the data rule out every effect of either sign larger in size than the interval's
+    farther end from zero.
+    """
+    if not iv.resolved:
+        return "-"
+    return f"no {what} larger than {max(abs(iv.low), abs(iv.high)):.3g}"
+
+
+def _claim_what(c: Claim) -> str:
+    return (
+        f"difference {c.compare[0]} - {c.compare[1]}"
+        if c.compare
+        else f"slope per unit of x ({c.trend} claimed)"
+    )
+
+
+def _side_by_side(regimes: Sequence[_Regime], w: Callable[[str], None]) -> None:
+    """Both regimes' interval and verdict per claim, and whether they agree."""
+    a, b = regimes
+    w("## Verdicts of both regimes")
+    w("")
+    w(
+        f"| claim | the paper says | metric (stage) | {a.plan.name}: we measure (95 %) | over | verdict "
+        f"| {b.plan.name}: we measure (95 %) | over | verdict | regimes |"
+    )
+    w("|---|---|---|---|---|---|---|---|---|---|")
+    differ = []
+    for c in a.plan.claims:
+        cells = []
+        verdicts: list[str | None] = []
+        for r in (a, b):
+            cl = next((x for x in r.plan.claims if x.id == c.id), None)
+            if cl is None:
+                cells += ["-", "-", "-"]
+                verdicts.append(None)
+                continue
+            iv, v = r.verdicts[c.id]
+            text = f"{_claim_what(cl)}: {iv.format()}"
+            if v == "not resolved" and iv.resolved:
+                text += f"; {excluded_effect(iv, 'difference' if cl.compare else 'slope')}"
+            cells += [text, claim_count(r.plan, r.results, cl), f"**{v}**"]
+            verdicts.append(v)
+        agree = "agree" if verdicts[0] == verdicts[1] else "**differ**"
+        if verdicts[0] != verdicts[1]:
+            differ.append(c.id)
+        w(
+            f"| {c.id} | {c.statement} | {metric_text(c.metric)} ({c.stage}) | "
+            + " | ".join(cells)
+            + f" | {agree} |"
+        )
+    w("")
+    for r in regimes:
+        tally = {
+            v: sum(1 for _, x in r.verdicts.values() if x == v)
+            for v in ("holds", "does not hold", "not resolved")
+        }
+        w(
+            f"- {r.plan.name}, at {r.done} of {r.jobs} runs: **{tally['holds']} of "
+            f"{len(r.plan.claims)} claims hold, {tally['does not hold']} do not hold, "
+            f"{tally['not resolved']} are not resolved**."
+            + (" Unfinished runs may change any verdict." if r.done < r.jobs else "")
+        )
+    w(
+        "- The regimes' verdicts differ on "
+        + (", ".join(differ) if differ else "no claim")
+        + (
+            ": such a claim depends on how the training budget is spent (see the regimes' budgets below)."
+            if differ
+            else "."
+        )
+    )
+    w("")
+
+
+def _regime_body(
+    r: _Regime,
+    report: Path,
+    figures: bool,
+    w: Callable[[str], None],
+    *,
+    level: int,
+    machine: str | None = None,
+) -> None:
+    """One plan's sections: what ran, budget, verdicts, every seed, the experiments, the runs."""
+    plan, out, results, archive = r.plan, r.out, r.results, r.archive
+    h = "#" * level
+    fig_root = figure_dir(report, plan)
     w(
         f"- Plan: `{_rel(plan.path)}`; runs in `{_rel(out)}/runs/<setting>-seed<k>/` "
-        "(each holds its `config.toml` and `run.json`). Each finished run's results (config, "
+        "(each holds its `config.toml`). Each finished run's results (config, "
         "seeds, episode and update logs, stage summaries, evaluations; no models) are archived in "
         f"`{_rel(archive)}/<setting>-seed<k>/`, beside this report: a fresh clone regenerates the "
         "report from them and its sweep trains only the runs not archived."
@@ -1123,62 +1507,49 @@ def write_report(
         f"{plan.evaluation.num_envs} environments per batch), the same for every run."
     )
     w(
-        f"- Runs finished: {n_done} of {len(jobs)}. Machine: {machine_summary()}. "
-        f"Written {time.strftime('%Y-%m-%d %H:%M')}."
-    )
-    w(
-        "- Statistics: every number is a mean over training seeds with its 95 % Student-t interval "
-        "`[low, high]`; differences use Welch's interval, trends the least-squares slope's t interval "
-        "(`hptvsim.experiments.stats`); an interval is cut to the range its quantity cannot leave (a "
-        "rate to [0, 1], a difference of rates to [-1, 1], a variance or a time to capture to "
-        ">= 0), which keeps its coverage. A claim **holds** only when the whole interval lies on the claimed "
-        "side of zero, **does not hold** when it lies wholly on the other side, and is **not "
-        "resolved** otherwise. Each interval is 95 % on its own, with no correction for testing "
-        f"{len(plan.claims)} claims at once: where no effect exists, about one claim in twenty "
-        "still comes out holding or not holding by chance."
+        f"- Runs finished: {r.done} of {r.jobs}."
+        + (f" Machine: {machine}. Written {time.strftime('%Y-%m-%d %H:%M')}." if machine else "")
     )
     w("")
-    w("## Budget")
+    w(f"{h} Budget")
     w("")
     w(_budget_text(plan))
     w("")
-    w("## Verdicts")
+    w(f"{h} Verdicts")
     w("")
-    w("| claim | the paper says | metric (stage) | we measure (95 % interval) | over | verdict |")
-    w("|---|---|---|---|---|---|")
+    w("| claim | the paper says | metric (stage) | we measure (95 % interval) | over | verdict | excludes |")
+    w("|---|---|---|---|---|---|---|")
     tally: dict[str, int] = {"holds": 0, "does not hold": 0, "not resolved": 0}
-    verdicts = {c.id: claim_result(plan, results, c) for c in plan.claims}
     for c in plan.claims:
-        iv, v = verdicts[c.id]
+        iv, v = r.verdicts[c.id]
         tally[v] += 1
-        what = (
-            f"difference {c.compare[0]} - {c.compare[1]}"
-            if c.compare
-            else f"slope per unit of x ({c.trend} claimed)"
-        )
         bold = f"**{v}**"
         if v == "not resolved" and not iv.resolved:
             bold += " (no finished runs)" if iv.n == 0 else f" (n = {iv.n}: too few seeds)"
+        excl = excluded_effect(iv, "difference" if c.compare else "slope") if v == "not resolved" else "-"
         w(
-            f"| {c.id} | {c.statement} | {metric_text(c.metric)} ({c.stage}) | {what}: {iv.format()} "
-            f"| {claim_count(plan, results, c)} | {bold} |"
+            f"| {c.id} | {c.statement} | {metric_text(c.metric)} ({c.stage}) | "
+            f"{_claim_what(c)}: {iv.format()} | {claim_count(plan, results, c)} | {bold} | {excl} |"
         )
     w("")
     w(
-        f"At {n_done} of {len(jobs)} runs: **{tally['holds']} of {len(plan.claims)} claims hold, "
+        f"At {r.done} of {r.jobs} runs: **{tally['holds']} of {len(plan.claims)} claims hold, "
         f"{tally['does not hold']} do not hold, {tally['not resolved']} are not resolved**."
-        + (" Unfinished runs may change any verdict." if n_done < len(jobs) else "")
+        + (" Unfinished runs may change any verdict." if r.done < r.jobs else "")
     )
     w("")
-    w(f"Each verdict regenerates with `{cmd} --report-only`.")
+    w(f"Each verdict regenerates with `{r.cmd} --report-only`.")
     w("")
-    _seeds_section(plan, results, verdicts, fig_root, figures, w, f"{n_done} of {len(jobs)} runs finished")
+    _seeds_section(
+        plan, results, r.verdicts, fig_root, figures, w, f"{r.done} of {r.jobs} runs finished", report, level
+    )
     for exp in plan.experiments:
-        _experiment_section(plan, exp, results, out, fig_root, figures, w)
-    w("## Runs")
+        _experiment_section(plan, exp, results, out, fig_root, figures, w, report, level)
+    w(f"{h} Runs")
     w("")
     w("| run folder | setting | seed | config | state |")
     w("|---|---|---|---|---|")
+    jobs = plan_jobs(plan)
     for j in jobs:
         s = plan.settings[j.setting]
         extra = (", stages " + "/".join(s.stages)) if s.stages else ""
@@ -1196,8 +1567,6 @@ def write_report(
             "numbers above use the finished stages only."
         )
         w("")
-    report.write_text("\n".join(lines).rstrip() + "\n")
-    return report
 
 
 def metric_unit(metric: str) -> str:
@@ -1220,12 +1589,14 @@ def _seeds_section(
     figures: bool,
     w: Callable[[str], None],
     runs_text: str,
+    report: Path,
+    level: int = 2,
 ) -> None:
     """The report's "every seed behind the verdicts": a panel per claim and a table of the values.
 
     ``runs_text`` (e.g. "27 of 27 runs finished") goes into the figure's caption.
     """
-    w("### Every seed behind the verdicts")
+    w(f"{'#' * (level + 1)} Every seed behind the verdicts")
     w("")
     if figures:
         import matplotlib.pyplot as plt
@@ -1256,7 +1627,7 @@ def _seeds_section(
             "seed far from the others, which widens an interval, shows at a glance:"
         )
         w("")
-        w(f"![claims]({os.path.relpath(path, fig_root.parent)})")
+        w(f"![claims]({os.path.relpath(path, report.parent)})")
         w("")
     w("| claim | setting | " + " | ".join(f"seed {k}" for k in plan.seeds) + " |")
     w("|---|---|" + "---|" * len(plan.seeds))
@@ -1284,7 +1655,7 @@ def _budget_text(plan: Plan) -> str:
         parts = [
             f"{st.name} {st.budget_steps:,}"
             if st.budget_steps
-            else f"{st.name} {st.budget_episodes} episodes"
+            else f"{st.name} {getattr(st, 'budget_episodes', 0)} episodes"
             for st in cfg.stages
         ]
         total = budget_steps(cfg.stages)
@@ -1310,10 +1681,12 @@ def _experiment_section(
     fig_root: Path,
     figures: bool,
     w: Callable[[str], None],
+    report: Path,
+    level: int = 2,
 ) -> None:
     from hptvsim.experiments.figures import make_figures
 
-    w(f"## {exp.title} ({exp.figure})")
+    w(f"{'#' * level} {exp.title} ({exp.figure})")
     w("")
     stages = _stage_names(plan, exp)
     folder = _write_experiment_sweep(plan, exp, out)
@@ -1341,7 +1714,7 @@ def _experiment_section(
                 )
             w("")
             for p in written:
-                w(f"![{p.stem}]({os.path.relpath(p, fig_root.parent)})")
+                w(f"![{p.stem}]({os.path.relpath(p, report.parent)})")
             w("")
         else:
             w("No finished episodes yet: no figures.")
@@ -1356,7 +1729,7 @@ def _experiment_section(
         "eval.self.time_to_capture_s",
     ]
     for stage in stages:
-        w(f"### {exp.title}: end of stage `{stage}`")
+        w(f"{'#' * (level + 1)} {exp.title}: end of stage `{stage}`")
         w("")
         w("| metric | " + " | ".join(f"{e.label}" for e in exp.entries) + " |")
         w("|---|" + "---|" * len(exp.entries))
@@ -1518,7 +1891,7 @@ def sweep_eta(out: Path, remaining: int, now: float | None = None, stale_s: floa
     )
 
 
-def _status_line(job: ReproJob, st: Mapping[str, Any]) -> str:
+def _status_line(job: ReproJob | ReproGroup, st: Mapping[str, Any]) -> str:
     """``[HH:MM:SS] <status> <run folder> (<why> | in <minutes>)``: one line of the sweep's log."""
     why = st.get("error") or st.get("note")
     tail = f" ({why})" if why else f" in {st['seconds'] / 60:.1f} min"
@@ -1526,7 +1899,9 @@ def _status_line(job: ReproJob, st: Mapping[str, Any]) -> str:
 
 
 def _stop_workers(
-    pending: Mapping[Future[dict[str, Any]], ReproJob], grace_s: float, log: Callable[[str], None]
+    pending: Mapping[Future[dict[str, Any]], ReproJob | ReproGroup],
+    grace_s: float,
+    log: Callable[[str], None],
 ) -> None:
     """Ask every worker to stop at its episode's end, wait up to ``grace_s``, then end them."""
     import multiprocessing
@@ -1589,7 +1964,7 @@ def reproduce(
         stop_grace_s: Longest wait [s] for the runs to reach their episodes' ends when interrupted.
     """
     out.mkdir(parents=True, exist_ok=True)
-    archive = archive_dir(report)
+    archive = archive_dir(report, plan)
     restored = restore_archived(plan, out, archive, log)
     if restored:
         log(f"restored from {archive}: {', '.join(restored)}")
@@ -1648,16 +2023,20 @@ def reproduce(
     previous_term = None  # SIGTERM (kill, docker stop) stops the sweep as Ctrl-C does
     if threading.current_thread() is threading.main_thread():
         previous_term = signal.signal(signal.SIGTERM, _raise_interrupt)
-    pending: dict[Future[dict[str, Any]], ReproJob] = {}
+    pending: dict[Future[dict[str, Any]], ReproJob | ReproGroup] = {}
     running: set[str] = set()
     try:
-        queue = list(jobs)
+        queue = plan_units(plan, jobs)
         while queue or pending:
             while queue and len(pending) < n:
                 job = queue.pop(0)
                 log(f"[{time.strftime('%H:%M:%S')}] start {job.run_dir}")
-                pending[pool.submit(run_job, str(plan.path), job, str(out))] = job
-            running = {j.run_dir for j in pending.values()}
+                pending[pool.submit(run_unit, str(plan.path), job, str(out))] = job
+            running = {
+                r
+                for j in pending.values()
+                for r in (j.run_dirs if isinstance(j, ReproGroup) else (j.run_dir,))
+            }
             done, _ = wait(list(pending), timeout=10.0, return_when=FIRST_COMPLETED)
             show_progress()
             for fut in done:

@@ -46,6 +46,7 @@ from hptvsim.train.fast import SQUASH_EPS, BatchedAdam, BatchedSAC, ReplayBatch
 
 __all__ = [
     "BatchedEvaluation",
+    "EndedEpisode",
     "FastIPPO",
     "FastMAISAC",
     "FastPPOConfig",
@@ -210,6 +211,24 @@ class _Seed:
     returns: list[float] = field(default_factory=list)  # finished episodes' mean learner return
     captures: list[bool] = field(default_factory=list)
     lengths: list[int] = field(default_factory=list)
+    ended: list[EndedEpisode] = field(default_factory=list)  # not yet logged by the caller
+
+
+@dataclass(frozen=True)
+class EndedEpisode:
+    """One finished episode of one game, as the run's episode log writes it.
+
+    Attributes:
+        game_steps: The seed's game steps when it ended (all its games together).
+        returns: Every agent's total reward, in the game's agent order.
+        length: Its steps.
+        truncated: Whether it ended by the time limit (else a termination: capture, collision...).
+    """
+
+    game_steps: int
+    returns: tuple[float, ...]
+    length: int
+    truncated: bool
 
 
 def _streams(seed: int) -> tuple[np.random.Generator, torch.Generator, int]:
@@ -346,6 +365,19 @@ class _Batched:
                 sd.returns.extend(float(r) for r in ret)
                 sd.captures.extend(bool(c) for c in result.flags.captured[envs])
                 sd.lengths.extend(int(v) for v in game.steps[envs])
+                at = (self.env_steps + 1) * self.num_envs
+                truncated = np.asarray(
+                    result.truncated[envs].any(axis=1) & ~result.terminated[envs].any(axis=1), dtype=bool
+                )
+                for j, e in enumerate(envs):
+                    sd.ended.append(
+                        EndedEpisode(
+                            at,
+                            tuple(float(r) for r in game.episode_return[e]),
+                            int(game.steps[e]),
+                            bool(truncated[j]),
+                        )
+                    )
                 game.reset(envs)
             sd.obs = game.obs.copy()
             out.append((active, result, final_obs, done))

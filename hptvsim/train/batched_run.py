@@ -15,7 +15,16 @@ seed alone writes:
 * ``checkpoint/``: the latest checkpoint (models, optimiser state, random streams, counters),
   from which ``--resume`` goes on (the games restart their episodes: a resumed run follows the
   same learning but not the same numbers, since games stopped mid-episode cannot be stored);
-* ``run.toml``: the config and provenance (command, versions, seeds).
+* ``run.toml``: the config and provenance (command, versions, seeds);
+* ``config.toml``: the config of this seed alone (``seeds = [k]``; :func:`load_batched_config`
+  reads it back), what ``hptvsim reproduce`` compares to decide whether a run is its own;
+* ``episodes.csv``: every finished training episode of every game, one row per agent (stage,
+  episode, agent, the seed's game steps at its end, return, length, how it ended), the log the
+  reproduction's training metrics and reward figures read; appended at each checkpoint, so a
+  resumed run's log has no row twice;
+* ``stages/<stage>/``: at each stage's end, the learners' models then (``<agent>.zip``) and
+  ``stage.json`` (game steps, episodes, every agent's mean return over its last 20 episodes);
+* ``summary.json``: written last, when the run has finished every stage.
 
 Evaluation plays ``eval_episodes`` fixed episodes at once (one per game of an evaluation batch
 reset with ``eval_seed``), deterministic actions, against the same fixed policies as training.
@@ -39,6 +48,7 @@ import torch
 
 from hptvsim.envs.protocol import Game
 from hptvsim.train.batched import (
+    EndedEpisode,
     FastIPPO,
     FastMAISAC,
     FastPPOConfig,
@@ -53,11 +63,28 @@ __all__ = [
     "RunResult",
     "StageGame",
     "batched_config_from_dict",
+    "batched_config_to_dict",
     "fast_preset",
     "is_batched_config",
     "load_batched_config",
     "train_batched",
 ]
+
+EPISODE_FIELDS = (
+    "stage_index",
+    "stage",
+    "episode",
+    "agent",
+    "env_step",
+    "return",
+    "length",
+    "terminated",
+    "truncated",
+)
+"""Columns of a run's ``episodes.csv`` (those of the one-game trainer's log that both write)."""
+
+EPISODE_FLUSH_S = 60.0  # [s] the episode log is appended this often (a resume cuts it back)
+STAGE_FINAL_EPISODES = 20  # a stage's final mean return in stage.json: its last 20 episodes
 
 CURVE_FIELDS = (
     "wall_s",
@@ -156,6 +183,7 @@ class RunResult:
     final_capture: list[float]
     wall_s: float
     game_steps: int
+    finished: bool = True  # False: stopped on request before the budget, checkpointed
 
 
 def _state(trainer: FastIPPO | FastMAISAC) -> dict[str, Any]:
@@ -247,6 +275,8 @@ def train_batched(
     resume: bool = False,
     progress: bool = True,
     on_eval: Callable[[dict[str, Any]], None] | None = None,
+    folders: Sequence[Path] | None = None,
+    stop_requested: Callable[[], bool] | None = None,
 ) -> RunResult:
     """Train ``cfg.seeds`` together on batched games; see the module docstring for the outputs.
 
@@ -262,6 +292,9 @@ def train_batched(
         resume: Go on from the seeds' checkpoints (all seeds must have one).
         progress: Show a progress bar (game steps, steps/s, updates/s, latest evaluation).
         on_eval: Called with each evaluation's row (for benchmarks).
+        folders: Each seed's run folder (default ``out/seed<k>``).
+        stop_requested: Polled between batched steps; when it returns True the run writes a
+            checkpoint and returns unfinished (``RunResult.finished`` False), to be resumed.
 
     Raises:
         FileNotFoundError: ``resume`` without a checkpoint for every seed.
@@ -279,7 +312,9 @@ def train_batched(
             "fixed=hptvsim.experiments.policies.zoo_fixed(cfg.fixed) (the zoo sits above training)"
         )
     ends = list(np.cumsum([st.budget_steps for st, _ in stages]))
-    folders = [out / f"seed{s}" for s in cfg.seeds]
+    folders = list(folders) if folders is not None else [out / f"seed{s}" for s in cfg.seeds]
+    if len(folders) != len(cfg.seeds):
+        raise ValueError(f"{len(folders)} folders for {len(cfg.seeds)} seeds")
     for f in folders:
         (f / "models").mkdir(parents=True, exist_ok=True)
     elapsed0, eval0 = 0.0, 0.0
@@ -314,8 +349,13 @@ def train_batched(
         for k, st in enumerate(states):
             curves[k] = list(st["curve"])
             reached_s[k], reached_steps[k] = st["reached_s"], st["reached_steps"]
-    for f in folders:
+    for k, f in enumerate(folders):
         (f / "run.toml").write_text(_toml(_provenance(cfg)))
+        (f / "config.toml").write_text(_toml(batched_config_to_dict(cfg, seeds=(cfg.seeds[k],))))
+    logs = [
+        _EpisodeLog(f / "episodes.csv", trainer.agents, states[k] if states else None)
+        for k, f in enumerate(folders)
+    ]
     eval_make = stages[-1][1]
     eval_game = eval_make(cfg.eval_episodes, cfg.eval_seed)
     eval_fixed = dict(fixed(eval_game)) if fixed is not None else {}
@@ -323,7 +363,7 @@ def train_batched(
     t0 = time.monotonic() - elapsed0
     evaluating = eval0  # seconds spent evaluating, not training
     last_eval = -math.inf
-    last_ckpt = time.monotonic()
+    last_ckpt = last_flush = time.monotonic()
     last_log: dict[str, float] = {}
     best = [max((r["eval_capture"] for r in c), default=-1.0) for c in curves]
 
@@ -364,7 +404,37 @@ def train_batched(
                 capture=f"{np.mean(caps):.2f}", stage=stages[trainer.stage][0].name, refresh=False
             )
 
+    def drain() -> None:  # the seeds' finished episodes into their logs, in the current stage
+        for k, sd in enumerate(trainer.seeds):
+            logs[k].add(trainer.stage, stages[trainer.stage][0].name, sd.ended)
+            sd.ended.clear()
+
+    def finish_stage() -> None:  # models and stage.json of the stage that has just ended
+        drain()
+        st = stages[trainer.stage][0]
+        for k, f in enumerate(folders):
+            logs[k].flush()
+            folder = f / "stages" / st.name
+            trainer.save_seed(k, folder)
+            info = {
+                "stage": st.name,
+                "index": trainer.stage,
+                "scenario": st.scenario,
+                "algo": cfg.algo,
+                "seed": cfg.seeds[k],
+                "env_steps": int(trainer.game_steps - (ends[trainer.stage - 1] if trainer.stage else 0)),
+                "game_steps_total": int(trainer.game_steps),
+                "updates_total": int(trainer.updates),
+                "episodes": logs[k].stage_episodes(trainer.stage),
+                "final_mean_return": logs[k].final_means(trainer.stage, STAGE_FINAL_EPISODES),
+            }
+            (folder / "stage.json").write_text(json.dumps(info, indent=2, sort_keys=True) + "\n")
+            stage_infos[k].append(info)
+
     def checkpoint() -> None:
+        drain()
+        for log in logs:
+            log.flush()
         st = _state(trainer)
         for k, f in enumerate(folders):
             ck = f / "checkpoint"
@@ -377,6 +447,8 @@ def train_batched(
                 curve=curves[k],
                 reached_s=reached_s[k],
                 reached_steps=reached_steps[k],
+                episodes_bytes=logs[k].size,
+                episodes_count=logs[k].count,
             )
             if isinstance(trainer, FastMAISAC):
                 _save_replay(ck / "replay.npz", trainer, k)
@@ -385,15 +457,22 @@ def train_batched(
             tmp.replace(ck / "state.pt")
         trainer.save([f / "checkpoint" for f in folders])
 
+    stage_infos: list[list[dict[str, Any]]] = [_stage_infos(f, stage0) for f in folders]
+    finished = out_of_time = False
     try:
         while trainer.game_steps < ends[-1]:
             if trainer.game_steps >= ends[trainer.stage]:
+                finish_stage()
                 trainer.switch(stages[trainer.stage + 1][1], fixed)
                 continue
+            if stop_requested is not None and stop_requested():
+                break
             now = time.monotonic()
             if cfg.budget_s is not None and now - t0 >= cfg.budget_s:
+                out_of_time = True
                 break
             if cfg.train_budget_s is not None and train_s() >= cfg.train_budget_s:
+                out_of_time = True
                 break
             if now - last_eval >= cfg.eval_every_s:
                 evaluate()
@@ -406,8 +485,17 @@ def train_batched(
                 bar.update(trainer.game_steps - before)
             if time.monotonic() - last_ckpt >= cfg.checkpoint_every_s:
                 checkpoint()
-                last_ckpt = time.monotonic()
-        if not curves[0] or curves[0][-1]["game_steps"] != trainer.game_steps:
+                last_ckpt = last_flush = time.monotonic()
+            elif time.monotonic() - last_flush >= EPISODE_FLUSH_S:  # progress for `--status`
+                drain()
+                for log in logs:
+                    log.flush()
+                last_flush = time.monotonic()
+        finished = trainer.game_steps >= ends[-1]
+        if finished and len(stage_infos[0]) < len(stages):
+            finish_stage()
+        # the models a run ends with are evaluated (a budget's end included; not a user's stop)
+        if (finished or out_of_time) and (not curves[0] or curves[0][-1]["game_steps"] != trainer.game_steps):
             evaluate()
         checkpoint()
         trainer.save([f / "models" for f in folders])
@@ -419,6 +507,8 @@ def train_batched(
     wall = time.monotonic() - t0
     for k, f in enumerate(folders):
         _write_curve(f / "curve.csv", curves[k])
+        if not curves[k]:
+            continue
         final = curves[k][-1]
         (f / "eval.json").write_text(
             json.dumps(
@@ -440,13 +530,26 @@ def train_batched(
                 indent=2,
             )
         )
+        if finished:
+            summary = {
+                "name": cfg.name,
+                "algo": cfg.algo,
+                "seed": cfg.seeds[k],
+                "global_step": int(trainer.game_steps),
+                "updates": int(trainer.updates),
+                "num_envs": _num_envs(cfg),
+                "wall_s": round(wall, 3),
+                "stages": stage_infos[k],
+            }
+            (f / "summary.json").write_text(json.dumps(summary, indent=2, sort_keys=True) + "\n")
     return RunResult(
         folders=folders,
         reached_s=reached_s,
         reached_steps=reached_steps,
-        final_capture=[c[-1]["eval_capture"] for c in curves],
+        final_capture=[c[-1]["eval_capture"] if c else math.nan for c in curves],
         wall_s=wall,
         game_steps=trainer.game_steps,
+        finished=finished,
     )
 
 
@@ -543,6 +646,118 @@ def _merge_states(states: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
         out["opt"] = cat_adam([s["opt"] for s in states])
     if "opts" in first:
         out["opts"] = [cat_adam(items) for items in zip(*(s["opts"] for s in states), strict=True)]
+    return out
+
+
+class _EpisodeLog:
+    """One seed's ``episodes.csv``, appended at checkpoints and cut back to one on resume.
+
+    Args:
+        path: The file.
+        agents: The game's agents (one row each per episode).
+        state: The seed's checkpoint when resuming (its ``episodes_bytes``/``episodes_count``:
+            the file is cut to what that checkpoint had logged); None: a new log.
+    """
+
+    def __init__(self, path: Path, agents: Sequence[str], state: Mapping[str, Any] | None) -> None:
+        self.path = path
+        self.agents = tuple(agents)
+        self.pending: list[tuple[int, str, EndedEpisode]] = []
+        if state is not None and "episodes_bytes" in state and path.is_file():
+            with path.open("r+b") as fh:
+                fh.truncate(int(state["episodes_bytes"]))
+            self.count = int(state["episodes_count"])
+        else:
+            with path.open("w", newline="") as fh:
+                csv.writer(fh).writerow(EPISODE_FIELDS)
+            self.count = 0
+        self.size = path.stat().st_size
+
+    def add(self, stage_index: int, stage: str, episodes: Sequence[EndedEpisode]) -> None:
+        """Queue finished episodes of ``stage`` (written by :meth:`flush`)."""
+        self.pending.extend((stage_index, stage, e) for e in episodes)
+
+    def flush(self) -> None:
+        """Append the queued episodes."""
+        if not self.pending:
+            return
+        with self.path.open("a", newline="") as fh:
+            w = csv.writer(fh)
+            for stage_index, stage, e in self.pending:
+                for agent, ret in zip(self.agents, e.returns, strict=True):
+                    w.writerow(
+                        (
+                            stage_index,
+                            stage,
+                            self.count,
+                            agent,
+                            e.game_steps,
+                            f"{ret:.6g}",
+                            e.length,
+                            int(not e.truncated),
+                            int(e.truncated),
+                        )
+                    )
+                self.count += 1
+        self.pending.clear()
+        self.size = self.path.stat().st_size
+
+    def _stage_rows(self, stage_index: int) -> list[dict[str, str]]:
+        with self.path.open(newline="") as fh:
+            return [r for r in csv.DictReader(fh) if int(r["stage_index"]) == stage_index]
+
+    def stage_episodes(self, stage_index: int) -> int:
+        """Episodes logged in stage ``stage_index``."""
+        return len({r["episode"] for r in self._stage_rows(stage_index)})
+
+    def final_means(self, stage_index: int, last: int) -> dict[str, float]:
+        """Every agent's mean return over its last ``last`` episodes of stage ``stage_index``."""
+        per: dict[str, list[float]] = {a: [] for a in self.agents}
+        for r in self._stage_rows(stage_index):
+            per[r["agent"]].append(float(r["return"]))
+        return {a: round(float(np.mean(v[-last:])), 3) for a, v in per.items() if v}
+
+
+def _stage_infos(folder: Path, upto: int) -> list[dict[str, Any]]:
+    """The ``stage.json`` of the stages before ``upto`` a run has finished (on resume)."""
+    infos = [json.loads(p.read_text()) for p in (folder / "stages").glob("*/stage.json")]
+    return sorted((i for i in infos if int(i["index"]) < upto), key=lambda i: int(i["index"]))
+
+
+def _num_envs(cfg: BatchedRunConfig) -> int:
+    return cfg.ppo.num_envs if cfg.algo == "ippo" else cfg.sac.num_envs
+
+
+def batched_config_to_dict(cfg: BatchedRunConfig, *, seeds: Sequence[int] | None = None) -> dict[str, Any]:
+    """The config file's mapping of ``cfg`` (the inverse of :func:`batched_config_from_dict`).
+
+    Args:
+        cfg: The config.
+        seeds: Write these seeds instead of ``cfg.seeds`` (one seed's own ``config.toml``).
+    """
+    out: dict[str, Any] = {"regime": "fast", "name": cfg.name, "algo": cfg.algo}
+    out["seeds"] = list(cfg.seeds if seeds is None else seeds)
+    if cfg.fixed:
+        out["fixed"] = dict(cfg.fixed)
+    out["device"] = cfg.device
+    for key in ("budget_s", "train_budget_s"):
+        if getattr(cfg, key) is not None:
+            out[key] = getattr(cfg, key)
+    out["checkpoint_every_s"] = cfg.checkpoint_every_s
+    table = asdict(cfg.ppo if cfg.algo == "ippo" else cfg.sac)
+    out["ppo" if cfg.algo == "ippo" else "sac"] = {
+        k: list(v) if isinstance(v, tuple) else v for k, v in table.items() if v is not None
+    }
+    out["eval"] = {k: getattr(cfg, v) for k, v in _EVAL_KEYS.items()}
+    out["stage"] = [
+        {
+            "name": st.name,
+            "scenario": st.scenario,
+            "budget_steps": st.budget_steps,
+            "options": dict(st.options),
+        }
+        for st in cfg.stages
+    ]
     return out
 
 

@@ -217,3 +217,97 @@ def test_ippo_on_batched_games_learns_the_tiny_goto_scenario(tmp_path: Path) -> 
     trained = evaluate(factory, policies_from_specs(f"zip:{zips[0]}"), episodes=20)
     assert trained.summary["success_rate"]["mean"] is not None
     assert trained.summary["success_rate"]["mean"] >= 0.9
+
+
+def _selfplay(tmp_path: Path, *, budgets: tuple[int, ...] = (48, 64)) -> BatchedRunConfig:
+    """Every agent learning (the section-V shape) through a curriculum of two stages."""
+    from hptvsim.train.batched_run import StageGame
+
+    options = {"task": "pursuit", "extended_obs": True, "max_steps": 12, "reward": REWARD}
+    return BatchedRunConfig(
+        name="sp",
+        algo="maisac",
+        seeds=(0, 1),
+        sac=SAC,
+        eval_every_s=1e9,
+        eval_episodes=2,
+        checkpoint_every_s=1e9,
+        device="cpu",
+        stages=tuple(
+            StageGame(name, name, options, b) for name, b in zip(("source", "target"), budgets, strict=False)
+        ),
+        budget_steps=sum(budgets),
+    )
+
+
+def _episode_rows(folder: Path) -> list[dict[str, str]]:
+    import csv
+
+    with (folder / "episodes.csv").open(newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_a_curriculum_run_logs_every_episode_and_writes_each_stage_and_a_summary(tmp_path: Path) -> None:
+    """The run-folder files the reproduction reads: episodes.csv, stages/, summary.json, config.toml."""
+    import json
+
+    from hptvsim.train.batched_run import batched_config_to_dict, load_batched_config
+
+    cfg = _selfplay(tmp_path)
+    run = train_batched(cfg, None, tmp_path, progress=False)
+    assert run.finished and run.game_steps == 112
+    for k, f in enumerate(run.folders):
+        rows = _episode_rows(f)
+        agents = ["pursuer_0", "pursuer_1", "pursuer_2", "evader_0"]
+        episodes = sorted({int(r["episode"]) for r in rows})
+        assert episodes == list(range(len(episodes))) and len(rows) == 4 * len(episodes)
+        assert {r["agent"] for r in rows} == set(agents)
+        # 12-step episodes on 4 games: each stage's budget ends some; the log knows their stages
+        by_stage = {s: {int(r["episode"]) for r in rows if r["stage"] == s} for s in ("source", "target")}
+        assert by_stage["source"] and by_stage["target"] and max(by_stage["source"]) < min(by_stage["target"])
+        assert all(int(r["length"]) <= 12 for r in rows)
+        assert all(int(r["env_step"]) <= 48 for r in rows if r["stage"] == "source")
+        for i, st in enumerate(("source", "target")):
+            info = json.loads((f / "stages" / st / "stage.json").read_text())
+            assert info["index"] == i and info["episodes"] == len(by_stage[st])
+            assert set(info["final_mean_return"]) == set(agents)
+            assert sorted(p.name for p in (f / "stages" / st).glob("*.zip")) == sorted(
+                f"{a}.zip" for a in agents
+            )
+        summary = json.loads((f / "summary.json").read_text())
+        assert summary["global_step"] == 112 and [s["stage"] for s in summary["stages"]] == [
+            "source",
+            "target",
+        ]
+        # config.toml is this seed's config alone, and reads back as it
+        own = load_batched_config(f / "config.toml")
+        assert own.seeds == (cfg.seeds[k],)
+        assert batched_config_to_dict(own) == batched_config_to_dict(cfg, seeds=(cfg.seeds[k],))
+
+
+def test_a_run_stopped_on_request_resumes_with_no_episode_logged_twice(tmp_path: Path) -> None:
+    calls = {"n": 0}
+
+    def stop_after_20_steps() -> bool:
+        calls["n"] += 1
+        return calls["n"] > 20
+
+    cfg = _selfplay(tmp_path, budgets=(64, 48))
+    first = train_batched(cfg, None, tmp_path, progress=False, stop_requested=stop_after_20_steps)
+    assert not first.finished and first.game_steps == 80  # 20 batched steps of 4 games
+    rows_then = {}
+    for f in first.folders:
+        assert not (f / "summary.json").exists() and (f / "stages" / "source" / "stage.json").is_file()
+        rows_then[f] = _episode_rows(f)
+        # a flush after the checkpoint is cut back on resume: write a stray row to see it go
+        with (f / "episodes.csv").open("a") as fh:
+            fh.write("9,stray,999,pursuer_0,0,0,0,0,0\n")
+    second = train_batched(cfg, None, tmp_path, progress=False, resume=True)
+    assert second.finished and second.game_steps == 112
+    for f in second.folders:
+        rows = _episode_rows(f)
+        assert rows[: len(rows_then[f])] == rows_then[f]
+        assert not any(r["stage"] == "stray" for r in rows)
+        episodes = [int(r["episode"]) for r in rows[::4]]
+        assert episodes == list(range(len(episodes)))  # numbered on from the checkpoint, none twice
+        assert (f / "summary.json").is_file() and (f / "stages" / "target" / "stage.json").is_file()

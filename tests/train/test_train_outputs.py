@@ -380,10 +380,10 @@ def test_a_sweeps_curves_use_its_window_and_end_at_the_final_reward(tmp_path: Pa
     runs = [tmp_path / f"runs/s-seed{k}" for k in range(3)]
     for run in runs:
         run.mkdir(parents=True)
-        rows = ["stage_index,stage,episode,agent,return"]
+        rows = ["stage_index,stage,episode,agent,env_step,return"]
         for ep in range(30):
             for agent in ("pursuer_0", "pursuer_1", "evader_0"):
-                rows.append(f"0,source,{ep},{agent},{rng.normal(10.0 * ep, 50.0):.6f}")
+                rows.append(f"0,source,{ep},{agent},{100 * (ep + 1)},{rng.normal(10.0 * ep, 50.0):.6f}")
         (run / "episodes.csv").write_text("\n".join(rows) + "\n")
         (run / "stages/source").mkdir(parents=True)
         (run / "stages/source/stage.json").write_text("{}")
@@ -422,6 +422,13 @@ def test_a_sweeps_curves_use_its_window_and_end_at_the_final_reward(tmp_path: Pa
         assert res.exit_code == 1 and res.exception is not None and isinstance(res.exception, SystemExit)
         assert "sweep.json: 'smooth' is " in res.output and "1..1000" in res.output, res.output
         assert "Traceback" not in res.output
+    (sweep / "sweep.json").write_text(json.dumps(manifest))
+    old_csv = runs[1] / "episodes.csv"  # a file from before env_step was written: one line naming it
+    header = old_csv.read_text().splitlines()[0]
+    old_csv.write_text(header.replace(",env_step", "") + "\n")
+    res = CliRunner().invoke(main, ["figures", str(sweep), "--out", str(tmp_path / "o"), "--no-trajectories"])
+    assert res.exit_code == 1 and "Traceback" not in res.output, res.output
+    assert "runs/s-seed1/episodes.csv: no column env_step; " in res.output, res.output
 
 
 def _noisy_runs(root: Path, spreads: Sequence[float]) -> list[Path]:

@@ -16,10 +16,21 @@ import pytest
 from train_helpers import ROOT
 
 from hptvsim.experiments.reproduce import build_config, load_plan, plan_jobs, write_report
-from hptvsim.train.config import ConfigError, load_config
+from hptvsim.train.batched_run import BatchedRunConfig
+from hptvsim.train.config import ConfigError, TrainConfig, load_config
 
 PLANS = ROOT / "configs" / "reproduce"
 HPTVSIM = [sys.executable, "-m", "hptvsim.cli"]
+
+
+def _paper(cfg: object) -> TrainConfig:
+    assert isinstance(cfg, TrainConfig)
+    return cfg
+
+
+def _fast(cfg: object) -> BatchedRunConfig:
+    assert isinstance(cfg, BatchedRunConfig)
+    return cfg
 
 
 def test_the_shipped_plan_runs_every_experiment_on_the_pursuit_game_with_three_seeds() -> None:
@@ -32,26 +43,61 @@ def test_the_shipped_plan_runs_every_experiment_on_the_pursuit_game_with_three_s
     assert [j.seed for j in jobs] == sorted(j.seed for j in jobs)
     assert len(jobs) == 9 * 3
     for setting in plan.settings.values():  # every run trains at least 150k env steps
-        cfg = build_config(setting, 0, plan.fixed)
+        cfg = _paper(build_config(setting, 0, plan.fixed))
         assert sum(s.budget_steps or 0 for s in cfg.stages) >= 150_000, setting.label
-    base = build_config(plan.settings["base"], 0, plan.fixed)
+    base = _paper(build_config(plan.settings["base"], 0, plan.fixed))
     assert [s.name for s in base.stages] == ["source", "transition", "target"]
     assert all(s.env.task == "pursuit" for s in base.stages)
     assert sum(s.budget_steps or 0 for s in base.stages) >= 150_000
     assert base.checkpoint_at_episode_end
-    ippo = build_config(plan.settings["ippo"], 0, plan.fixed)
+    ippo = _paper(build_config(plan.settings["ippo"], 0, plan.fixed))
     assert ippo.algo == "ippo" and [s.budget_steps for s in ippo.stages] == [
         s.budget_steps for s in base.stages
     ]
-    only = build_config(plan.settings["target_only"], 1, plan.fixed)
+    only = _paper(build_config(plan.settings["target_only"], 1, plan.fixed))
     assert [s.name for s in only.stages] == ["target"] and only.seed == 1
     assert only.stages[0].budget_steps == sum(s.budget_steps or 0 for s in base.stages)
     for k in range(1, 5):  # Fig. 11: every alpha_0 in the source scenario alone, 150k env steps each
-        ent = build_config(plan.settings[f"src_alpha0{k}"], 2, plan.fixed)
+        ent = _paper(build_config(plan.settings[f"src_alpha0{k}"], 2, plan.fixed))
         assert [s.name for s in ent.stages] == ["source"] and ent.sac.ent_coef == f"auto_0.{k}"
         assert ent.stages[0].budget_steps == 150_000 and ent.stages[0].env.scenario == "source"
-    vmax = build_config(plan.settings["vmax35"], 0, plan.fixed)
+    vmax = _paper(build_config(plan.settings["vmax35"], 0, plan.fixed))
     assert all(s.env.options["vehicle_parameters"]["pursuer"]["v_max"] == 3.5 for s in vmax.stages)
+
+
+def test_the_scaled_plan_has_ten_seeds_and_the_papers_budget_in_the_fast_regime() -> None:
+    """configs/reproduce/section5-scale.toml (issue 36): section5's settings, experiments and claims,
+    >= 10 seeds, 600k env steps per stage, the seeds of a setting trained together."""
+    from hptvsim.experiments.reproduce import plan_units
+
+    small, plan = load_plan(PLANS / "section5.toml"), load_plan(PLANS / "section5-scale.toml")
+    assert plan.regime == "fast" and small.regime == "paper"
+    assert len(plan.seeds) >= 10 and plan.evaluation == small.evaluation
+    assert set(plan.settings) == set(small.settings)
+    assert plan.experiments == small.experiments and plan.claims == small.claims
+    for sid, setting in plan.settings.items():
+        cfg = _fast(build_config(setting, 7, plan.fixed))
+        assert cfg.seeds == (7,)
+        one = build_config(small.settings[sid], 0, small.fixed)
+        assert [st.name for st in cfg.stages] == [st.name for st in one.stages]
+        assert cfg.algo == one.algo
+        assert all(st.budget_steps >= 600_000 for st in cfg.stages), sid
+        if len(cfg.stages) == 3:
+            assert sum(st.budget_steps for st in cfg.stages) >= 1_200_000
+    base = _fast(build_config(plan.settings["base"], 0))
+    only = _fast(build_config(plan.settings["target_only"], 0))
+    assert only.stages[0].budget_steps == sum(st.budget_steps for st in base.stages)  # the same budget
+    vmax = _fast(build_config(plan.settings["vmax35"], 0))
+    assert all(st.options["vehicle_parameters"]["pursuer"]["v_max"] == 3.5 for st in vmax.stages)
+    omega = _fast(build_config(plan.settings["omega40"], 0))
+    assert all(st.options["vehicle_parameters"]["evader"]["omega_max"] == 4.0 for st in omega.stages)
+    for k in range(1, 5):
+        ent = _fast(build_config(plan.settings[f"src_alpha0{k}"], 0))
+        assert ent.sac.initial_ent_coef == pytest.approx(k / 10)
+    assert not base.fixed  # every agent learns, as in the Table II runs
+    units = plan_units(plan, plan_jobs(plan))
+    assert len(units) == 9  # one process per setting, its ten seeds together
+    assert all(len(u.run_dirs) == len(plan.seeds) for u in units)  # type: ignore[union-attr]
 
 
 def _claim(metric: str, stage: str, compare: str) -> str:
@@ -146,7 +192,16 @@ def test_the_report_lists_every_seed_behind_each_claim(tmp_path: Path) -> None:
     results = Results(values=values, progress={})
     lines: list[str] = []
     verdicts = {c.id: claim_result(plan, results, c) for c in plan.claims}
-    _seeds_section(plan, results, verdicts, tmp_path / "fig", True, lines.append, "3 of 8 runs finished")
+    _seeds_section(
+        plan,
+        results,
+        verdicts,
+        tmp_path / "fig",
+        True,
+        lines.append,
+        "3 of 8 runs finished",
+        tmp_path / "r.md",
+    )
     text = "\n".join(lines)
     assert f"| {c1.id} | {c1.compare[0]} | 0.125 | -2.5 |" in text  # type: ignore[index]
     assert f"| {c1.id} | {c1.compare[1]} | - | 1.23e+03 |" in text  # type: ignore[index]
@@ -166,7 +221,10 @@ def test_the_report_lists_every_seed_behind_each_claim(tmp_path: Path) -> None:
 
 def test_cli_user_errors_are_one_line(tmp_path: Path) -> None:
     for args, needle in (
-        (["--plan", "nope"], "neither a file nor a shipped plan; shipped: section5, toy"),
+        (
+            ["--plan", "nope"],
+            "neither a file nor a shipped plan; shipped: section5, section5-scale, toy, toy-fast",
+        ),
         (["--plan", "toy", "--experiment", "fig99"], "--experiment 'fig99' is unknown; valid: algo, stt"),
         (["--plan", "toy", "--seed", "7"], "--seed 7 is not a seed of the plan; valid: 0, 1"),
     ):
@@ -285,6 +343,44 @@ def _snapshot(root: Path) -> dict[str, str]:
         if p.name == "episodes.csv" or (p.parent.name == "eval" and p.suffix == ".json"):
             out[str(p.relative_to(root))] = p.read_text()
     return out
+
+
+@pytest.mark.slow
+def test_two_regimes_end_to_end_at_toy_size_side_by_side(tmp_path: Path) -> None:
+    """toy.toml (one game, 2 seeds) then toy-fast.toml (batched games, 3 seeds per setting on 2
+    workers, one process per setting): one report with both regimes' verdicts per claim."""
+    paper = _reproduce_plan(PLANS / "toy.toml", tmp_path / "toy")
+    assert paper.returncode == 0, paper.stdout[-3000:] + paper.stderr[-3000:]
+    r = _reproduce_plan(PLANS / "toy-fast.toml", tmp_path / "toy-fast")
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    plan = load_plan(PLANS / "toy-fast.toml")
+    assert plan.beside == (PLANS / "toy.toml").resolve() and len(plan.seeds) > plan.workers
+    text = (tmp_path / "toy-fast" / "r.md").read_text()
+    assert "Runs finished: 18 of 18" in text and f"Runs finished: {9 * len(plan.seeds)} of 27" in text
+    both = text.split("## Verdicts of both regimes")[1].split("\n## ")[0]
+    rows = [line for line in both.splitlines() if re.match(r"\| C\d", line)]
+    assert [row.split("|")[1].strip() for row in rows] == [c.id for c in plan.claims]
+    for row in rows:
+        assert len(re.findall(r"\*\*(holds|does not hold|not resolved)\*\*", row)) == 2, row
+        assert re.search(r"\| (2 \+ 2 seeds|8 runs over 4 values) \|", row), row  # toy: 2 seeds
+        assert re.search(r"\| (3 \+ 3 seeds|12 runs over 4 values) \|", row), row  # toy-fast: 3 seeds
+        assert row.rstrip().endswith(("| agree |", "| **differ** |")), row
+    assert re.search(r"- toy, at 18 of 18 runs: \*\*\d+ of 12 claims hold", both)
+    assert re.search(r"- toy-fast, at 27 of 27 runs: \*\*\d+ of 12 claims hold", both)
+    assert "## toy: one game, Table II" in text and "## toy-fast: batched games, fast regime" in text
+    log = r.stdout + r.stderr
+    for sid in plan.settings:  # each setting's seeds in one worker
+        assert f"runs/{sid}-seed0..2" in log
+    for job in plan_jobs(plan):
+        run = tmp_path / "toy-fast" / job.run_dir
+        assert (run / "summary.json").is_file() and (run / "episodes.csv").is_file()
+        assert not (run / "checkpoint" / "replay.npz").exists()  # deleted once evaluated
+        cfg = build_config(plan.settings[job.setting], job.seed, plan.fixed)
+        for st in cfg.stages:
+            data = json.loads((run / "eval" / f"{st.name}.json").read_text())
+            assert {"self", "vs_scripted_evader", "vs_scripted_pursuers"} <= set(data)
+        archived = tmp_path / "toy-fast" / "r" / "results-toy-fast" / Path(job.run_dir).name
+        assert (archived / "summary.json").is_file()  # the fast regime's own archive
 
 
 @pytest.mark.slow
