@@ -76,7 +76,8 @@ LAYERS: Final[tuple[Layer, ...]] = (
         ("hptvsim.cosim",),
         "FMI 2.0 and 3.0 instances over FMPy, an FMU's model and the FMI errors; a master over a "
         "connection graph (Jacobi), SSP, vehicle files; the vehicle system of B environments on "
-        "the FMU backend and on a batched backend running the same generated C",
+        "the FMU backend and on a batched backend running the same generated C; the one trajectory "
+        "schema every writer above uses (columns, SI units, types, layouts)",
     ),
     Layer(
         "world",

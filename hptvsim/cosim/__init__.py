@@ -13,6 +13,8 @@
   snapshot, restore) on the FMU path, and :func:`make_system` for either backend;
 * :mod:`hptvsim.cosim.batched`: the same system, bit for bit, through the FMU binaries'
   batch entry points, for training speed.
+* :mod:`hptvsim.cosim.trajectory`: the one trajectory schema (column names, SI units, stored
+  types, order and layouts) that the master's output table and every writer above it use.
 """
 
 from __future__ import annotations

@@ -18,12 +18,19 @@ def _write(
 ) -> None:
     """Write ``time`` and the outputs: CSV (Reals to 17 digits, Booleans as true/false) or Parquet.
 
+    The trajectory schema's ``wide`` layout (:mod:`hptvsim.cosim.trajectory`): its ``time`` column
+    [s], then one column per output, named as the graph's outputs (the CSV header carries no
+    units; the Parquet fields carry them as metadata).
     Parquet columns carry the FMI types: float64 (Real, Float64), float32, int32 (Integer), the
     FMI 3 integer types as they are (its Enumerations as int64), bool (Boolean), string (String).
     Parquet fields carry each output's ``unit`` and ``display_unit`` as metadata (``time``: s).
     Written to a temporary file first, then renamed.
     """
     import csv
+
+    from hptvsim.cosim.trajectory import TIME, field_metadata
+
+    out_units = [units[k] if k < len(units) else (None, None) for k in range(len(names))]
 
     tmp = target.with_name(target.name + ".tmp")
     if target.suffix == ".parquet":
@@ -40,12 +47,10 @@ def _write(
         for t in ("Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32"):
             kinds[t] = getattr(pa, t.lower())()
         kinds |= {"Int64": pa.int64(), "UInt64": pa.uint64()}
-        fields = [pa.field("time", pa.float64(), metadata={"unit": "s"})]
+        fields = [pa.field(TIME.name, pa.float64(), metadata=field_metadata(TIME.unit))]
         arrays = [pa.array([r[0] for r in rows], pa.float64())]
         for k, (name, vtype) in enumerate(zip(names, types, strict=True)):
-            unit, display = units[k] if k < len(units) else (None, None)
-            meta = {key: v for key, v in (("unit", unit), ("display_unit", display)) if v}
-            fields.append(pa.field(name, kinds[vtype], metadata=meta or None))
+            fields.append(pa.field(name, kinds[vtype], metadata=field_metadata(*out_units[k])))
             arrays.append(pa.array([r[k + 1] for r in rows], kinds[vtype]))
         pq.write_table(pa.Table.from_arrays(arrays, schema=pa.schema(fields)), tmp)
     else:
@@ -59,7 +64,7 @@ def _write(
 
         with tmp.open("w", newline="") as fh:
             writer = csv.writer(fh)
-            writer.writerow(["time", *names])
+            writer.writerow([TIME.name, *names])  # plain names, as every release wrote them
             writer.writerows([[cell(v) for v in r] for r in rows])
     tmp.replace(target)
 

@@ -54,6 +54,7 @@ from typing import Any, ClassVar, Final, Literal, Self, TypeVar, get_args, get_o
 import numpy as np
 import numpy.typing as npt
 
+from hptvsim.cosim import trajectory  # the one trajectory schema
 from hptvsim.envs.metrics import EpisodeMetrics
 from hptvsim.palette import agent_color, display_constants  # the one palette of every view
 
@@ -705,14 +706,14 @@ class AgentTrajectory(SchemaObject):
             the terms were).
         r_E1: Approach term of each step (Eq. 18, unweighted; None likewise).
         r_E2: Capture term of each step (Eq. 19, unweighted; None likewise).
-        ranges: Sonar ranges per beam [m] of each step; an empty tuple at steps whose frame
-            carried no sonar (``FrameOptions.sonar_every``); None when not stored at all.
         z: 3-D game: depth [m], positive down (None in the planar game).
         phi: 3-D game: roll [rad] (None in the planar game).
         theta: 3-D game: pitch [rad] (None in the planar game).
         w: 3-D game: heave speed [m/s] (None in the planar game).
         w_cmd: 3-D game: commanded vertical speed [m/s], positive down (None in the planar game).
         altitude: 3-D game: height above the seabed [m] (None in the planar game).
+        ranges: Sonar ranges per beam [m] of each step; an empty tuple at steps whose frame
+            carried no sonar (``FrameOptions.sonar_every``); None when not stored at all.
 
     The columns are :class:`FloatColumn` and the ranges :class:`RangeRows` (numpy arrays);
     sequences of numbers given for them are converted.
@@ -733,35 +734,21 @@ class AgentTrajectory(SchemaObject):
     r_C: FloatColumn | None = None
     r_E1: FloatColumn | None = None
     r_E2: FloatColumn | None = None
-    ranges: RangeRows | None = None
     z: FloatColumn | None = None
     phi: FloatColumn | None = None
     theta: FloatColumn | None = None
     w: FloatColumn | None = None
     w_cmd: FloatColumn | None = None
     altitude: FloatColumn | None = None
+    ranges: RangeRows | None = None  # last, as in every layout of the trajectory schema
 
-    COLUMNS_3D: ClassVar[tuple[str, ...]] = ("z", "phi", "theta", "w", "w_cmd", "altitude")
-    """The columns only the 3-D game fills (None in planar trajectories)."""
+    COLUMNS_3D: ClassVar[tuple[str, ...]] = trajectory.COLUMNS_3D
+    """The columns only the 3-D game fills (None in planar trajectories;
+    :data:`hptvsim.cosim.trajectory.COLUMNS_3D`)."""
 
-    COLUMNS: ClassVar[tuple[str, ...]] = (
-        "x",
-        "y",
-        "psi",
-        "u",
-        "v",
-        "r",
-        "v_cmd",
-        "omega_cmd",
-        "reward",
-        "distance",
-        "min_range",
-        "r_C",
-        "r_E1",
-        "r_E2",
-        *COLUMNS_3D,
-    )
-    """The scalar columns, one value per step (the long table's columns after ``step, time, agent``)."""
+    COLUMNS: ClassVar[tuple[str, ...]] = trajectory.AGENT_COLUMN_NAMES
+    """The scalar columns, one value per step (the long table's columns after ``step, time, agent``;
+    :data:`hptvsim.cosim.trajectory.AGENT_COLUMNS`, with their units)."""
 
     def __post_init__(self) -> None:
         for c in self.COLUMNS:
@@ -786,34 +773,10 @@ class Trajectories(SchemaObject):
     time: tuple[float, ...]
     agents: tuple[AgentTrajectory, ...]
 
-    UNITS: ClassVar[dict[str, str]] = {
-        "step": "",
-        "time": "s",
-        "agent": "",
-        "x": "m",
-        "y": "m",
-        "psi": "rad",
-        "u": "m/s",
-        "v": "m/s",
-        "r": "rad/s",
-        "v_cmd": "m/s",
-        "omega_cmd": "rad/s",
-        "reward": "",
-        "distance": "m",
-        "min_range": "m",
-        "r_C": "",
-        "r_E1": "",
-        "r_E2": "",
-        "z": "m",
-        "phi": "rad",
-        "theta": "rad",
-        "w": "m/s",
-        "w_cmd": "m/s",
-        "altitude": "m",
-        "ranges": "m",
-    }
-    """The SI unit of each column of :meth:`columns` ("": a count, a name or dimensionless); the
-    CSV header and the Parquet fields' ``unit`` metadata carry them."""
+    UNITS: ClassVar[Mapping[str, str]] = trajectory.UNITS
+    """The SI unit of each column of :meth:`columns` ("": a count, a name or dimensionless;
+    :data:`hptvsim.cosim.trajectory.UNITS`); the CSV header and the Parquet fields' ``unit``
+    metadata carry them."""
 
     @classmethod
     def from_frames(cls, frames: Sequence[Frame]) -> Trajectories:
@@ -845,6 +808,9 @@ class Trajectories(SchemaObject):
     def columns(self) -> dict[str, npt.NDArray[Any]]:
         """Long table (one row per step and agent) as columns: ``step, time, agent, x, y, ...``.
 
+        The ``long`` layout of the trajectory schema
+        (:data:`hptvsim.cosim.trajectory.LONG_COLUMNS`).
+
         What the service writes as CSV or Parquet. A column that some agent lacks (a trajectory
         stored before it existed) is left out. ``ranges``, when every agent has them, is an object
         column holding each row's beam ranges [m] as a float64 array (empty where the step had no
@@ -852,9 +818,11 @@ class Trajectories(SchemaObject):
         """
         n_rows = len(self.step) * len(self.agents)
         out: dict[str, npt.NDArray[Any]] = {
-            "step": np.tile(np.asarray(self.step, dtype=np.int64), len(self.agents)),
-            "time": np.tile(np.asarray(self.time, dtype=np.float64), len(self.agents)),
-            "agent": np.repeat(np.asarray([a.name for a in self.agents], dtype=object), len(self.step)),
+            trajectory.STEP.name: np.tile(np.asarray(self.step, dtype=np.int64), len(self.agents)),
+            trajectory.TIME.name: np.tile(np.asarray(self.time, dtype=np.float64), len(self.agents)),
+            trajectory.AGENT.name: np.repeat(
+                np.asarray([a.name for a in self.agents], dtype=object), len(self.step)
+            ),
         }
         for c in AgentTrajectory.COLUMNS:
             if any(getattr(a, c) is None for a in self.agents):
@@ -872,19 +840,16 @@ class Trajectories(SchemaObject):
                 for t in range(len(a.ranges)):
                     rows[k] = a.ranges.row(t)
                     k += 1
-            out["ranges"] = rows
+            out[trajectory.RANGES.name] = rows
         assert all(v.shape == (n_rows,) for v in out.values())
         return out
 
 
 def _state_value(a: AgentState, column: str) -> float | None:
     """An agent state's value of a trajectory column (:attr:`AgentTrajectory.COLUMNS`)."""
-    if column == "v_cmd":
-        return a.action[0]
-    if column == "omega_cmd":
-        return a.action[1]
-    if column == "w_cmd":
-        return a.action[2] if len(a.action) > 2 else None
+    if column in trajectory.COMMAND_FIELDS:  # the action's entries, in action order
+        k = trajectory.COMMAND_COLUMNS.index(column)
+        return a.action[k] if k < len(a.action) else None
     value: float | None = getattr(a, column)
     return value
 

@@ -25,6 +25,7 @@ from typing import Any, Final, Literal, Protocol
 import numpy as np
 import numpy.typing as npt
 
+from hptvsim.cosim import trajectory
 from hptvsim.cosim.fmi2 import FmuError
 from hptvsim.cosim.orchestrator import SimulationFailedError
 from hptvsim.envs.games import game_options, make_game
@@ -296,16 +297,14 @@ class EpisodeStepper:
         self.game: Literal["planar", "3d"] = flavour(self._scene)
         self.action_size = len(core.command_fields)
         fields = core.command_fields
-        self._command_slots = {
-            col: fields.index(f)
-            for col, f in (("v_cmd", "v"), ("omega_cmd", "omega"), ("w_cmd", "w_z"))
-            if f in fields
+        self._command_slots = {  # commanded column -> its entry of the action
+            col: fields.index(f) for col, f in trajectory.COMMAND_FIELDS.items() if f in fields
         }
         self._columns = tuple(
             c
             for c in AgentTrajectory.COLUMNS
             if (self._scene.vertical or c not in AgentTrajectory.COLUMNS_3D)
-            and (not c.endswith("_cmd") or c in self._command_slots)
+            and (c not in trajectory.COMMAND_FIELDS or c in self._command_slots)
         )
         self.seed = int(core.seed)
         self.options = options if options is not None else FrameOptions()

@@ -10,7 +10,9 @@ line 19). Each dataset is a standard Minari dataset (``minari.load_dataset`` ope
 * per episode: the agent's observations (Eq. 14; ``T + 1`` rows, the last after the final
   step), its actions ``[v, omega]`` in SI units as the vehicle executed them (clipped to
   Eq. 15's box; ``T`` rows), its rewards (Eq. 20), terminations and truncations, and ``infos``
-  with ``position`` [m], ``yaw`` [rad] and ``distance`` [m] to its target (``T + 1`` rows);
+  with ``position`` [m], ``yaw`` [rad] and ``distance`` [m] to its target (``T + 1`` rows): the
+  trajectory schema's columns (:mod:`hptvsim.cosim.trajectory`), named with their units in the
+  ``hptvsim`` metadata (``columns``, ``units``);
   episode metadata: ``agent``, ``batch_seed``, ``env_index``, ``captured``, ``collision``;
 * dataset metadata: Minari's own (``ref_min_score`` = the mean return of ``scripted:random``
   agents in the same role, ``ref_max_score`` = the experts' mean return, so
@@ -45,7 +47,7 @@ import numpy as np
 import numpy.typing as npt
 
 from hptvsim.envs.core import GameCore, planar_scenario
-from hptvsim.offline.dataset import DEFAULT_DATASET_DIR, minari_root, versions
+from hptvsim.offline.dataset import DEFAULT_DATASET_DIR, dataset_infos, minari_root, schema_metadata, versions
 from hptvsim.offline.rollout import Episode, play
 
 __all__ = [
@@ -205,12 +207,14 @@ def _buffer(ep: Episode, i: int, episode_id: int) -> Any:
         rewards=ep.rewards[:t, i].astype(np.float64),
         terminations=ep.terminations[:t, i].copy(),
         truncations=ep.truncations[:t, i].copy(),
-        infos={
-            "position": ep.positions[: t + 1, i].astype(np.float64),
-            # one value per step as lists: Minari 0.5.4's arrow storage cannot decode 1-D arrays
-            "yaw": ep.yaw[: t + 1, i].astype(np.float64).tolist(),
-            "distance": ep.distance[: t + 1, i].astype(np.float64).tolist(),
-        },
+        infos=dataset_infos(  # the trajectory schema's columns
+            {
+                "x": ep.positions[: t + 1, i, 0],
+                "y": ep.positions[: t + 1, i, 1],
+                "psi": ep.yaw[: t + 1, i],
+                "distance": ep.distance[: t + 1, i],
+            }
+        ),
     )
 
 
@@ -371,6 +375,7 @@ def collect(
                             "diagonal": layout.diagonal,
                             "extended": layout.extended,
                         },
+                        **schema_metadata(box.shape[0]),  # fields as trajectory columns, units
                         "action_low": box.low.tolist(),
                         "action_high": box.high.tolist(),
                         "returns": _describe(expert_returns),

@@ -6,6 +6,13 @@ docstring describes the contents). Here: where datasets live (:func:`dataset_pat
 :func:`minari_root`), opening them (:func:`open_dataset`, never downloading), the versions a
 dataset or model records (:func:`versions`), and the training arrays
 (:class:`Trajectories`, :func:`load_trajectories`).
+
+A dataset's per-step fields are columns of the one trajectory schema
+(:mod:`hptvsim.cosim.trajectory`): actions are the commanded columns ``v_cmd, omega_cmd``
+[m/s, rad/s], rewards the ``reward`` column (Eq. 20), and the ``infos`` hold
+:data:`~hptvsim.cosim.trajectory.DATASET_INFOS` (``position`` = ``x, y`` [m], ``yaw`` = ``psi``
+[rad], ``distance`` [m]); :func:`dataset_infos` builds them and :func:`schema_metadata` records
+the columns and their units in the dataset's ``hptvsim`` metadata.
 """
 
 from __future__ import annotations
@@ -14,7 +21,7 @@ import contextlib
 import importlib.metadata
 import os
 import sys
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -22,13 +29,17 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from hptvsim.cosim import trajectory  # the one trajectory schema
+
 __all__ = [
     "DEFAULT_DATASET_DIR",
     "Trajectories",
+    "dataset_infos",
     "dataset_path",
     "load_trajectories",
     "minari_root",
     "open_dataset",
+    "schema_metadata",
     "versions",
 ]
 
@@ -96,6 +107,58 @@ def open_dataset(ref: str | Path, root: Path = DEFAULT_DATASET_DIR) -> Any:
     return minari.MinariDataset(dataset_path(ref, root) / "data")
 
 
+def dataset_infos(columns: Mapping[str, npt.ArrayLike]) -> dict[str, Any]:
+    """An episode's Minari ``infos`` from its schema columns, one value per step each.
+
+    Args:
+        columns: ``(T + 1,)`` values of each column that :data:`~hptvsim.cosim.trajectory.DATASET_INFOS`
+            names (``x``, ``y`` [m], ``psi`` [rad], ``distance`` [m]).
+
+    Returns:
+        ``{"position": (T + 1, 2) [m], "yaw": [rad], "distance": [m]}``: a key of several columns
+        as a float64 array, a key of one column as a list (Minari 0.5.4's arrow storage cannot
+        decode 1-D arrays).
+
+    Raises:
+        KeyError: A column is missing (the message names it and the columns needed).
+    """
+    infos: dict[str, Any] = {}
+    for key, names in trajectory.DATASET_INFOS.items():
+        missing = [c for c in names if c not in columns]
+        if missing:
+            needed = sorted({c for cs in trajectory.DATASET_INFOS.values() for c in cs})
+            raise KeyError(
+                f"dataset infos need the columns {', '.join(needed)}; missing: {', '.join(missing)}"
+            )
+        values = np.stack([np.asarray(columns[c], dtype=np.float64) for c in names], axis=-1)
+        infos[key] = values if len(names) > 1 else values[:, 0].tolist()
+    return infos
+
+
+def schema_metadata(action_dim: int) -> dict[str, Any]:
+    """The trajectory-schema columns of a dataset's fields and their SI units, for its metadata.
+
+    Args:
+        action_dim: Entries of an action (2: ``[v, omega]``; 3: ``[v, omega, w_z]``).
+
+    Returns:
+        ``{"columns": {"actions": [...], "rewards": ["reward"], "infos": {key: [...]}},
+        "units": {column: unit}}``.
+
+    Raises:
+        ValueError: ``action_dim`` is not 2 or 3.
+    """
+    if action_dim not in (2, 3):
+        raise ValueError(f"action_dim {action_dim} is not 2 ([v, omega]) or 3 ([v, omega, w_z])")
+    columns: dict[str, Any] = {
+        "actions": list(trajectory.COMMAND_COLUMNS[:action_dim]),
+        "rewards": ["reward"],
+        "infos": {key: list(names) for key, names in trajectory.DATASET_INFOS.items()},
+    }
+    named = [*columns["actions"], *columns["rewards"], *(c for cs in columns["infos"].values() for c in cs)]
+    return {"columns": columns, "units": {c: trajectory.UNITS[c] for c in named}}
+
+
 # --- training arrays --------------------------------------------------------------------------
 
 
@@ -105,8 +168,8 @@ class Trajectories:
 
     Attributes:
         observations: ``(S, obs_size)`` every step's observation (not the final ones).
-        actions: ``(S, act_dim)`` actions [SI].
-        rewards: ``(S,)``.
+        actions: ``(S, act_dim)`` actions: the schema's ``v_cmd, omega_cmd`` [m/s, rad/s].
+        rewards: ``(S,)`` the schema's ``reward`` column (Eq. 20).
         returns_to_go: ``(S,)`` ``R_t = sum_{t' >= t} r_t'`` within the episode (undiscounted).
         timesteps: ``(S,)`` step index within the episode.
         starts: ``(E,)`` first row of each episode.

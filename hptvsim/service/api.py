@@ -161,7 +161,7 @@ def trajectory_csv(table: Any) -> bytes:
     """A trajectory table as CSV; each row's sonar ranges become one space-separated field.
 
     The header names each column with its SI unit, ``x [m]`` (the Parquet file's fields carry
-    the same units as metadata, from :attr:`~hptvsim.episodes.frames.Trajectories.UNITS`). The same
+    the same units as metadata, from :data:`hptvsim.cosim.trajectory.UNITS`). The same
     text the API streams (:func:`~hptvsim.service.downloads.csv_chunks`), for a table in memory.
     """
     from hptvsim.service.downloads import TableRows, csv_chunks

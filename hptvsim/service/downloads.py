@@ -41,6 +41,8 @@ from typing import TYPE_CHECKING, Protocol
 from starlette.responses import StreamingResponse
 from starlette.types import Receive, Scope, Send
 
+from hptvsim.cosim import trajectory  # the one trajectory schema
+
 if TYPE_CHECKING:
     import pyarrow as pa
     import pyarrow.parquet as pq
@@ -89,6 +91,9 @@ MEDIA_TYPES = {
 
 _WIDTH = {"BOOLEAN": 1, "INT32": 4, "FLOAT": 4, "INT64": 8, "DOUBLE": 8, "INT96": 12}
 """Bytes [B] of one decoded value of each Parquet physical type (16 for strings and the rest)."""
+
+_RANGES = trajectory.RANGES.name
+"""The sonar ranges' column (a list per row, written last in every format)."""
 
 _JSON = json.JSONEncoder(ensure_ascii=False, allow_nan=False, separators=(",", ":"))
 """Encodes as the API's JSON responses do (Starlette's ``JSONResponse``)."""
@@ -427,7 +432,7 @@ def csv_chunks(rows: TrajectoryRows) -> Iterator[bytes]:
     """The trajectory as CSV, in chunks.
 
     The header names each column with its SI unit, ``x [m]`` (the Parquet file's fields carry the
-    same units as metadata, from :attr:`~hptvsim.episodes.frames.Trajectories.UNITS`); each row's
+    same units as metadata, from :data:`hptvsim.cosim.trajectory.UNITS`); each row's
     sonar ranges become one space-separated field. Values are written by Arrow's CSV writer,
     one batch of rows at a time.
 
@@ -437,18 +442,15 @@ def csv_chunks(rows: TrajectoryRows) -> Iterator[bytes]:
     import pyarrow as pa
     import pyarrow.csv as pacsv
 
-    from hptvsim.episodes.frames import Trajectories
-
     try:
         names = rows.column_names
-        units = Trajectories.UNITS
-        header = [f"{c} [{units[c]}]" if units.get(c) else c for c in names]
+        header = [trajectory.header(c, trajectory.UNITS.get(c)) for c in names]
         buf = io.BytesIO()
         writer: pacsv.CSVWriter | None = None
         for batch in rows.batches(names):
             arrays = list(batch.columns)
-            if "ranges" in names:
-                i = names.index("ranges")
+            if _RANGES in names:
+                i = names.index(_RANGES)
                 arrays[i] = pa.array(_ranges_text(arrays[i], sep=" ", json_numbers=False), pa.string())
             out = pa.RecordBatch.from_arrays(arrays, names=header)
             if writer is None:
@@ -472,7 +474,7 @@ def _agents(rows: TrajectoryRows) -> list[str]:
     import pyarrow.compute as pc
 
     seen: dict[str, None] = {}
-    for batch in rows.batches(["agent"]):
+    for batch in rows.batches([trajectory.AGENT.name]):
         for name in pc.unique(batch.column(0)).to_pylist():
             seen.setdefault(str(name), None)
     return list(seen)
@@ -482,7 +484,7 @@ def _column_text(rows: TrajectoryRows, column: str, start: int, stop: int) -> It
     """One column's values of rows ``start`` to ``stop`` as the inside of a JSON array."""
     first = True
     for batch in rows.batches([column], start, stop):
-        if column == "ranges":
+        if column == _RANGES:
             body = ",".join(f"[{r}]" for r in _ranges_text(batch.column(0), sep=",", json_numbers=True))
         else:
             body = _JSON.encode(batch.column(0).to_pylist())[1:-1]
@@ -505,23 +507,24 @@ def json_chunks(rows: TrajectoryRows) -> Iterator[bytes]:
     Raises:
         ValueError: A non-finite value (JSON cannot hold it; the stream ends there).
     """
-    from hptvsim.episodes.frames import AgentTrajectory
-
     out = _Chunker()
     try:
         names = set(rows.column_names)
         agents = _agents(rows) if rows.num_rows else []
         n_steps = rows.num_rows // max(len(agents), 1)
         pieces: list[Iterator[str] | str] = []
-        for c in ("step", "time"):
-            pieces += ['{"step":[' if c == "step" else '],"time":[', _column_text(rows, c, 0, n_steps)]
+        for k, col in enumerate(trajectory.PER_AGENT_INDEX):  # the per-agent layout: step, time once
+            pieces += [
+                ("{" if k == 0 else "],") + f'"{col.name}":[',
+                _column_text(rows, col.name, 0, n_steps),
+            ]
         pieces.append('],"agents":[')
         for chunk in _pieces(pieces, out):
             yield chunk
         for k, name in enumerate(agents):
             start, stop = k * n_steps, (k + 1) * n_steps
             agent: list[Iterator[str] | str] = [("," if k else "") + '{"name":' + _JSON.encode(name)]
-            for c in (*AgentTrajectory.COLUMNS, "ranges"):
+            for c in (*trajectory.AGENT_COLUMN_NAMES, _RANGES):
                 if c in names:
                     agent += [f',"{c}":[', _column_text(rows, c, start, stop), "]"]
                 else:
@@ -564,19 +567,19 @@ def jsonl_chunks(rows: TrajectoryRows) -> Iterator[bytes]:
     out = _Chunker()
     try:
         names = rows.column_names
-        scalars = [c for c in names if c != "ranges"]
+        scalars = [c for c in names if c != _RANGES]
         for batch in rows.batches(names):
             cols = {c: batch.column(names.index(c)).to_pylist() for c in scalars}
             ranges = (
-                _ranges_text(batch.column(names.index("ranges")), sep=",", json_numbers=True)
-                if "ranges" in names
+                _ranges_text(batch.column(names.index(_RANGES)), sep=",", json_numbers=True)
+                if _RANGES in names
                 else None
             )
             lines = []
             for i in range(batch.num_rows):
                 record = _JSON.encode({c: cols[c][i] for c in scalars})
                 if ranges is not None:
-                    record = record[:-1] + ("," if scalars else "") + f'"ranges":[{ranges[i]}]}}'
+                    record = record[:-1] + ("," if scalars else "") + f'"{_RANGES}":[{ranges[i]}]}}'
                 lines.append(record + "\n")
             chunk = out.add("".join(lines))
             if chunk is not None:

@@ -224,21 +224,23 @@ def write_outputs(
     import pyarrow as pa
     import pyarrow.parquet as pq
 
+    from hptvsim.cosim import trajectory
     from hptvsim.service.downloads import row_group_rows
 
     out_dir.mkdir(parents=True, exist_ok=True)
     _write_atomic(
         out_dir / STATIC_FILE, json.dumps(static if static is not None else result.static.to_dict())
     )
-    cols = result.trajectories.columns()
-    kinds = {"agent": pa.string(), "ranges": pa.list_(pa.float32())}  # others: numpy's dtype
-    table = pa.table({k: (pa.array(v.tolist(), kinds[k]) if k in kinds else v) for k, v in cols.items()})
-    units = type(result.trajectories).UNITS
-    table = table.cast(  # each field's SI unit in its metadata
-        pa.schema(
-            [f.with_metadata({"unit": units[f.name]}) if units.get(f.name) else f for f in table.schema]
-        )
-    )
+    cols = result.trajectories.columns()  # the schema's long layout, in its order
+    fields = []
+    arrays = []
+    for name, values in cols.items():
+        col = trajectory.column(name)
+        kind = trajectory.arrow_type(col.dtype)
+        # text and lists from Python objects; numbers straight from their arrays
+        arrays.append(pa.array(values.tolist() if values.dtype == object else values, kind))
+        fields.append(pa.field(name, kind, metadata=trajectory.field_metadata(col.unit)))  # SI unit
+    table = pa.Table.from_arrays(arrays, schema=pa.schema(fields))
     traj = out_dir / TRAJECTORY_FILE
     tmp = out_dir / (TRAJECTORY_FILE + ".tmp")
     # row groups of a few MB, so that a download reads any range of rows in bounded memory

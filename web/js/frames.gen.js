@@ -181,13 +181,13 @@
  * @property {(Array<number> | null)} [r_C] Obstacle term of each step (Eq. 17, unweighted; None in trajectories stored before the terms were).
  * @property {(Array<number> | null)} [r_E1] Approach term of each step (Eq. 18, unweighted; None likewise).
  * @property {(Array<number> | null)} [r_E2] Capture term of each step (Eq. 19, unweighted; None likewise).
- * @property {(Array<Array<number>> | null)} [ranges] Sonar ranges per beam [m] of each step; an empty tuple at steps whose frame carried no sonar (`FrameOptions.sonar_every`); None when not stored at all.
  * @property {(Array<number> | null)} [z] 3-D game: depth [m], positive down (None in the planar game).
  * @property {(Array<number> | null)} [phi] 3-D game: roll [rad] (None in the planar game).
  * @property {(Array<number> | null)} [theta] 3-D game: pitch [rad] (None in the planar game).
  * @property {(Array<number> | null)} [w] 3-D game: heave speed [m/s] (None in the planar game).
  * @property {(Array<number> | null)} [w_cmd] 3-D game: commanded vertical speed [m/s], positive down (None in the planar game).
  * @property {(Array<number> | null)} [altitude] 3-D game: height above the seabed [m] (None in the planar game).
+ * @property {(Array<Array<number>> | null)} [ranges] Sonar ranges per beam [m] of each step; an empty tuple at steps whose frame carried no sonar (`FrameOptions.sonar_every`); None when not stored at all.
  */
 
 export const SCHEMA_VERSION = "hptvsim-frames/2";
@@ -1340,24 +1340,6 @@ export const FRAME_SCHEMA = {
           ],
           "default": null
         },
-        "ranges": {
-          "description": "Sonar ranges per beam [m] of each step; an empty tuple at steps whose frame carried no sonar (`FrameOptions.sonar_every`); None when not stored at all.",
-          "anyOf": [
-            {
-              "type": "array",
-              "items": {
-                "type": "array",
-                "items": {
-                  "type": "number"
-                }
-              }
-            },
-            {
-              "type": "null"
-            }
-          ],
-          "default": null
-        },
         "z": {
           "description": "3-D game: depth [m], positive down (None in the planar game).",
           "anyOf": [
@@ -1440,6 +1422,24 @@ export const FRAME_SCHEMA = {
               "type": "array",
               "items": {
                 "type": "number"
+              }
+            },
+            {
+              "type": "null"
+            }
+          ],
+          "default": null
+        },
+        "ranges": {
+          "description": "Sonar ranges per beam [m] of each step; an empty tuple at steps whose frame carried no sonar (`FrameOptions.sonar_every`); None when not stored at all.",
+          "anyOf": [
+            {
+              "type": "array",
+              "items": {
+                "type": "array",
+                "items": {
+                  "type": "number"
+                }
               }
             },
             {
