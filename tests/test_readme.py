@@ -272,7 +272,8 @@ COMMANDS: dict[str, tuple[Run | Help, ...]] = {
     ),
     "hptvsim reproduce --plan section5-scale": (
         Run(  # the scaled plan's status against its committed archive (runs finished before)
-            "hptvsim reproduce --plan section5-scale --status --out {tmp}/rep --report {repo}/docs/reproduction.md",
+            "hptvsim reproduce --plan section5-scale --status --out {tmp}/rep"
+            " --report {repo}/docs/reproduction.md",
             r"(?m)^runs/base-seed0 .* finished \(archived\)$[\s\S]*^([3-8]\d|90) of 90 runs finished",
             (),
         ),

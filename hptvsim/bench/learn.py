@@ -28,6 +28,7 @@ from __future__ import annotations
 import contextlib
 import csv
 import json
+import logging
 import math
 import os
 import time
@@ -39,6 +40,8 @@ from typing import Any
 import numpy as np
 
 __all__ = ["TRAINERS", "LearnCurve", "bench_learn"]
+
+log = logging.getLogger(__name__)
 
 TRAINERS = ("fast ippo", "fast maisac", "sb3 one game", "benchmarl isac")
 """The rows, in the order they run."""
@@ -198,7 +201,7 @@ def run_sb3(cap_s: float, target: float, episodes: int, out: Path, chunk: int) -
                         "kind": "hptvsim",
                         "scenario": SCENARIO,
                         "task": "pursuit",
-                        "options": {k: v for k, v in GAME.items() if k != "threads"},
+                        "options": {k: v for k, v in GAME.items() if k not in ("threads", "task")},
                     },
                 }
             ],
@@ -221,7 +224,7 @@ def run_sb3(cap_s: float, target: float, episodes: int, out: Path, chunk: int) -
         )
         trained_s += time.monotonic() - t0
         steps = int(result.global_step)
-        ckpt = run_dir / "checkpoint"
+        ckpt = run_dir / "checkpoint" / "models"
         learners = sorted(p.stem for p in ckpt.glob("pursuer_*.zip"))
         curve.add(
             trained_s,
@@ -245,7 +248,6 @@ def _stacked(policies: Sequence[SB3ZipPolicy]) -> Callable[[Any], Any]:
 def run_benchmarl(cap_s: float, target: float, episodes: int, out: Path, every_iters: int) -> LearnCurve:
     """BenchMARL's ISAC on the TorchRL env, evaluated every ``every_iters`` iterations."""
     import torch
-    from benchmarl.experiment import Callback
     from torchrl.envs.utils import ExplorationType, set_exploration_type
 
     from hptvsim.bench.benchmarl_runner import BenchmarlSettings, make_experiment
@@ -270,14 +272,47 @@ def run_benchmarl(cap_s: float, target: float, episodes: int, out: Path, every_i
         ended = done.any(axis=1)
         return float(np.mean([bool(captured[b, first[b]].any()) and ended[b] for b in range(done.shape[0])]))
 
-    class _DoneError(Exception):
-        """Competent, or the cap is spent: ends BenchMARL's loop (which closes the experiment)."""
+    evaluate = _benchmarl_evaluate_class()(curve, capture_rate, every_iters, target, cap_s)
 
-    class Evaluate(Callback):  # type: ignore[misc]  # benchmarl is untyped
+    settings = BenchmarlSettings(algorithm="isac", num_envs=64, frames_per_batch=6400, iterations=10**6)
+    folder = out / "benchmarl-isac"
+    folder.mkdir(parents=True, exist_ok=True)
+    experiment = make_experiment(task, settings, seed=0, save_folder=folder, callbacks=[evaluate])
+    with contextlib.suppress(BenchmarlDone):
+        experiment.run()
+    eval_env.close()
+    return curve
+
+
+class BenchmarlDone(Exception):  # noqa: N818  # an end, not an error
+    """Competent, or the cap is spent: ends BenchMARL's loop (which closes the experiment)."""
+
+
+def _benchmarl_evaluate_class() -> type:
+    """The BenchMARL callback that evaluates the row, made once, as this module's ``BenchmarlEvaluate``.
+
+    BenchMARL pickles its callbacks with the experiment's configuration, so the class must be
+    importable by name; it is built on first use because benchmarl is an optional extra.
+    """
+    made = globals().get("BenchmarlEvaluate")
+    if made is not None:
+        return made  # type: ignore[no-any-return]
+    from benchmarl.experiment import Callback
+
+    class BenchmarlEvaluate(Callback):  # type: ignore[misc]  # benchmarl is untyped
         """Evaluates every ``every_iters`` iterations; the evaluations' time is not counted."""
 
-        def __init__(self) -> None:
+        def __init__(
+            self,
+            curve: LearnCurve,
+            capture_rate: Callable[[Any], float],
+            every_iters: int,
+            target: float,
+            cap_s: float,
+        ) -> None:
             super().__init__()
+            self.curve, self.capture_rate = curve, capture_rate
+            self.every_iters, self.target, self.cap_s = every_iters, target, cap_s
             self.start = time.monotonic()
             self.evaluating = 0.0
             self.iters = 0
@@ -286,26 +321,23 @@ def run_benchmarl(cap_s: float, target: float, episodes: int, out: Path, every_i
         def on_batch_collected(self, batch: Any) -> None:
             self.frames += int(batch.numel())
             self.iters += 1
-            if self.iters % every_iters:
+            if self.iters % self.every_iters:
                 return
             t0 = time.monotonic()
             trained = t0 - self.start - self.evaluating
-            curve.add(trained, self.frames, capture_rate(self.experiment.policy))
+            self.curve.add(trained, self.frames, self.capture_rate(self.experiment.policy))
             self.evaluating += time.monotonic() - t0
-            if curve.points[-1][2] >= target or trained >= cap_s:
-                raise _DoneError
+            if self.curve.points[-1][2] >= self.target or trained >= self.cap_s:
+                raise BenchmarlDone
 
         def __getstate__(self) -> dict[str, Any]:
+            """Nothing: BenchMARL pickles the callbacks only to record the configuration."""
             return {}
 
-    settings = BenchmarlSettings(algorithm="isac", num_envs=64, frames_per_batch=6400, iterations=10**6)
-    folder = out / "benchmarl-isac"
-    folder.mkdir(parents=True, exist_ok=True)
-    experiment = make_experiment(task, settings, seed=0, save_folder=folder, callbacks=[Evaluate()])
-    with contextlib.suppress(_DoneError):
-        experiment.run()
-    eval_env.close()
-    return curve
+    BenchmarlEvaluate.__qualname__ = "BenchmarlEvaluate"
+    BenchmarlEvaluate.__module__ = __name__
+    globals()["BenchmarlEvaluate"] = BenchmarlEvaluate
+    return BenchmarlEvaluate
 
 
 def bench_learn(
@@ -339,14 +371,31 @@ def bench_learn(
     out.mkdir(parents=True, exist_ok=True)
     rows = [(name, cap, target, episodes, out, quick) for name in TRAINERS if name in trainers]
     if jobs == 1:
-        curves = [_run_row(row) for row in rows]
+        curves = []
+        for row in rows:
+            try:
+                curves.append(_run_row(row))
+            except Exception as exc:  # one failed row must not lose the others
+                curves.append(_outcome(row[0], cap, exc))
     else:
         import multiprocessing as mp
         from concurrent.futures import ProcessPoolExecutor
 
         with ProcessPoolExecutor(max_workers=jobs, mp_context=mp.get_context("spawn")) as pool:
-            curves = list(pool.map(_run_row, rows))
+            futures = [pool.submit(_run_row, row) for row in rows]
+            curves = [
+                _outcome(row[0], cap, f.exception() or f.result())
+                for row, f in zip(rows, futures, strict=True)
+            ]
     return _report(curves, target, out, quick=quick, jobs=jobs)
+
+
+def _outcome(name: str, cap: float, result: LearnCurve | BaseException) -> LearnCurve:
+    """A row's curve, or an empty one saying why the row failed (the other rows are kept)."""
+    if isinstance(result, LearnCurve):
+        return result
+    log.error("bench learn: the row %r failed", name, exc_info=result)
+    return LearnCurve(name, cap_s=cap, note=f"failed: {type(result).__name__}: {result}")
 
 
 def _run_row(row: tuple[str, float, float, int, Path, bool]) -> LearnCurve:
@@ -388,6 +437,7 @@ def _report(
                 "best_capture": best,
                 "trained_s": c.points[-1][0] if c.points else 0.0,
                 "ratio_to_fast_ippo": ratio,
+                "note": c.note,
             }
         )
     with (out / "learn.csv").open("w", newline="") as fh:
@@ -453,6 +503,8 @@ def table(report: dict[str, Any]) -> str:
     ]
     for r in report["rows"]:
         t = "not reached" if r["time_to_target_s"] is None else f"{r['time_to_target_s']:.0f}"
+        if r.get("note"):
+            t = f"{t} ({r['note']})"
         n = "-" if r["steps_to_target"] is None else f"{r['steps_to_target']:,}"
         lines.append(
             f"| {r['trainer']} | {t} | {n} | {r['best_capture']:.2f} | {r['trained_s']:.0f} "

@@ -39,7 +39,7 @@ import pytest
 from service_helpers import ROOT
 
 TOP_LEVEL = {"hptvsim"}
-TRAINED_POLICIES = {"maisac-pursuers", "maisac-evader", "dt-pursuers"}
+TRAINED_POLICIES = {"maisac-pursuers", "ippo-pursuers", "maisac-evader", "dt-pursuers"}
 FINAL = ("finished", "failed", "cancelled", "interrupted")
 # environment variables that would let the installed copy see the checkout or another setup
 _FOREIGN_ENV = ("PYTHONPATH", "PYTHONHOME", "PYTHONSTARTUP", "VIRTUAL_ENV", "DATABASE_URL", "RAY_ADDRESS")

@@ -35,3 +35,20 @@ def test_bench_learn_runs_two_rows_side_by_side_and_reports_them(tmp_path: Path)
         assert im.size[0] > 800
     bad = CliRunner().invoke(main, ["bench", "learn", "--trainer", "sb3", "--out", str(tmp_path / "x")])
     assert bad.exit_code == 2 and "sb3 one game" in bad.output and "Traceback" not in bad.output
+
+
+def test_the_sb3_and_benchmarl_rows_train_and_evaluate(tmp_path: Path) -> None:
+    """Today's one-game SB3 path and BenchMARL's ISAC on the TorchRL env, one evaluation each."""
+    from hptvsim.bench.learn import run_benchmarl, run_sb3
+
+    sb3 = run_sb3(1.0, 0.7, 2, tmp_path, chunk=50)
+    assert [(n, 0.0 <= c <= 1.0) for _, n, c in sb3.points] == [(50, True)]
+    assert sorted(p.name for p in (tmp_path / "sb3-one-game/checkpoint/models").glob("*.zip")) == [
+        "pursuer_0.zip",
+        "pursuer_1.zip",
+        "pursuer_2.zip",
+    ]
+    isac = run_benchmarl(1.0, 0.7, 2, tmp_path, every_iters=1)
+    frames = [n for _, n, _ in isac.points]
+    assert frames == [6400 * (k + 1) for k in range(len(frames))]  # an iteration: 64 games x 100 frames
+    assert isac.points[-1][0] >= 1.0 and all(0.0 <= c <= 1.0 for _, _, c in isac.points)  # to its cap
