@@ -9,8 +9,8 @@ behind the names (:func:`hptvsim.zoo.load_policy`,
 allows them.
 
 The lists are those of :func:`hptvsim.world.scenario.list_scenarios` (the shipped scenario
-folder) and :func:`hptvsim.zoo.list_policies` (scripted policies and the policy index of
-``HPTVSIM_POLICY_DIR``, the checkout or the wheel).
+folder) and :func:`hptvsim.zoo.list_policies` (scripted policies, the shipped policy index of
+the checkout or the wheel, and that of the user's ``HPTVSIM_POLICY_DIR``).
 """
 
 from __future__ import annotations

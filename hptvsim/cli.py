@@ -198,8 +198,7 @@ def demo(out_dir: Path, duration: float, no_episode: bool, scenario: str) -> Non
     path = run_demo(out_dir, duration=duration)
     click.echo(f"trajectory plot: {path.resolve()}")
     if not no_episode:
-        steps = None if scenario != "target" else 1200
-        click.echo(f"episode plot: {plot_episode(out_dir, scenario=scenario, max_steps=steps).resolve()}")
+        click.echo(f"episode plot: {plot_episode(out_dir, scenario=scenario).resolve()}")
 
 
 def _register() -> None:

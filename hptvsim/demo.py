@@ -220,7 +220,7 @@ def plot_episode(
     *,
     scenario: str = "target",
     seed: int = 0,
-    max_steps: int | None = 1200,
+    max_steps: int | None = None,
     echo: Callable[[str], None] | None = print,
 ) -> Path:
     """Play one episode with the default policies on the FMU backend; report it; write ``episode.png``.

@@ -13,7 +13,9 @@ same ones, in any game (:class:`~hptvsim.envs.protocol.Game`), without asking wh
   in the planar game, :data:`hptvsim.envs.policies3d.POLICY_NAMES_3D` in the 3-D game;
 * shipped trained policies listed in ``policies/index.toml`` (the repository's ``policies/``
   folder, or the copy in an installed wheel): each entry names its kind (``sb3`` or ``dt``),
-  file, roles and the command, config and seed that made it;
+  file, roles and the command, config and seed that made it; a folder of the user's own, with an
+  ``index.toml`` of the same format, named by ``$HPTVSIM_POLICY_DIR``, adds its policies to them
+  (a name both list is refused);
 * a path to a checkpoint: ``sb3:path/to/model.zip`` or ``dt:path/to/model.pt``.
 
 A policy that acts in its game's action space where that is not the commands (the 3-D game's
@@ -28,6 +30,7 @@ imported when a DT is first loaded); :func:`register_loader` adds other kinds.
 from __future__ import annotations
 
 import dataclasses
+import os
 import tomllib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -46,6 +49,7 @@ from hptvsim.train.policy import check_sb3, load_sb3  # SB3 itself is imported w
 __all__ = [
     "CHECKPOINT_GAMES",
     "GAMES",
+    "USER_POLICY_ENV",
     "GameCommands",
     "PolicyChecker",
     "PolicyInfo",
@@ -61,6 +65,7 @@ __all__ = [
     "load_policy",
     "policy_dir",
     "register_loader",
+    "user_policy_dir",
 ]
 
 GAMES: Final = ("planar", "3d")
@@ -140,16 +145,66 @@ def _loader(kind: str) -> PolicyLoader:
     return _LOADERS[kind]
 
 
+USER_POLICY_ENV: Final = "HPTVSIM_POLICY_DIR"
+"""The environment variable naming a folder of the user's own policies (added to the shipped ones)."""
+
+
 def policy_dir() -> Path:
-    """The folder of shipped trained policies (``$HPTVSIM_POLICY_DIR``, the checkout's, or the wheel's)."""
-    return shipped_dir("policies", env="HPTVSIM_POLICY_DIR")
+    """The folder of shipped trained policies (the checkout's ``policies/``, or the wheel's copy)."""
+    return shipped_dir("policies")
+
+
+def user_policy_dir() -> Path | None:
+    """The user's own policy folder, ``$HPTVSIM_POLICY_DIR`` (None when unset or empty).
+
+    Its ``index.toml`` lists policies in the shipped index's format; they are offered beside the
+    shipped ones (:func:`list_policies`).
+    """
+    value = os.environ.get(USER_POLICY_ENV, "")
+    return Path(value) if value else None
 
 
 _SCRIPTED_ROLES = POLICY_ROLES  # one table, in the layer that defines the scripted policies
 
 
+def _indexed(root: Path) -> list[PolicyInfo]:
+    """The trained policies listed in ``root/index.toml`` (none when the folder has no index)."""
+    index = root / "index.toml"
+    if not index.is_file():
+        return []
+    out = []
+    data = tomllib.loads(index.read_text())
+    for name, entry in sorted(data.get("policies", {}).items()):
+        files = {str(a): root / str(f) for a, f in entry.get("files", {}).items()}
+        if "file" not in entry and not files:
+            raise ValueError(f"{index}: policy {name!r} needs 'file' or 'files'")
+        out.append(
+            PolicyInfo(
+                name=name,
+                kind=str(entry["kind"]),
+                roles=tuple(entry.get("roles", ("pursuer", "evader"))),
+                path=root / str(entry["file"]) if "file" in entry else next(iter(files.values())),
+                files=files,
+                description=str(entry.get("description", "")),
+                provenance=dict(entry.get("provenance", {})),
+                default_for=tuple(entry.get("default_for", ())),
+                games=tuple(entry.get("games", ("planar",))),
+            )
+        )
+    return out
+
+
 def list_policies(folder: Path | None = None) -> list[PolicyInfo]:
-    """Every named policy: the scripted ones, then the shipped trained ones."""
+    """Every named policy: the scripted ones, then the trained ones.
+
+    Args:
+        folder: List the trained policies of this folder's ``index.toml`` only. None: the shipped
+            ones (:func:`policy_dir`) and, after them, the user's (:func:`user_policy_dir`).
+
+    Raises:
+        ValueError: An index entry without a file, or a user policy named like a shipped one
+            (one line naming both index files).
+    """
     out = [
         PolicyInfo(
             name=f"scripted:{n}",
@@ -160,28 +215,21 @@ def list_policies(folder: Path | None = None) -> list[PolicyInfo]:
         )
         for n in POLICY_NAMES
     ]
-    root = folder if folder is not None else policy_dir()
-    index = root / "index.toml"
-    if index.is_file():
-        data = tomllib.loads(index.read_text())
-        for name, entry in sorted(data.get("policies", {}).items()):
-            files = {str(a): root / str(f) for a, f in entry.get("files", {}).items()}
-            if "file" not in entry and not files:
-                raise ValueError(f"{index}: policy {name!r} needs 'file' or 'files'")
-            out.append(
-                PolicyInfo(
-                    name=name,
-                    kind=str(entry["kind"]),
-                    roles=tuple(entry.get("roles", ("pursuer", "evader"))),
-                    path=root / str(entry["file"]) if "file" in entry else next(iter(files.values())),
-                    files=files,
-                    description=str(entry.get("description", "")),
-                    provenance=dict(entry.get("provenance", {})),
-                    default_for=tuple(entry.get("default_for", ())),
-                    games=tuple(entry.get("games", ("planar",))),
+    if folder is not None:
+        return out + _indexed(folder)
+    shipped = policy_dir()
+    trained = _indexed(shipped)
+    user = user_policy_dir()
+    if user is not None and user.resolve() != shipped.resolve():
+        names = {p.name for p in trained}
+        for p in _indexed(user):
+            if p.name in names:
+                raise ValueError(
+                    f"policy {p.name!r} is listed in both {shipped / 'index.toml'} and "
+                    f"{user / 'index.toml'} ({USER_POLICY_ENV}); give the user's policy another name"
                 )
-            )
-    return out
+        trained += _indexed(user)
+    return out + trained
 
 
 def _trained_default(role: str, task: str, game: str) -> str | None:

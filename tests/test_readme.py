@@ -124,6 +124,12 @@ class Help:
     expect: str
 
 
+EVALUATE_SHIPPED = (
+    "hptvsim evaluate --env hptvsim:target/pursuit --env-option extended_obs=true --pursuers maisac-pursuers"
+    " --evaders maisac-evader"
+)
+"""The README's evaluation of the shipped policies, whose numbers its table states."""
+
 QUICK = (
     "--no-progress --no-tensorboard --set stage.0.budget_steps=60 --set stage.1.budget_steps=60"
     " --set stage.2.budget_steps=60 --set stage.*.env.options.max_steps=30 --set sac.learning_starts=20"
@@ -225,10 +231,9 @@ COMMANDS: dict[str, tuple[Run | Help, ...]] = {
             after="hptvsim train quick",
         ),
     ),
-    "hptvsim evaluate --env hptvsim:target/pursuit --pursuers maisac-pursuers --evaders maisac-evader": (
+    EVALUATE_SHIPPED: (
         Run(
-            "hptvsim evaluate --env hptvsim:target/pursuit --pursuers maisac-pursuers --evaders maisac-evader"
-            " --episodes 2 --env-option max_steps=30 --json {tmp}/eval.json",
+            f"{EVALUATE_SHIPPED} --episodes 2 --env-option max_steps=30 --json {{tmp}}/eval.json",
             r"\| pursuer=maisac-pursuers, evader=maisac-evader \| \d\.\d\d ± .* \| 2 \|",
             ("{tmp}/eval.json",),
             slow=True,
@@ -596,3 +601,64 @@ def test_readme_command(
         shared.ok(step.after)
     writes = [Path(w.format(tmp=tmp_path, shared=shared.folder)) for w in step.writes]
     check(run(argv(step.cmd, tmp_path, shared.folder), tmp_path), step.expect, writes)
+
+
+# --- the README's numbers are what its commands print ----------------------------------------------
+
+SHIPPED_ROW = re.compile(
+    r"^\| shipped MAISAC pursuers \| shipped MAISAC evader \| (\d\.\d\d) \+- (\d\.\d\d) \| (\d\.\d\d) \|$",
+    re.M,
+)
+"""The table row of the shipped pursuers against the shipped evader (target scenario)."""
+
+
+def _index_evaluation() -> list[str]:
+    """The command behind the shipped pursuers' numbers, as recorded in ``policies/index.toml``."""
+    import tomllib
+
+    index = tomllib.loads((REPO / "policies" / "index.toml").read_text())["policies"]
+    recorded = re.match(
+        r"(hptvsim evaluate .*?) --episodes 100: ", index["maisac-pursuers"]["provenance"]["evaluation"]
+    )
+    assert recorded is not None, (
+        "policies/index.toml: maisac-pursuers records no 100-episode evaluate command"
+    )
+    return shlex.split(recorded.group(1))
+
+
+def _episodes(args: list[str], tmp: Path, name: str) -> list[dict[str, object]]:
+    import json
+
+    out = tmp / f"{name}.json"
+    res = run([*args, "--json", str(out)], tmp)
+    check(res, r"\| pursuer=maisac-pursuers, evader=maisac-evader \|")
+    return list(json.loads(out.read_text())["runs"][0]["episodes"])
+
+
+def test_the_readme_evaluation_plays_the_episodes_behind_its_table(tmp_path: Path) -> None:
+    """A fast subset: the README's command plays the recorded measurement's first episodes exactly.
+
+    The table's numbers were measured with the command recorded in ``policies/index.toml``
+    (explicit ``extended_obs`` and ``max_steps``); the README's own command must play the same
+    episodes (same settings, from the scenario), so that it prints the table's numbers (the slow
+    test below runs all 100).
+    """
+    assert EVALUATE_SHIPPED in readme_commands()
+    assert SHIPPED_ROW.search(README.read_text(encoding="utf-8")), "the README's table lost its shipped row"
+    keys = ("captured", "collision", "length", "returns")
+    ours = _episodes([*argv(EVALUATE_SHIPPED, tmp_path, tmp_path), "--episodes", "3"], tmp_path, "readme")
+    theirs = _episodes([*HPTVSIM, *_index_evaluation()[1:], "--episodes", "3"], tmp_path, "recorded")
+    assert [{k: e[k] for k in keys} for e in ours] == [{k: e[k] for k in keys} for e in theirs]
+
+
+@pytest.mark.slow
+def test_the_readme_evaluation_prints_the_numbers_of_its_table(tmp_path: Path) -> None:
+    """The README's command, all 100 episodes (minutes): the capture and collision rates its table states."""
+    match = SHIPPED_ROW.search(README.read_text(encoding="utf-8"))
+    assert match is not None
+    capture, spread, collision = match.groups()
+    res = run(argv(EVALUATE_SHIPPED, tmp_path, tmp_path), tmp_path, timeout=3600)
+    row = (
+        rf"\| pursuer=maisac-pursuers, evader=maisac-evader \| {re.escape(capture)} ± {re.escape(spread)} \|"
+    )
+    check(res, row + rf"[^|]*\| {re.escape(collision)} ± ")

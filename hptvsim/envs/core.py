@@ -305,9 +305,10 @@ class GameCore(GameBase[ObsLayout]):
             of Figs. 9-10); validated like the scenario's own.
         reward: Overrides of the scenario's ``[task.reward]`` weights and magnitudes (e.g.
             ``{"delta_C": 0.01}``; the fields of :class:`~hptvsim.world.scenario.Reward`),
-            validated like the scenario's own. The paper gives the magnitudes of Eqs. 17-19 but
-            not the weights of Eq. 20, so these are a training choice; capture and collision
-            rules do not depend on them.
+            validated like the scenario's own, or a preset's name (``"paper"``: Eq. 20's unit
+            weights; :data:`~hptvsim.world.scenario.REWARD_PRESETS`). The paper gives the
+            magnitudes of Eqs. 17-19 but not the weights of Eq. 20, so these are a training
+            choice; capture and collision rules do not depend on them.
     """
 
     kind: str = "planar"
@@ -329,7 +330,7 @@ class GameCore(GameBase[ObsLayout]):
         seed: int | None = None,
         threads: int | None = None,
         vehicle_parameters: Mapping[str, Mapping[str, float]] | None = None,
-        reward: Mapping[str, float] | None = None,
+        reward: Mapping[str, float] | str | None = None,
     ) -> None:
         sc = scenario_argument(scenario)
         overrides = common_overrides(sc, task=task, max_steps=max_steps, reward=reward)

@@ -181,7 +181,7 @@ class Game3DCore(GameBase[Obs3DLayout]):
         max_steps: int | None = None,
         seed: int | None = None,
         threads: int | None = None,
-        reward: Mapping[str, float] | None = None,
+        reward: Mapping[str, float] | str | None = None,
         azimuth_beams: int | None = None,
         elevation_beams: int | None = None,
         goal_depth: float | None = None,

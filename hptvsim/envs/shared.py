@@ -24,7 +24,7 @@ import numpy.typing as npt
 
 from hptvsim.envs.policies import Policy
 from hptvsim.envs.protocol import INFO_KEYS, POSE_FIELDS, RESET_INFO_KEYS, Game, StepResult
-from hptvsim.world.scenario import AgentSpec, Scenario, Task, World, load_scenario
+from hptvsim.world.scenario import AgentSpec, Scenario, Task, World, load_scenario, reward_preset
 from hptvsim.world.sensor_config import SonarConfig
 
 __all__ = [
@@ -77,12 +77,15 @@ def common_overrides(
     *,
     task: str | None = None,
     max_steps: int | None = None,
-    reward: Mapping[str, float] | None = None,
+    reward: Mapping[str, float] | str | None = None,
 ) -> dict[str, Any]:
     """The scenario changes that a game's ``task``, ``max_steps`` and ``reward`` arguments ask.
 
+    ``reward`` is a table of ``[task.reward]`` fields or the name of a preset
+    (:data:`~hptvsim.world.scenario.REWARD_PRESETS`, e.g. ``"paper"`` for Eq. 20's unit weights).
+
     Raises:
-        ValueError: An invalid task or step limit (the message says what is valid).
+        ValueError: An invalid task, step limit or reward preset (the message says what is valid).
     """
     overrides: dict[str, Any] = {}
     if task is not None and task != sc.task.kind:
@@ -93,6 +96,8 @@ def common_overrides(
         if isinstance(max_steps, bool) or not float(max_steps).is_integer() or max_steps < 1:
             raise ValueError(f"max_steps = {max_steps!r} is invalid; valid: an integer >= 1")
         overrides["simulation"] = {"max_steps": int(max_steps)}
+    if isinstance(reward, str):
+        reward = reward_preset(reward)
     if reward:
         overrides.setdefault("task", {})["reward"] = {k: float(v) for k, v in reward.items()}
     return overrides

@@ -355,7 +355,13 @@ def register(main: click.Group) -> None:
 
         out = out_dir if out_dir is not None else paths[0] / "figures"
         try:
-            written = make_figures(list(paths), out, with_trajectories=not no_trajectories, smooth=smooth)
+            written = make_figures(
+                list(paths),
+                out,
+                with_trajectories=not no_trajectories,
+                smooth=smooth,
+                note=lambda line: click.echo(f"warning: {line}", err=True),
+            )
         except (FileNotFoundError, RunFileError, WindowError) as exc:
             raise click.ClickException(str(exc)) from None
         for p in written:

@@ -49,6 +49,7 @@ import numpy.typing as npt
 from hptvsim.envs.core import GameCore, planar_scenario
 from hptvsim.offline.dataset import DEFAULT_DATASET_DIR, dataset_infos, minari_root, schema_metadata, versions
 from hptvsim.offline.rollout import Episode, play
+from hptvsim.world.scenario import REWARD_PRESETS
 
 __all__ = [
     "RANDOM_SPEC",
@@ -358,6 +359,8 @@ def collect(
                         "scenario": core.scenario.name,
                         "scenario_source": str(core.scenario.source),
                         "task": core.task.kind,
+                        # the reward weights behind the returns (a DT's targets are in them)
+                        "reward": {k: float(getattr(core.task.reward, k)) for k in REWARD_PRESETS["paper"]},
                         "agents": list(agents),
                         "role": _role(core, agents[0]),
                         "all_agents": list(core.agents),

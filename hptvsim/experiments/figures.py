@@ -6,7 +6,7 @@
 * :func:`final_reward_bars`: mean and variance of the final rewards per setting, with 95 %
   intervals over seeds (Fig. 11, the entropy coefficient study).
 * :func:`trajectories`: one evaluation episode per stage, every vehicle's track (Figs. 12-13),
-  from the ``position`` (north, east) the agents report in ``infos``.
+  from the game's poses (planar and 3-D games); a figure it cannot draw is named in one line.
 * :func:`claims_figure`: every seed behind each of a reproduction's claims, one panel per claim
   (``hptvsim reproduce`` draws it beside its verdict table).
 
@@ -23,7 +23,7 @@ import json
 import math
 import textwrap
 from collections import defaultdict
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -877,7 +877,7 @@ def claims_figure(panels: Sequence[ClaimPanel], *, caption: str = "", columns: i
 
 
 def _north_east(info: Mapping[str, Any]) -> tuple[float, float] | None:
-    """An agent's (north, east) position [m] from its info: ``position`` (planar game) or ``x, y`` (3-D)."""
+    """An agent's (north, east) position [m] from its info: ``position`` (the toy game) or ``x, y``."""
     if "position" in info:
         return float(info["position"][0]), float(info["position"][1])
     if "x" in info and "y" in info:
@@ -885,8 +885,69 @@ def _north_east(info: Mapping[str, Any]) -> tuple[float, float] | None:
     return None
 
 
-def trajectories(run_dir: Path, out: Path, *, seed: int = 0) -> list[Path]:
-    """One deterministic episode per finished stage with that stage's models; tracks from ``infos``."""
+def _positions(env: Any, infos: Mapping[str, Mapping[str, Any]]) -> dict[str, tuple[float, float]]:
+    """Every agent's (north, east) position [m] now.
+
+    From the game's poses (:attr:`hptvsim.envs.protocol.Game.poses`, every game of the package:
+    planar and 3-D, including agents that a fixed policy drives), else from the agents' ``infos``
+    (other registered envs).
+    """
+    game = getattr(env, "game", None)
+    if game is not None and hasattr(game, "poses") and hasattr(game, "agents"):
+        poses = np.asarray(game.poses)[0]  # (N, 6): x north, y east [m], ...; the env's one game
+        return {a: (float(poses[i, 0]), float(poses[i, 1])) for i, a in enumerate(game.agents)}
+    return {a: xy for a, i in infos.items() if (xy := _north_east(i)) is not None}
+
+
+def _stderr_note(message: str) -> None:
+    import sys
+
+    print(message, file=sys.stderr)
+
+
+def _episode_tracks(
+    env: Any, policies: Mapping[str, Any], seed: int
+) -> tuple[dict[str, list[tuple[float, float]]], dict[str, tuple[float, float]]]:
+    """One episode's tracks (north, east) [m] per agent and the goals of the agents that have one."""
+    from hptvsim.train.evaluate import EVAL_SEED_OFFSET, reset_policies
+
+    obs, infos = env.reset(seed=EVAL_SEED_OFFSET + seed)
+    reset_policies(dict(policies))
+    tracks: dict[str, list[tuple[float, float]]] = defaultdict(list)
+    goals = {a: (float(i["goal"][0]), float(i["goal"][1])) for a, i in infos.items() if "goal" in i}
+    for a, xy in _positions(env, infos).items():
+        tracks[a].append(xy)
+    while env.agents:
+        acting = list(env.agents)
+        obs, _, _, _, infos = env.step({a: policies[a](obs[a]) for a in acting})
+        for a, xy in _positions(env, infos).items():
+            if a in acting:  # an agent whose episode has ended stays where it ended
+                tracks[a].append(xy)
+    return dict(tracks), goals
+
+
+def trajectories(
+    run_dir: Path,
+    out: Path,
+    *,
+    seed: int = 0,
+    note: Callable[[str], None] = _stderr_note,
+) -> list[Path]:
+    """One deterministic episode per finished stage with that stage's models: every vehicle's track.
+
+    Positions come from the game's poses (planar and 3-D games alike). A stage whose figure
+    cannot be drawn (its models are gone, its env reports no positions, ...) is reported to
+    ``note`` in one line naming the figure and why; the other stages go on.
+
+    Args:
+        run_dir: A training run's folder.
+        out: Folder of the PNGs (``trajectories_<stage>.png``).
+        seed: Evaluation episode seed (offset as ``hptvsim evaluate``'s).
+        note: Receives one line per figure not drawn (default: standard error).
+
+    Returns:
+        The written files.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
@@ -895,34 +956,28 @@ def trajectories(run_dir: Path, out: Path, *, seed: int = 0) -> list[Path]:
     from hptvsim.experiments.policies import policies_from_specs
     from hptvsim.train.config import load_run_config
     from hptvsim.train.envs import make_env_factory
-    from hptvsim.train.evaluate import EVAL_SEED_OFFSET, reset_policies
 
     cfg = load_run_config(run_dir)
     written = []
     out.mkdir(parents=True, exist_ok=True)
     for stage in cfg.stages:
+        path = out / f"trajectories_{stage.name}.png"
         if not (run_dir / "stages" / stage.name / "stage.json").is_file():
+            note(f"{path.name} not drawn: stage {stage.name!r} of {run_dir} has not finished")
             continue
-        env = make_env_factory(stage.env)()
         try:
-            policies = policies_from_specs(f"run:{run_dir}@{stage.name}", dict(cfg.fixed))(env)
-            obs, infos = env.reset(seed=EVAL_SEED_OFFSET + seed)
-            reset_policies(policies)
-            tracks: dict[str, list[tuple[float, float]]] = defaultdict(list)
-            goals: dict[str, tuple[float, float]] = {}
-            for a, i in infos.items():
-                if "goal" in i:
-                    goals[a] = (float(i["goal"][0]), float(i["goal"][1]))
-                if (xy := _north_east(i)) is not None:
-                    tracks[a].append(xy)
-            while env.agents:
-                obs, _, _, _, infos = env.step({a: policies[a](obs[a]) for a in env.agents})
-                for a, i in infos.items():
-                    if (xy := _north_east(i)) is not None:
-                        tracks[a].append(xy)
-        finally:
-            env.close()
+            env = make_env_factory(stage.env)()
+            try:
+                policies = policies_from_specs(f"run:{run_dir}@{stage.name}", dict(cfg.fixed))(env)
+                tracks, goals = _episode_tracks(env, policies, seed)
+            finally:
+                env.close()
+        except Exception as exc:  # a figure that cannot be drawn must not stop the others
+            reason = " ".join(str(exc).split()) or type(exc).__name__
+            note(f"{path.name} not drawn: {reason}")
+            continue
         if not tracks:
+            note(f"{path.name} not drawn: the env of stage {stage.name!r} reports no positions")
             continue
         fig, ax = plt.subplots(figsize=(6, 5))
         for agent, pts in sorted(tracks.items()):
@@ -941,7 +996,6 @@ def trajectories(run_dir: Path, out: Path, *, seed: int = 0) -> list[Path]:
         ax.legend(fontsize=7)
         ax.grid(alpha=0.3)
         fig.tight_layout()
-        path = out / f"trajectories_{stage.name}.png"
         fig.savefig(path, dpi=120)
         plt.close(fig)
         written.append(path)
@@ -1018,6 +1072,7 @@ def make_figures(
     with_trajectories: bool = True,
     stages: Sequence[str] | None = None,
     smooth: int | None = None,
+    note: Callable[[str], None] = _stderr_note,
 ) -> list[Path]:
     """All figures for runs and sweeps; returns the written files.
 
@@ -1028,6 +1083,7 @@ def make_figures(
         stages: Only these stages (default: a sweep's ``stages``, else all).
         smooth: Moving-average window of the reward curves [episodes] (default: a sweep's
             ``smooth``, else 5).
+        note: Receives one line per figure that could not be drawn (default: standard error).
 
     Raises:
         FileNotFoundError: No finished episodes in the given folders.
@@ -1060,5 +1116,5 @@ def make_figures(
     )
     if with_trajectories:
         for run in runs[:1] if len(runs) > 1 else runs:
-            written += trajectories(run, out)
+            written += trajectories(run, out, note=note)
     return written

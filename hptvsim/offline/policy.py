@@ -29,6 +29,7 @@ every agent of its role).
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, Final, cast
 
@@ -40,8 +41,17 @@ from hptvsim.envs.core import GameCore
 from hptvsim.envs.protocol import Game
 from hptvsim.envs.task import reward_terms
 from hptvsim.offline.model import DecisionTransformer, DTConfig
+from hptvsim.world.scenario import REWARD_PRESETS
 
-__all__ = ["DEFAULT_TARGET", "DT_GAMES", "DTPolicy", "load_dt", "load_policy_file", "reward_estimator"]
+__all__ = [
+    "DEFAULT_TARGET",
+    "DT_GAMES",
+    "DTPolicy",
+    "data_reward",
+    "load_dt",
+    "load_policy_file",
+    "reward_estimator",
+]
 
 F32 = npt.NDArray[np.float32]
 F64 = npt.NDArray[np.float64]
@@ -65,8 +75,32 @@ that game's observation layout, Eq. 14)."""
 RewardFn = Callable[[F32, F32], F64]
 
 
-def reward_estimator(core: GameCore, agent: str) -> RewardFn:
-    """The agent's reward (Eq. 20) estimated from its previous and current observations."""
+def data_reward(payload: Mapping[str, Any], m: int) -> dict[str, float]:
+    """The reward weights of model ``m``'s training data (the ``[task.reward]`` fields they set).
+
+    ``hptvsim collect`` records them in each dataset's metadata and the DT's file keeps that
+    metadata. A file without them was trained on data collected before the shipped scenarios
+    declared the shipped policies' training weights, under the paper's unit weights (the
+    ``paper`` preset of :data:`~hptvsim.world.scenario.REWARD_PRESETS`), as the shipped
+    ``dt-pursuers`` were.
+    """
+    datasets = payload.get("provenance", {}).get("datasets", [])
+    meta = datasets[m] if 0 <= m < len(datasets) and isinstance(datasets[m], Mapping) else {}
+    recorded = meta.get("reward")
+    if isinstance(recorded, Mapping):
+        return {str(k): float(v) for k, v in recorded.items()}
+    return dict(REWARD_PRESETS["paper"])
+
+
+def reward_estimator(core: GameCore, agent: str, weights: Mapping[str, float] | None = None) -> RewardFn:
+    """The agent's reward (Eq. 20) estimated from its previous and current observations.
+
+    Args:
+        core: The game.
+        agent: Whose reward.
+        weights: ``[task.reward]`` fields replacing the game's (None: the game's reward).
+    """
+    task = core.task if weights is None else replace(core.task, reward=replace(core.task.reward, **weights))
     i = core.agents.index(agent)
     layout = core.layout
     pursuer = core.pursuer[i : i + 1].copy()
@@ -74,7 +108,7 @@ def reward_estimator(core: GameCore, agent: str) -> RewardFn:
 
     def estimate(previous: F32, current: F32) -> F64:
         terms = reward_terms(
-            core.task,
+            task,
             min_range=current[:, layout.min_range : layout.min_range + 1].astype(np.float64)
             * layout.max_range,
             distance=current[:, layout.distance : layout.distance + 1].astype(np.float64) * layout.diagonal,
@@ -117,6 +151,9 @@ class DTPolicy:
         target_return: The return to condition on (a number or a statistic's name).
         reward_fn: Estimates a step's reward from the previous and current observations when
             ``act`` is not given it (None: rewards count as 0).
+        own_reward: Always estimate with ``reward_fn``, ignoring a reward ``act`` is given: the
+            game's reward has other weights than the DT's training data had, and its targets
+            are returns under the data's (:func:`data_reward`).
         precision: ``float32`` or ``bfloat16`` (autocast of the matmuls).
         hide_actions: Keep the context's action tokens at zero, as a model trained with
             ``action_dropout = 1`` saw them (see :class:`~hptvsim.offline.trainer.DTTrainConfig`).
@@ -133,6 +170,7 @@ class DTPolicy:
         reward_fn: RewardFn | None = None,
         precision: str = "float32",
         hide_actions: bool = False,
+        own_reward: bool = False,
     ) -> None:
         if model.num_models != 1:
             raise ValueError(f"a DTPolicy drives one model; got {model.num_models} (use model.select(i))")
@@ -150,6 +188,7 @@ class DTPolicy:
         self.reward_fn = reward_fn
         self.precision = precision
         self.hide_actions = hide_actions
+        self.own_reward = own_reward and reward_fn is not None
         self.target_return = resolve_target(target_return, self.returns)
         self._rows = -1
 
@@ -217,7 +256,7 @@ class DTPolicy:
             sel = np.broadcast_to(np.asarray(active, dtype=bool), lead).reshape(rows) | start
         going = ~start & sel
         if going.any():
-            if reward is not None:
+            if reward is not None and not self.own_reward:
                 r = np.broadcast_to(np.asarray(reward, dtype=np.float64), lead).reshape(rows)
             elif self.reward_fn is not None:
                 r = self.reward_fn(self._previous, o)
@@ -328,12 +367,15 @@ def policies_from_file(
                 continue
             raise
         _check_fits(payload, m, core, agent, path)
+        weights = data_reward(payload, m)
+        game_weights = {k: float(getattr(core.task.reward, k)) for k in weights}
         out[agent] = DTPolicy(
             full.select(m),
             payload["models"][m],
             target_return=target_return,
-            reward_fn=reward_estimator(core, agent),
+            reward_fn=reward_estimator(core, agent, weights),
             hide_actions=float(payload.get("action_dropout", 0.0)) >= 1.0,
+            own_reward=weights != game_weights,  # returns-to-go in the data's reward
         )
     return out
 

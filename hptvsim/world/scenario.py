@@ -32,7 +32,9 @@ paper's Table II values)::
     [sensors.sonar3d]           # Sonar3dBeams: the 3-D game's beams (azimuth x elevation)
     [sensors.link]              # hptvsim.sensors.AcousticLinkConfig
     [task]                      # Task: kind = "pursuit" | "goto", distances, goal
-    [task.reward]               # Reward: delta_C, delta_E1, delta_E2 of Eq. 20
+    [task.reward]               # Reward: delta_C, delta_E1, delta_E2 of Eq. 20 (default 1: the
+                                # "paper" preset, REWARD_PRESETS; the shipped scenarios declare
+                                # the training weights, the "shipped" preset)
     [simulation]                # Simulation: dt, max_steps, h_max, seed
 
 Angles are radians inside; a file may give any angle field ``f`` as ``f_deg`` in degrees.
@@ -106,6 +108,7 @@ __all__ = [
     "MAX_GROUP_SIZE",
     "MAX_REWARD",
     "MAX_SITE_SIZE",
+    "REWARD_PRESETS",
     "ROLES",
     "AgentSpec",
     "CircleRegion",
@@ -124,6 +127,7 @@ __all__ = [
     "World",
     "list_scenarios",
     "load_scenario",
+    "reward_preset",
     "scenario_dir",
     "scenario_json_schema",
     "scenario_path",
@@ -389,7 +393,8 @@ class Reward:
     +-progress_reward`` when the distance to the target shrinks or grows (Eq. 18), and ``r_E2 =
     capture_reward`` within the target distance (Eq. 19). The paper gives the magnitudes
     (400, 0.25, 900) but not the weights; the default weights 1 reproduce its equations as
-    published.
+    published (the ``paper`` preset of :data:`REWARD_PRESETS`). The shipped pursuit scenarios
+    declare the weights the shipped policies were trained with instead (the ``shipped`` preset).
 
     ``crash_penalty`` is ours (default 0, the paper's reward): a collision or leaving the site ends
     the episode, and with it the stream of ``r_C`` penalties, so a learner that stays near an
@@ -414,6 +419,34 @@ class Reward:
 
     def __post_init__(self) -> None:
         check_bounds(self)
+
+
+REWARD_PRESETS: dict[str, dict[str, float]] = {
+    "paper": {"delta_C": 1.0, "delta_E1": 1.0, "delta_E2": 1.0, "crash_penalty": 0.0},
+    "shipped": {"delta_C": 0.01, "delta_E1": 4.0, "delta_E2": 0.1, "crash_penalty": 1000.0},
+}
+"""Named reward weights (the ``[task.reward]`` fields they set; the magnitudes stay the scenario's).
+
+``paper``: Eq. 20 as published, every weight 1 and no crash penalty; returns reach -100,000 in a
+1200-step episode near obstacles (``r_C = -400`` per step). ``shipped``: the weights the shipped
+pursuers were trained with (``configs/train/shipped-pursuers.toml``) and the ones the shipped
+pursuit scenarios (source, transition, target, target_currents) declare: -4 per step near an
+obstacle, +-1 per step for closing in or falling back, +90 per step at capture and -1000 once for
+a crash. Select one with the envs' ``reward="paper"`` option (``--env-option reward=paper``).
+"""
+
+
+def reward_preset(name: str) -> dict[str, float]:
+    """The ``[task.reward]`` fields of a named preset (:data:`REWARD_PRESETS`).
+
+    Raises:
+        ValueError: ``name`` is not a preset (the message lists the valid names).
+    """
+    if name not in REWARD_PRESETS:
+        raise ValueError(
+            f"reward = {name!r} is not a reward preset; valid: {', '.join(map(repr, REWARD_PRESETS))}"
+        )
+    return dict(REWARD_PRESETS[name])
 
 
 @dataclass(frozen=True, kw_only=True)

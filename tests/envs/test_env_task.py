@@ -268,8 +268,8 @@ def test_reward_option_reweights_the_game() -> None:
     from hptvsim.envs import UPEGBatchEnv, UPEGParallelEnv, UPEGVectorEnv
     from hptvsim.world.scenario import ScenarioError
 
-    weights = {"delta_C": 0.01, "delta_E1": 4.0, "delta_E2": 0.1}
-    plain = UPEGParallelEnv("source", seed=3)
+    weights = {"delta_C": 0.01, "delta_E1": 4.0, "delta_E2": 0.1, "crash_penalty": 0.0}
+    plain = UPEGParallelEnv("source", seed=3, reward="paper")  # Eq. 20's unit weights, by name
     shaped = UPEGParallelEnv("source", seed=3, reward=weights)
     try:
         assert shaped.core.task.reward.delta_E1 == 4.0 and plain.core.task.reward.delta_E1 == 1.0

@@ -22,7 +22,7 @@ from hptvsim.zoo import load_policy
 
 @pytest.fixture
 def core() -> Iterator[GameCore]:
-    c = GameCore("target", num_envs=3, max_steps=40, seed=5)
+    c = GameCore("target", num_envs=3, max_steps=40, seed=5, reward="paper")  # Eq. 17's -400 per step
     yield c
     c.close()
 

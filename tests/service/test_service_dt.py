@@ -1,8 +1,8 @@
 """A Decision Transformer in the service: listed with the policies, it drives pursuers in episodes.
 
-The service serves the policies of ``HPTVSIM_POLICY_DIR`` (default: the shipped ``policies/``);
-here a folder holding the tiny DT run of the offline tests, so the test does not depend on what
-the repository ships.
+The service serves the shipped policies (``policies/``) and those of the user's
+``HPTVSIM_POLICY_DIR``; here a folder holding the tiny DT run of the offline tests, listed beside
+the shipped ones.
 """
 
 from __future__ import annotations
@@ -33,6 +33,7 @@ def test_dt_pursuers_run_in_the_service(dt_server: Server) -> None:
     with httpx.Client(base_url=f"{dt_server.url}/api/v1", timeout=60.0) as api:
         listed = {p["name"]: p for p in api.get("/policies", params={"role": "pursuer"}).json()}
         assert "tiny-dt" in listed and listed["tiny-dt"]["roles"] == ["pursuer"]
+        assert {"maisac-pursuers", "dt-pursuers"} <= set(listed)  # the user's folder adds to the shipped
         evaders = {p["name"] for p in api.get("/policies", params={"role": "evader"}).json()}
         assert "tiny-dt" not in evaders
         body = {

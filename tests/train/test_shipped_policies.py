@@ -9,6 +9,10 @@ scripted pure-pursuit pursuers do (measured 0.68 against 0.26).
 from __future__ import annotations
 
 import hashlib
+import json
+import os
+import subprocess
+import sys
 import tomllib
 from pathlib import Path
 
@@ -18,6 +22,7 @@ import pytest
 from hptvsim.envs import GameCore
 from hptvsim.train.batched_run import load_batched_config
 from hptvsim.train.config import load_config
+from hptvsim.world.scenario import REWARD_PRESETS, load_scenario
 from hptvsim.zoo import default_policy, list_policies, load_policy, policy_dir
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -120,6 +125,94 @@ def test_the_shipped_policies_are_the_pursuit_defaults() -> None:
         name = default_policy(role, "pursuit")
         assert name in index and "pursuit" in index[name]["default_for"]
     assert default_policy("pursuer", "goto") == "scripted:pure_pursuit"
+
+
+def test_a_user_policy_folder_adds_to_the_shipped_ones(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    shipped = {p.name for p in list_policies() if p.kind != "scripted"}
+    evader = next(p for p in SHIPPED if "evader" in p.roles)
+    assert evader.path is not None
+    (tmp_path / "mine.zip").write_bytes(evader.path.read_bytes())
+    (tmp_path / "index.toml").write_text(
+        '[policies.my-evader]\nkind = "sb3"\nfile = "mine.zip"\nroles = ["evader"]\ndescription = "mine"\n'
+    )
+    monkeypatch.setenv("HPTVSIM_POLICY_DIR", str(tmp_path))
+    listed = {p.name: p for p in list_policies()}
+    assert shipped <= set(listed) and {"maisac-pursuers", "dt-pursuers", "my-evader"} <= set(listed)
+    assert listed["my-evader"].path == tmp_path / "mine.zip"
+    assert default_policy("pursuer", "pursuit") == "maisac-pursuers"  # the shipped defaults stay
+    core = GameCore("target", extended_obs=True, seed=3)
+    try:
+        obs = core.reset(seed=3)
+        act = np.asarray(load_policy("my-evader", core, "evader_0").act(obs[:, 3]))
+        assert act.shape == (1, 2)
+    finally:
+        core.close()
+
+
+def test_a_user_policy_named_like_a_shipped_one_is_refused(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    (tmp_path / "index.toml").write_text(
+        '[policies.maisac-evader]\nkind = "sb3"\nfile = "x.zip"\nroles = ["evader"]\n'
+    )
+    monkeypatch.setenv("HPTVSIM_POLICY_DIR", str(tmp_path))
+    with pytest.raises(ValueError) as info:
+        list_policies()
+    message = str(info.value)
+    assert "\n" not in message and "'maisac-evader'" in message
+    assert str(policy_dir() / "index.toml") in message and str(tmp_path / "index.toml") in message
+
+
+PURSUIT_SCENARIOS = ["source", "transition", "target", "target_currents", "salish_sea", "salish_sea_chart"]
+
+
+@pytest.mark.parametrize("scenario", PURSUIT_SCENARIOS)
+def test_the_shipped_pursuit_scenarios_declare_the_training_reward_and_episode_length(scenario: str) -> None:
+    """One truth: the reward and step limit the shipped pursuers were trained with are the scenarios'."""
+    prov = next(p for p in SHIPPED if "pursuer" in p.roles).provenance
+    s = load_scenario(scenario)
+    assert {k: getattr(s.task.reward, k) for k in prov["reward"]} == prov["reward"]
+    assert s.simulation.max_steps == prov["options"]["max_steps"] == 1200
+    assert prov["reward"] == REWARD_PRESETS["shipped"]
+
+
+def test_the_paper_reward_preset_is_eq_20_as_published() -> None:
+    core = GameCore("target", reward="paper")
+    try:
+        w = core.task.reward
+        assert (w.delta_C, w.delta_E1, w.delta_E2, w.crash_penalty) == (1.0, 1.0, 1.0, 0.0)
+        assert (w.collision_penalty, w.progress_reward, w.capture_reward) == (400.0, 0.25, 900.0)
+    finally:
+        core.close()
+    with pytest.raises(
+        ValueError, match=r"reward = 'nice' is not a reward preset; valid: 'paper', 'shipped'"
+    ):
+        GameCore("target", reward="nice")
+
+
+def test_the_default_target_episode_reports_returns_under_the_training_reward(tmp_path: Path) -> None:
+    """``hptvsim episode`` with its defaults: the shipped pursuers against the shipped evader.
+
+    Under the paper's unit weights this episode's returns were -180,228, -30,585, ...; under the
+    reward the policies were trained with (the scenario's) each is in the hundreds to low thousands.
+    """
+    out = tmp_path / "episode.json"
+    env = {**os.environ, "PYTHONUNBUFFERED": "1", "MPLBACKEND": "Agg"}
+    res = subprocess.run(
+        [sys.executable, "-m", "hptvsim.cli", "episode", "--json", str(out)],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=600,
+    )
+    assert res.returncode == 0, res.stdout + res.stderr
+    summary = json.loads(out.read_text())["summary"]
+    assert summary["steps"] <= 1200  # the scenario's step limit, as in training
+    returns = summary["metrics"]["returns"]
+    assert sorted(returns) == ["evader_0", "pursuer_0", "pursuer_1", "pursuer_2"]
+    assert all(100.0 <= abs(r) <= 5000.0 for r in returns.values()), returns
 
 
 def _capture(pursuers: str, evaders: str, scenario: str = "target") -> float:
