@@ -32,6 +32,8 @@ from hptvsim.train.config import ConfigError, TrainConfig, config_from_dict, loa
 from hptvsim.zoo import check_policy_spec
 
 HPTVSIM = [sys.executable, "-m", "hptvsim.cli"]
+PLANAR_MODEL = Path(__file__).resolve().parents[1] / "policies" / "maisac-pursuer_0.zip"
+"""A shipped model of the planar game (2 actions), which no 3-D scenario can play."""
 
 TOY_SMALL: dict[str, Any] = {
     "seed": 3,
@@ -103,7 +105,7 @@ def error_line(res: subprocess.CompletedProcess[str]) -> str:
     lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
     message = [ln for ln in lines if not ln.startswith(("Usage: ", "Try '"))]
     assert len(message) == 1, shown
-    assert message[0].lower().startswith("error"), shown
+    assert message[0].startswith("Error: "), shown  # click's prefix, the same in every command
     return message[0]
 
 
@@ -133,6 +135,33 @@ CASES: dict[str, tuple[list[str], tuple[str, ...]]] = {
         ("'maisac-pursuers' drives pursuer, not evader_0", "maisac-evader"),
     ),
     "episode-max-steps": (["episode", "--max-steps", "0"], ("0", ">= 1")),
+    "episode-model-of-another-game": (  # a planar model in a 3-D scenario: was a 39-line traceback
+        [
+            "episode",
+            "--scenario",
+            "dive_flat",
+            "--policy",
+            f"pursuer_0=sb3:{PLANAR_MODEL}",
+            "--max-steps",
+            "2",
+        ],
+        ("maisac-pursuer_0.zip", "acts in (2,)", "3d game takes 3"),
+    ),
+    "episode-model-garbage": (
+        ["episode", "--policy", "pursuer_0=sb3:garbage.bin", "--max-steps", "2"],
+        ("garbage.bin", "not an SB3 SAC or PPO file"),
+    ),
+    "episode-model-missing": (
+        ["episode", "--policy", "pursuer_0=sb3:missing.zip", "--max-steps", "2"],
+        ("missing.zip", "not found"),
+    ),
+    "episode-backend": (["episode", "--backend", "nosuch"], ("nosuch", "batched")),
+    "scenario-show-garbage": (["scenario", "show", "garbage.bin"], ("garbage.bin",)),
+    "scenario-validate-garbage": (["scenario", "validate", "bad.toml"], ("bad.toml",)),
+    "evaluate-model-missing": (
+        ["evaluate", "--env", "toy:source/goto", "--policy", "sb3:missing.zip", "--episodes", "1"],
+        ("missing.zip",),
+    ),
     "view-scenario": (["view", "--scenario", "nosuch", "--port", "0"], ("nosuch", "target")),
     "replay-missing": (["replay", "missing.rrd"], ("missing.rrd", "does not exist")),
     "viz-schema": (["viz", "schema", "--out", "bad.toml/web"], ("bad.toml/web", "cannot make")),

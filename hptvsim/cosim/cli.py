@@ -115,8 +115,7 @@ def register(main: click.Group) -> None:
         """
         import dataclasses
 
-        from tqdm import tqdm
-
+        from hptvsim._output import progress_bar
         from hptvsim.cosim.fmi import FmuError
         from hptvsim.cosim.graph import GraphError, load_graph
         from hptvsim.cosim.orchestrator import Orchestrator, SimulationFailedError, SimulationTerminated
@@ -174,7 +173,7 @@ def register(main: click.Group) -> None:
         with orch:
             rows.append([0.0, *orch.output_values()])
             try:
-                for _ in tqdm(range(steps), desc=graph.name, unit="step", disable=steps < 10_000):
+                for _ in progress_bar(range(steps), desc=graph.name, unit="step", disable=steps < 10_000):
                     orch.step()
                     rows.append([orch.time, *orch.output_values()])
             except SimulationTerminated as exc:

@@ -15,10 +15,16 @@ is made for; the views below are written once against the protocol and play any 
 * :class:`UPEGBatchEnv`: B environments x N agents as arrays, for multi-agent training;
 * :class:`GameCore`: the planar game; :mod:`hptvsim.envs.policies`: its scripted policies;
 * the 3-D game (diving 6-DOF vehicles, issue 15): :class:`Game3DCore` (:mod:`hptvsim.envs.core3d`),
-  its views under their earlier names in :mod:`hptvsim.envs.game3d`
-  (:class:`~hptvsim.envs.game3d.UPEG3DParallelEnv`, the Gymnasium ids
+  its views under their earlier names beside the planar ones (:func:`parallel_env_3d` /
+  :class:`UPEG3DParallelEnv`, :class:`UPEG3DSingleAgentEnv`, :class:`UPEG3DVectorEnv`,
+  :func:`make_sb3_vec_env_3d`, from :mod:`hptvsim.envs.game3d`; the Gymnasium ids
   ``hptvsim/UPEG3D-Pursuer-v0``, ``hptvsim/UPEG3D-Evader-v0``, ``hptvsim/UPEG3D-Goto-v0``) and
   :mod:`hptvsim.envs.policies3d`.
+
+Actions differ between the games (:class:`ActionConvention`, each game's ``action_convention``):
+the planar game takes ``[v, omega]`` in physical units [m/s, rad/s] within the vehicle's limits;
+the 3-D game takes ``[a_v, a_omega, a_w]`` scaled to ``[-1, 1]``. ``game.commands(actions)``
+and ``game.to_actions(commands)`` convert in either game.
 """
 
 from __future__ import annotations
@@ -34,9 +40,16 @@ if TYPE_CHECKING:
     from hptvsim.envs.batch import UPEGBatchEnv
     from hptvsim.envs.core import GameCore
     from hptvsim.envs.core3d import Game3DCore
+    from hptvsim.envs.game3d import (
+        UPEG3DParallelEnv,
+        UPEG3DSingleAgentEnv,
+        UPEG3DVectorEnv,
+        make_sb3_vec_env_3d,
+        parallel_env_3d,
+    )
     from hptvsim.envs.games import make_game, register_game
     from hptvsim.envs.parallel import GameParallelEnv, UPEGParallelEnv, parallel_env
-    from hptvsim.envs.protocol import Game, StepResult
+    from hptvsim.envs.protocol import ActionConvention, Game, StepResult
     from hptvsim.envs.single import (
         GameSingleAgentEnv,
         GameVectorEnv,
@@ -49,6 +62,7 @@ if TYPE_CHECKING:
 __all__ = [
     "ENV_IDS",
     "ENV_IDS_3D",
+    "ActionConvention",
     "Game",
     "Game3DCore",
     "GameCore",
@@ -56,14 +70,19 @@ __all__ = [
     "GameSingleAgentEnv",
     "GameVectorEnv",
     "StepResult",
+    "UPEG3DParallelEnv",
+    "UPEG3DSingleAgentEnv",
+    "UPEG3DVectorEnv",
     "UPEGBatchEnv",
     "UPEGParallelEnv",
     "UPEGSingleAgentEnv",
     "UPEGVectorEnv",
     "make_game",
     "make_sb3_vec_env",
+    "make_sb3_vec_env_3d",
     "make_torchrl_env",
     "parallel_env",
+    "parallel_env_3d",
     "register_game",
 ]
 
@@ -73,8 +92,14 @@ __getattr__ = lazy_getattr(
         "UPEGBatchEnv": "hptvsim.envs.batch",
         "GameCore": "hptvsim.envs.core",
         "Game3DCore": "hptvsim.envs.core3d",
+        "UPEG3DParallelEnv": "hptvsim.envs.game3d",
+        "UPEG3DSingleAgentEnv": "hptvsim.envs.game3d",
+        "UPEG3DVectorEnv": "hptvsim.envs.game3d",
+        "make_sb3_vec_env_3d": "hptvsim.envs.game3d",
+        "parallel_env_3d": "hptvsim.envs.game3d",
         "make_game": "hptvsim.envs.games",
         "register_game": "hptvsim.envs.games",
+        "ActionConvention": "hptvsim.envs.protocol",
         "Game": "hptvsim.envs.protocol",
         "StepResult": "hptvsim.envs.protocol",
         "GameParallelEnv": "hptvsim.envs.parallel",

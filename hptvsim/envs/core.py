@@ -44,7 +44,7 @@ import numpy.typing as npt
 
 from hptvsim.cosim.system import SystemSpec, VehicleSpec, VehicleSystem, make_system
 from hptvsim.envs.policies import POLICY_ROLES, Limits, Policy, make_policy
-from hptvsim.envs.protocol import Game, Scene, StepResult
+from hptvsim.envs.protocol import ActionConvention, Game, Scene, StepResult
 from hptvsim.envs.shared import (
     Backend,
     GameBase,
@@ -313,6 +313,13 @@ class GameCore(GameBase[ObsLayout]):
 
     kind: str = "planar"
     command_fields: Final = ("v", "omega")
+    action_convention: Final = ActionConvention(
+        units=("m/s", "rad/s"),
+        normalised=False,
+        action_range="[v_min, v_max] x [-omega_max, omega_max]",
+        to_commands="none: the action is the command (clipped to the vehicle's limits)",
+    )
+    """Actions are the commands, in physical units (Eqs. 15-16); see ``ActionConvention``."""
     policy_roles: Final = POLICY_ROLES
     render_modes: Final[tuple[str, ...]] = ("rgb_array",)
 

@@ -87,7 +87,7 @@ from hptvsim.cosim.system import SIXDOF_LAYOUT, SystemSpec, VehicleSpec, Vehicle
 from hptvsim.envs.obs3d import Obs3DLayout
 from hptvsim.envs.policies import Policy
 from hptvsim.envs.policies3d import POLICY_ROLES_3D, make_policy_3d
-from hptvsim.envs.protocol import Scene, StepResult
+from hptvsim.envs.protocol import ActionConvention, Scene, StepResult
 from hptvsim.envs.shared import (
     Backend,
     GameBase,
@@ -168,6 +168,14 @@ class Game3DCore(GameBase[Obs3DLayout]):
 
     kind: str = "3d"
     command_fields: Final = ("v", "omega", "w_z")
+    action_convention: Final = ActionConvention(
+        units=("m/s", "rad/s", "m/s"),
+        normalised=True,
+        action_range="[-1, 1]^3",
+        to_commands="v = v_min + (a_v + 1) (v_max - v_min) / 2, omega = a_omega omega_max, "
+        "w_z = a_w w_z_max (Game3DCore.commands; the inverse: Game3DCore.to_actions)",
+    )
+    """Actions scaled to ``[-1, 1]`` per component; see :class:`~hptvsim.envs.protocol.ActionConvention`."""
     policy_roles: Final = POLICY_ROLES_3D
     render_modes: Final[tuple[str, ...]] = ()
 

@@ -48,6 +48,7 @@ __all__ = [
     "POSE_FIELDS",
     "RESET_INFO_KEYS",
     "VELOCITY_FIELDS",
+    "ActionConvention",
     "Game",
     "ObservationExtension",
     "Scene",
@@ -87,6 +88,32 @@ INFO_KEYS = (
 RESET_INFO_KEYS = INFO_KEYS[: INFO_KEYS.index("step") + 1]
 """The keys of an agent's info after a reset (before any step): the pose, ``altitude``,
 ``distance``, ``min_range`` and ``step``."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class ActionConvention:
+    """How a game's actions relate to its vehicles' commands (each shipped game's ``action_convention``).
+
+    The planar game takes the commands themselves, in physical units (the paper's Eqs. 15-16);
+    the 3-D game takes values scaled to ``[-1, 1]`` and maps them to commands. In either game,
+    :meth:`Game.commands` turns actions into commands and :meth:`Game.to_actions` commands into
+    actions. The README's table "Actions in each game" states the same for every shipped game (a
+    test keeps them equal).
+
+    Attributes:
+        units: The unit of each command of :attr:`Game.command_fields`, in order (``"m/s"``,
+            ``"rad/s"``).
+        normalised: True if an action is in ``[-1, 1]`` per component (mapped linearly to the
+            vehicle's command range); False if it is the command, in its unit, within the
+            vehicle's limits (``Game.action_bounds``).
+        action_range: The range of an action, as the README states it.
+        to_commands: How to turn an action into the commands, as the README states it.
+    """
+
+    units: tuple[str, ...]
+    normalised: bool
+    action_range: str
+    to_commands: str
 
 
 @dataclass

@@ -108,9 +108,11 @@ def run_episode(
         if on_frame is not None:
             on_frame(stepper.frame)
         if progress:
-            from tqdm.auto import tqdm
+            from hptvsim._output import progress_bar
 
-            bar = tqdm(total=stepper.static.max_steps, desc=f"episode {stepper.static.scenario}", unit="step")
+            bar = progress_bar(
+                total=stepper.static.max_steps, desc=f"episode {stepper.static.scenario}", unit="step"
+            )
         while not stepper.done:
             if _cancelled(cancel):
                 stepper.cancel()

@@ -2004,16 +2004,15 @@ def reproduce(
         bar.set_postfix_str(f"runs finished {finished}/{len(jobs)}, training: {names}", refresh=True)
 
     if progress:
-        from tqdm.auto import tqdm
+        from hptvsim._output import progress_bar
 
         start, _, _ = sweep_progress(out, budgets)
-        bar = tqdm(
+        bar = progress_bar(
             total=total_steps if by_steps else None,
             initial=start,
             desc=f"reproduce {plan.name}",
             unit="step",
             unit_scale=True,
-            dynamic_ncols=True,
         )
     import multiprocessing
 

@@ -177,9 +177,9 @@ def run_sweep(
     (out / "sweep.json").write_text(json.dumps(manifest, indent=2) + "\n")
     bar: Any = None
     if progress:
-        from tqdm.auto import tqdm
+        from hptvsim._output import progress_bar
 
-        bar = tqdm(total=len(jobs), desc=f"sweep {spec.name}", unit="job")
+        bar = progress_bar(total=len(jobs), desc=f"sweep {spec.name}", unit="job")
     results: list[dict[str, Any]] = []
     try:
         if serial:

@@ -130,9 +130,9 @@ def play(
     out: list[Episode] = []
     bar: Any = None
     if progress:
-        from tqdm.auto import tqdm
+        from hptvsim._output import progress_bar
 
-        bar = tqdm(total=episodes, desc=desc, unit="ep")
+        bar = progress_bar(total=episodes, desc=desc, unit="ep")
     try:
         for j in range((episodes + b - 1) // b):
             wanted = min(b, episodes - len(out))

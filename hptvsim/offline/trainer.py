@@ -514,9 +514,9 @@ def train(
     end = cfg.updates if stop_after is None else min(cfg.updates, stop_after)
     bar: Any = None
     if progress:
-        from tqdm.auto import tqdm
+        from hptvsim._output import progress_bar
 
-        bar = tqdm(total=cfg.updates, initial=start, desc="dt train", unit="upd")
+        bar = progress_bar(total=cfg.updates, initial=start, desc="dt train", unit="upd")
     acc_loss = np.zeros(len(data))
     acc_norm = np.zeros(len(data))
     acc_n = 0

@@ -423,9 +423,9 @@ def snr_sweep(
     limit = outlier_threshold(config)
     keys = ("rms", "inl", "out", "one", "det", "crlb")
     stats: dict[str, list[float]] = {k: [] for k in keys}
-    from tqdm import tqdm
+    from hptvsim._output import progress_bar
 
-    for snr in tqdm(snrs, desc="SNR sweep", unit="SNR", disable=not progress, leave=False):
+    for snr in progress_bar(snrs, desc="SNR sweep", unit="SNR", disable=not progress, leave=False):
         true_r = rng.uniform(min_range, config.max_range - 1.0, size=trials)
         x = synthesize_echoes(true_r, config, rng, snr_db=float(snr))
         d, peak = estimate_delay(x, s)

@@ -778,15 +778,14 @@ def _toml(data: Mapping[str, Any]) -> str:
 def _bar(cfg: BatchedRunConfig, trainer: Any, progress: bool, *, total: int) -> Any:
     if not progress:
         return None
-    from tqdm.auto import tqdm
+    from hptvsim._output import progress_bar
 
-    return tqdm(
+    return progress_bar(
         total=total,
         initial=trainer.game_steps,
         unit="step",
         unit_scale=True,
         desc=f"{cfg.name} {cfg.algo} x{len(cfg.seeds)} seeds",
-        dynamic_ncols=True,
     )
 
 

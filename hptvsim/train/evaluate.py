@@ -155,9 +155,9 @@ def evaluate(
         pols = policies(env) if callable(policies) else policies
         it: Any = range(episodes)
         if progress:
-            from tqdm.auto import tqdm
+            from hptvsim._output import progress_bar
 
-            it = tqdm(it, desc=f"evaluate {label}".strip(), unit="ep")
+            it = progress_bar(it, total=episodes, desc=f"evaluate {label}".strip(), unit="ep")
         eps = tuple(run_episode(env, pols, EVAL_SEED_OFFSET + 1000 * seed + k) for k in it)
     finally:
         env.close()

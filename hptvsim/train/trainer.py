@@ -289,9 +289,9 @@ def _start_run(
 def _progress(total: int, initial: int, desc: str, unit: str, enabled: bool) -> Any:
     if not enabled:
         return None
-    from tqdm.auto import tqdm
+    from hptvsim._output import progress_bar
 
-    return tqdm(total=total, initial=initial, desc=desc, unit=unit, dynamic_ncols=True, leave=True)
+    return progress_bar(total=total, initial=initial, desc=desc, unit=unit)
 
 
 def train(

@@ -289,6 +289,8 @@ def register(main: click.Group) -> None:
             if exc.partial is not None:
                 _report_episode(exc.partial, record, json_out, note="up to the failure")
             raise click.ClickException(f"the simulation failed: {exc}") from None
+        except (OSError, ValueError) as exc:  # a model that does not fit the scenario, or unreadable
+            raise click.ClickException(str(exc)) from None
         finally:
             signal.signal(signal.SIGINT, previous)
         _report_episode(result, record, json_out, note="up to Ctrl-C" if stop.is_set() else "")
@@ -298,17 +300,45 @@ def register(main: click.Group) -> None:
     @main.command("replay")
     @click.argument("file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
     @click.option("--web", is_flag=True, help="Serve the rerun web viewer (offline, from the pip install).")
-    @click.option("--port", type=int, default=9090, show_default=True, help="Web viewer port (--web).")
-    @click.option("--grpc-port", type=int, default=9876, show_default=True, help="Data port (--web).")
+    @click.option(
+        "--host",
+        default="127.0.0.1",
+        show_default=True,
+        help="Address the web viewer listens on (--web); 0.0.0.0 lets other machines connect.",
+    )
+    @click.option(
+        "--port",
+        type=click.IntRange(0, 65535),
+        default=9090,
+        show_default=True,
+        help="Web viewer port (--web).",
+    )
+    @click.option(
+        "--grpc-port",
+        type=click.IntRange(0, 65535),
+        default=9876,
+        show_default=True,
+        help="Data port (--web).",
+    )
     @click.option("--no-browser", is_flag=True, help="Do not open a browser (--web).")
-    def replay(file: Path, web: bool, port: int, grpc_port: int, no_browser: bool) -> None:
-        """Open a recording (.rrd) in the rerun viewer (the native one, or --web)."""
+    def replay(file: Path, web: bool, host: str, port: int, grpc_port: int, no_browser: bool) -> None:
+        """Open a recording (.rrd) in the rerun viewer (the native one, or --web).
+
+        With --web it serves until Ctrl-C, on this machine only unless --host says otherwise.
+        """
         from hptvsim.viz.replay import replay_native, replay_web
 
-        if web:
-            replay_web(file, web_port=port, grpc_port=grpc_port, open_browser=not no_browser)
-        else:
-            replay_native(file)
+        try:
+            if web:
+                code = replay_web(
+                    file, web_port=port, grpc_port=grpc_port, host=host, open_browser=not no_browser
+                )
+            else:
+                code = replay_native(file)
+        except (OSError, ValueError, RuntimeError) as exc:
+            raise click.ClickException(str(exc)) from None
+        if code != 0:
+            raise click.ClickException(f"the rerun viewer stopped with exit code {code}")
 
     @main.command("view")
     @click.option("--scenario", default="target", show_default=True, help="Shipped scenario name.")

@@ -34,6 +34,8 @@ the policies of the chosen scenario's game only (:func:`hptvsim.catalog.policies
 
 from __future__ import annotations
 
+import contextlib
+import io
 import logging
 import math
 import os
@@ -392,7 +394,8 @@ def viser_on_unix_socket(path: str, **kwargs: Any) -> Any:
 
     Args:
         path: Where to create the socket (its folder should be this user's alone).
-        **kwargs: Passed to ``viser.ViserServer`` (``label``, ``verbose``).
+        **kwargs: Passed to ``viser.ViserServer`` (``label``, ``verbose``; ``verbose=False``
+            also keeps viser's banner off standard output).
 
     Raises:
         RuntimeError: This viser builds its server some other way (the view then does not start:
@@ -411,7 +414,11 @@ def viser_on_unix_socket(path: str, **kwargs: Any) -> Any:
         vars(_infra)["websockets"] = _Delegate(
             real, asyncio=_Delegate(real.asyncio, server=_Delegate(real.asyncio.server, serve=_serve))
         )
-    server = viser.ViserServer(host=UNIX_HOST + path, port=0, **kwargs)
+    quiet = kwargs.get("verbose") is False
+    # viser prints a banner with its own address even with verbose=False: the socket's address,
+    # which no browser opens (the gateway's is the one to open; the caller prints that)
+    with contextlib.redirect_stdout(io.StringIO()) if quiet else contextlib.nullcontext():
+        server = viser.ViserServer(host=UNIX_HOST + path, port=0, **kwargs)
     if not (os.path.exists(path) and stat.S_ISSOCK(os.stat(path).st_mode)):
         server.stop()
         raise RuntimeError("viser did not bind its Unix socket")

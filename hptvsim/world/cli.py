@@ -38,7 +38,7 @@ def scenario_validate(files: tuple[str, ...]) -> None:
         try:
             s = load_scenario(f)
         except ScenarioError as exc:
-            click.echo(f"error: {exc}", err=True)
+            click.echo(f"Error: {exc}", err=True)  # click's prefix; every other file is still checked
             failed += 1
             continue
         world = s.build_world()
@@ -74,8 +74,7 @@ def scenario_show(file: str, out: Path | None) -> None:
     try:
         s = load_scenario(file)
     except ScenarioError as exc:
-        click.echo(f"error: {exc}", err=True)
-        sys.exit(1)
+        raise click.ClickException(str(exc)) from None
     path = render_scenario(s, out if out is not None else Path(f"{s.name}.png"))
     click.echo(str(path.resolve()))
 
@@ -204,8 +203,7 @@ def terrain_import(
         result = import_terrain(source, resolution=resolution, format=fmt, options=options)  # type: ignore[arg-type]
         path = save_heightmap(result.heightmap, out)
     except (TerrainImportError, ValueError, FileNotFoundError) as exc:
-        click.echo(f"error: {exc}", err=True)
-        sys.exit(1)
+        raise click.ClickException(str(exc)) from None
     hm = result.heightmap
     preview = render_heightmap(hm, out.with_suffix(".png"), title=f"{source.name} -> {out.name}")
     g = hm.geometry

@@ -26,7 +26,7 @@ def test_validate_reports_ok_and_fails_with_the_clear_error(tmp_path: Path) -> N
     res = run("scenario", "validate", "source", str(bad))
     assert res.exit_code == 1
     assert (
-        f"error: {bad}: vehicles[1].spawn.radius: -30.0 m is out of range (valid: in (0, 100000])"
+        f"Error: {bad}: vehicles[1].spawn.radius: -30.0 m is out of range (valid: in (0, 100000])"
         in res.output
     )
 
@@ -130,7 +130,7 @@ def test_terrain_import_errors_are_one_line(tmp_path: Path) -> None:
     res = run(
         "terrain", "import", str(tmp_path / "x.png"), "--out", str(tmp_path / "o.npz"), "--pixel-size", "1"
     )
-    assert res.exit_code == 1 and res.output.startswith("error: ") and "not a readable image" in res.output
+    assert res.exit_code == 1 and res.output.startswith("Error: ") and "not a readable image" in res.output
 
 
 def test_bench_world_quick_reports_ratios() -> None:
