@@ -790,8 +790,22 @@ class ClaimPanel:
     limits: tuple[float, float] = (-math.inf, math.inf)
 
 
-SEED_COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#e377c2", "#17becf", "#bcbd22")
-"""One colour per training seed (seed k: ``SEED_COLORS[k % 8]``), the same in every panel."""
+SEED_COLORS = (
+    "#1f77b4",
+    "#ff7f0e",
+    "#2ca02c",
+    "#9467bd",
+    "#8c564b",
+    "#e377c2",
+    "#17becf",
+    "#bcbd22",
+    "#d62728",
+    "#393b79",
+    "#8c6d31",
+    "#637939",
+)
+"""One colour per training seed (seed k: ``SEED_COLORS[k % 12]``), the same in every panel: twelve
+distinct hues, so a plan of ten seeds never repeats one (no grey or black: the means and trends)."""
 
 
 def claims_figure(panels: Sequence[ClaimPanel], *, caption: str = "", columns: int = 3) -> Any:

@@ -1437,6 +1437,7 @@ def _side_by_side(regimes: Sequence[_Regime], w: Callable[[str], None]) -> None:
     for c in a.plan.claims:
         cells = []
         verdicts: list[str | None] = []
+        measured = True
         for r in (a, b):
             cl = next((x for x in r.plan.claims if x.id == c.id), None)
             if cl is None:
@@ -1444,13 +1445,17 @@ def _side_by_side(regimes: Sequence[_Regime], w: Callable[[str], None]) -> None:
                 verdicts.append(None)
                 continue
             iv, v = r.verdicts[c.id]
+            measured = measured and iv.resolved
             text = f"{_claim_what(cl)}: {iv.format()}"
             if v == "not resolved" and iv.resolved:
                 text += f"; {excluded_effect(iv, 'difference' if cl.compare else 'slope')}"
             cells += [text, claim_count(r.plan, r.results, cl), f"**{v}**"]
             verdicts.append(v)
-        agree = "agree" if verdicts[0] == verdicts[1] else "**differ**"
-        if verdicts[0] != verdicts[1]:
+        if not measured:  # a regime without the runs behind this claim yet: nothing to compare
+            agree = "not compared: no data yet"
+        else:
+            agree = "agree" if verdicts[0] == verdicts[1] else "**differ**"
+        if measured and verdicts[0] != verdicts[1]:
             differ.append(c.id)
         w(
             f"| {c.id} | {c.statement} | {metric_text(c.metric)} ({c.stage}) | "

@@ -514,6 +514,7 @@ def test_the_claims_figure_shows_every_seed_in_its_colour_and_the_intervals_the_
     from hptvsim.experiments.figures import SEED_COLORS, ClaimPanel, claims_figure
     from hptvsim.experiments.stats import mean_interval, slope
 
+    assert len(set(SEED_COLORS)) == len(SEED_COLORS) >= 10  # a ten-seed plan repeats no colour
     rate = ClaimPanel(
         title="R: capture rate",
         ylabel="capture rate (fraction of episodes)",
