@@ -86,6 +86,8 @@ _NO_CAUSES: Mapping[str, Bool] = MappingProxyType({})
 
 _SCALAR_POINTS: Final = 16
 """Up to this many vehicles in all, :attr:`GameCore.altitude` interpolates point by point."""
+_SEABED_LIST_CELLS: Final = 1 << 18
+"""Seabed grids up to this many cells (~8 MB as Python floats) are copied to lists for that."""
 
 
 class Robots:
@@ -139,6 +141,9 @@ class Robots:
         self.max_range = ranges.pop()
         self.beam_angles = self.sonars[0].geometric.angles.copy()
         self.pursuer_index = np.flatnonzero(self.pursuer)
+        p0 = int(self.pursuer_index[0]) if self.pursuer_index.size else 0
+        contiguous = bool(np.array_equal(self.pursuer_index, np.arange(p0, p0 + self.pursuer_index.size)))
+        self._pursuer_slice = slice(p0, p0 + self.pursuer_index.size) if contiguous else None
         self.evader_index = np.flatnonzero(~self.pursuer)
         link_cfg = scenario.sensors.link
         self.links = (
@@ -169,7 +174,7 @@ class Robots:
     def sense(self, poses: F64, dt: float, out: F64) -> F64:
         """Fill ``out`` ``(B, N, K)`` with measured sonar ranges for ``poses`` ``(B, N, 3)``."""
         if len(self.sonars) == 1 and self.sonar_members[0].size == poses.shape[1]:
-            out[...] = self.sonars[0].measure(poses, dt)
+            self.sonars[0].measure(poses, dt, out=out)
             return out
         for sonar, idx in zip(self.sonars, self.sonar_members, strict=True):
             out[:, idx, :] = sonar.measure(poses, dt)
@@ -206,6 +211,9 @@ class Robots:
             nearest = np.argmin(d, axis=-1)
             known = np.take_along_axis(cand, nearest[..., None, None].repeat(2, -1), axis=2)[:, :, 0]
         # before the first report arrives, a pursuer knows nothing: it "sees" the target at itself
+        if self._pursuer_slice is not None:  # a view: copy the known positions in place
+            np.copyto(reported[:, self._pursuer_slice, :], known, where=known == known)  # (not NaN)
+            return reported
         known = np.where(np.isnan(known), positions[:, p, :], known)
         reported[:, p, :] = known
         return reported
@@ -446,6 +454,11 @@ class GameCore(GameBase[ObsLayout]):
             cells.origin[1],
             1.0 / cells.resolution,
         )
+        flat = hm.depth.size > 0 and float(hm.depth.min()) == float(hm.depth.max())
+        self._flat_altitude: F64 | None = (  # a flat seabed: the same altitude everywhere [m]
+            np.full((b, n), float(hm.depth.flat[0]) - self.depth) if flat else None
+        )
+        self._seabed_rows: list[list[float]] | F64 | None = None  # the depths as lists, on first use
         self._poses6 = np.zeros((b, n, 6))
         self._poses6[..., 2] = self.depth
         self._velocity6 = np.zeros((b, n, 6))
@@ -650,23 +663,35 @@ class GameCore(GameBase[ObsLayout]):
 
         The seabed's depth is :meth:`~hptvsim.world.terrain.HeightMap.depth_at` (bilinear); for a
         few vehicles (the single-environment views) it is evaluated point by point, with the
-        same arithmetic, because numpy's per-call cost would dominate the step.
+        same arithmetic, because numpy's per-call cost would dominate the step. A flat seabed
+        gives every vehicle the same altitude, computed once.
         """
+        if self._flat_altitude is not None:
+            return self._flat_altitude.copy()
         positions = self.state.positions
         b, n = positions.shape[:2]
         if b * n > _SCALAR_POINTS:
             altitude: F64 = self.world.heightmap.depth_at(positions) - self.depth
             return altitude
         d, nx, ny, ox, oy, inv = self._seabed
-        i_max, j_max, z = max(nx - 2, 0), max(ny - 2, 0), self.depth
+        if self._seabed_rows is None:  # Python floats: indexing them beats ndarray.item (large: rows)
+            self._seabed_rows = d.tolist() if d.size <= _SEABED_LIST_CELLS else d
+        rows, z = self._seabed_rows, self.depth
+        fi_max, fj_max = nx - 1.0, ny - 1.0
+        i_max, j_max = max(nx - 2, 0), max(ny - 2, 0)
+        di, dj = min(1, nx - 1), min(1, ny - 1)  # i1 = min(i0 + 1, nx - 1) as i0 <= max(nx - 2, 0)
         out = []
-        for x, y in positions.reshape(-1, 2).tolist():  # terrain.bilinear, unrolled
-            fi = min(max((x - ox) * inv, 0.0), nx - 1.0)
-            fj = min(max((y - oy) * inv, 0.0), ny - 1.0)
-            i0, j0 = min(int(fi), i_max), min(int(fj), j_max)
-            i1, j1 = min(i0 + 1, nx - 1), min(j0 + 1, ny - 1)
+        for x, y in positions.reshape(-1, 2).tolist():  # terrain.bilinear, unrolled (no calls)
+            fi = (x - ox) * inv
+            fi = 0.0 if fi < 0.0 else (fi_max if fi > fi_max else fi)
+            fj = (y - oy) * inv
+            fj = 0.0 if fj < 0.0 else (fj_max if fj > fj_max else fj)
+            i0, j0 = int(fi), int(fj)
+            i0 = i_max if i0 > i_max else i0
+            j0 = j_max if j0 > j_max else j0
             ti, tj = fi - i0, fj - j0
-            v00, v01, v10, v11 = d.item(i0, j0), d.item(i0, j1), d.item(i1, j0), d.item(i1, j1)
+            row0, row1 = rows[i0], rows[i0 + di]
+            v00, v01, v10, v11 = row0[j0], row0[j0 + dj], row1[j0], row1[j0 + dj]
             top = v00 + (v01 - v00) * tj
             bottom = v10 + (v11 - v10) * tj
             out.append(top + (bottom - top) * ti - z)

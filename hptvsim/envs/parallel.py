@@ -142,6 +142,7 @@ class GameParallelEnv(AgentSpaces, ParallelEnv[str, F32, F32]):  # type: ignore[
         n, k = len(self.possible_agents), core.action_bounds[0].shape[-1]
         self._idle = core.to_actions(np.zeros((n, len(core.command_fields))))  # (N, A): zero commands
         self._actions = np.zeros((1, n, k))
+        self._action_shape = (k,)
         self.max_cycles = core.max_steps
 
     @property
@@ -179,16 +180,19 @@ class GameParallelEnv(AgentSpaces, ParallelEnv[str, F32, F32]):  # type: ignore[
             raise RuntimeError("the episode is over; call reset() before step()")
         game = self.game
         act = self._actions
-        act[0] = self._idle
+        if len(actions) < len(self._index):  # (agents absent from actions command zero)
+            act[0] = self._idle
         index = self._index
         live = self.agents
+        shape = self._action_shape
         for agent, a in actions.items():
             i = index.get(agent)
             if i is None:
                 raise ValueError(f"unknown agent {agent!r}; agents: {', '.join(self.possible_agents)}")
             if agent not in live:
                 raise ValueError(f"{agent} has finished its episode and cannot act")
-            check_agent_action(game, i, a)
+            if getattr(a, "shape", None) != shape:  # (an array of the right shape needs no check)
+                check_agent_action(game, i, a)
             act[0, i] = a
         result = game.step(act)
         obs_all = result.obs[0].copy()
@@ -208,7 +212,8 @@ class GameParallelEnv(AgentSpaces, ParallelEnv[str, F32, F32]):  # type: ignore[
             term[agent] = term_l[i]
             trunc[agent] = trunc_l[i]
             infos[agent] = infos_l[i]
-        self.agents = [a for a in live if not (term[a] or trunc[a])]
+        if True in term_l or True in trunc_l:
+            self.agents = [a for a in live if not (term[a] or trunc[a])]
         return obs, rew, term, trunc, infos
 
     def state(self) -> F64:

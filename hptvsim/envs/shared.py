@@ -15,6 +15,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from typing import Any, Generic, Literal, Protocol, TypeVar, cast
 
@@ -273,7 +274,8 @@ def check_actions(game: Game, actions: npt.ArrayLike, *, out: F64 | None = None)
         out = np.array(actions, dtype=np.float64)
     else:
         np.copyto(out, actions)
-    if not np.isfinite(out.sum()):  # one reduction; find the culprit only on failure
+    total = sum(out.ravel().tolist()) if out.size <= 64 else out.sum()  # (few: Python is faster)
+    if not math.isfinite(total):  # one reduction; find the culprit only on failure
         bad = np.nonzero(~np.isfinite(out).all(axis=-1))
         if bad[0].size:  # (else finite values whose sum overflowed)
             e, i = int(bad[0][0]), int(bad[1][0])
@@ -326,7 +328,7 @@ def agent_infos(game: Game, result: StepResult | None, env: int) -> list[dict[st
     poses = game.poses[env].tolist()
     altitude = game.altitude[env].tolist()
     distance = game.distance[env].tolist()
-    min_range = game.ranges[env].min(axis=1).tolist()
+    min_range = np.minimum.reduce(game.ranges[env], axis=1).tolist()  # (the ufunc: no wrapper)
     step = int(game.steps[env])
     if result is None:
         return [

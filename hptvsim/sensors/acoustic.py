@@ -198,7 +198,6 @@ class AcousticLink:
         else:
             target = np.asarray(target_xy, dtype=np.float64)
             pursuers = np.asarray(pursuer_xy, dtype=np.float64)
-        t_prev = self.time.copy()
         self._steps += 1
         np.multiply(self._steps, self.dt, out=self.time)
         if not self.config.enabled:
@@ -206,9 +205,10 @@ class AcousticLink:
             self.stamp[...] = self.time[:, None]
             self.age[...] = 0.0
             return
-        t_max = float(self.time.max())
+        t_max = float(np.maximum.reduce(self.time))  # (the ufunc: no wrapper)
         if t_max + _EPS_T >= self._due_min:
             period = self.config.report_period
+            t_prev: F64 = np.multiply(self._steps - 1, self.dt, dtype=np.float64)  # the time before this step
             while True:
                 t_k: F64 = self._next_report.astype(np.float64) * period
                 due = np.flatnonzero(t_k <= self.time + _EPS_T)

@@ -111,6 +111,7 @@ class Sonar:
         self._z: F64 = np.empty(0)
         self._z_ptr = self._z.ctypes.data
         self._truth_ptr = self._truth.ctypes.data
+        self._out_ptr: tuple[F64 | None, int] = (None, 0)  # the last caller buffer and its address
         self._bias_ptr = self.errors.bias.ctypes.data  # GaussMarkov updates its bias in place
         self._fused_dt = math.nan
         self._fused_coef = (1.0, 0.0)
@@ -124,8 +125,17 @@ class Sonar:
         """Error-free geometric ranges ``(B, S, K)`` [m] (for rewards and tests)."""
         return self.geometric.ranges(poses, self.radii, sensing=self.sensing, active=active)
 
-    def measure(self, poses: npt.ArrayLike, dt: float, *, active: npt.ArrayLike | None = None) -> F64:
-        """Measured ranges ``(B, S, K)`` [m] for poses ``(B, N, 3)``; the error biases advance ``dt`` [s]."""
+    def measure(
+        self, poses: npt.ArrayLike, dt: float, *, active: npt.ArrayLike | None = None, out: F64 | None = None
+    ) -> F64:
+        """Measured ranges ``(B, S, K)`` [m] for poses ``(B, N, 3)``; the error biases advance ``dt`` [s].
+
+        Args:
+            poses: ``[x, y, psi]`` of every vehicle [m, m, rad].
+            dt: Time since the last measurement [s].
+            active: ``(B, N)`` booleans; inactive vehicles are not detected.
+            out: A C-contiguous float64 ``(B, S, K)`` array to write into (default: a new array).
+        """
         shape = np.shape(poses)
         if shape != (self.num_envs, self.num_agents, 3):
             raise ValueError(
@@ -133,17 +143,24 @@ class Sonar:
             )
         truth = self.geometric.ranges(poses, self.radii, sensing=self.sensing, active=active, out=self._truth)
         ranges = truth if self.signal is None else self.signal.estimate_ranges(truth)
+        bad_out = out is not None and (out.shape != self.shape or out.dtype != np.float64)
+        if bad_out or (out is not None and not out.flags.c_contiguous):
+            raise ValueError(f"out must be a C-contiguous float64 array of shape {self.shape}")
         if not self.config.errors.active:
-            return ranges.copy() if ranges is self._truth else ranges
-        if self._gm is not None:
-            return self._measure_fused(ranges, dt)
-        max_range = self.config.max_range
-        noisy = self.errors.measure(ranges, dt)
-        np.clip(noisy, 0.0, max_range, out=noisy)
-        result: F64 = np.where(ranges < max_range, noisy, max_range)
-        return result
+            result = ranges.copy() if ranges is self._truth else ranges
+        elif self._gm is not None:
+            return self._measure_fused(ranges, dt, out)
+        else:
+            max_range = self.config.max_range
+            noisy = self.errors.measure(ranges, dt)
+            np.clip(noisy, 0.0, max_range, out=noisy)
+            result = np.where(ranges < max_range, noisy, max_range)
+        if out is None:
+            return result
+        np.copyto(out, result)
+        return out
 
-    def _measure_fused(self, ranges: F64, dt: float) -> F64:
+    def _measure_fused(self, ranges: F64, dt: float, out: F64 | None = None) -> F64:
         """``errors.measure`` + clip + no-echo rule in one C pass (``errors_kernel.c``), same numbers.
 
         The normals are drawn in one call, in the order the numpy path draws them (bias drive,
@@ -168,11 +185,17 @@ class Sonar:
             self.rng.standard_normal(out=self._z)
         src = ranges if ranges.flags.c_contiguous else np.ascontiguousarray(ranges)
         src_ptr = self._truth_ptr if src is self._truth else src.ctypes.data
-        out = np.empty(self.shape)
+        if out is None:
+            out = np.empty(self.shape)
+            out_ptr = out.ctypes.data
+        else:  # a caller's buffer, usually the same one every step: its address is remembered
+            if self._out_ptr[0] is not out:
+                self._out_ptr = (out, out.ctypes.data)
+            out_ptr = self._out_ptr[1]
         phi, w_std = self._fused_coef
         assert self._gm is not None
         self._gm(
             n, src_ptr, self._bias_ptr, self._z_ptr, phi, w_std, cfg.noise_std, self.config.max_range,
-            int(step_bias), int(cfg.bias_std > 0.0), int(add_noise), out.ctypes.data,
+            int(step_bias), int(cfg.bias_std > 0.0), int(add_noise), out_ptr,
         )  # fmt: skip
         return out

@@ -68,6 +68,39 @@ def test_every_game_implements_the_protocol(kind: str, scenario: str) -> None:
         game.close()
 
 
+@pytest.mark.parametrize(
+    ("scenario", "list_cells"),
+    [("salish_sea", 1 << 18), ("salish_sea", 0), ("source", 1 << 18)],  # real bathymetry; flat
+)
+def test_the_planar_altitude_is_the_seabeds_bilinear_depth_less_the_operating_depth(
+    scenario: str, list_cells: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Few vehicles take the point-by-point path (the seabed as lists, or a large one's numpy rows;
+    a flat seabed, a constant); it must equal the vectorised interpolation, bit for bit, inside
+    the grid, on its edges and outside it (clamped)."""
+    monkeypatch.setattr("hptvsim.envs.core._SEABED_LIST_CELLS", list_cells)
+    game = make_game(scenario, num_envs=1, seed=0)
+    game.reset(seed=0)
+    hm = game.world.heightmap  # type: ignore[attr-defined]
+    g = hm.geometry
+    x0, y0 = g.origin
+    x1, y1 = x0 + (g.shape[0] - 1) * g.resolution, y0 + (g.shape[1] - 1) * g.resolution
+    rng = np.random.default_rng(3)
+    n = len(game.agents)
+    points = [
+        rng.uniform([x0, y0], [x1, y1], (n, 2)),  # inside
+        np.array([[x0, y0], [x1, y1], [x0, y1], [x1, y0]])[:n],  # corners
+        np.array([[x0 - 50.0, y0 - 7.0], [x1 + 3.0, y1 + 80.0], [x0 + 1.3, y1 + 9.0], [x1 + 1.0, y0 + 2.2]])[
+            :n
+        ],
+    ]
+    for xy in points:
+        game.state.positions[0] = xy  # type: ignore[attr-defined]
+        expected = hm.depth_at(xy) - game.depth  # type: ignore[attr-defined]
+        np.testing.assert_array_equal(game.altitude[0], expected)
+    game.close()
+
+
 def test_the_planar_game_appends_to_plain_eq14_what_its_extended_layout_observes() -> None:
     plain = make_game("target", num_envs=2, seed=4)
     wide = make_game("target", num_envs=2, seed=4, extended_obs=True)
