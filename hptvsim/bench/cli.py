@@ -110,10 +110,25 @@ def bench_env_cmd(quick: bool, scenario: str, as_json: bool) -> None:
     help="Game to step: the 3-vs-1 underwater game when available, else the toy game; 3d: the "
     "3-D game (6-DOF vehicles that dive, dive_flat scenario).",
 )
-def bench_train_cmd(quick: bool, as_json: bool, env_kind: str) -> None:
-    """Env steps/s of MAISAC with 4 learners: plain SB3 vs the batched path, in the same run."""
-    from hptvsim.bench.train import bench_train
+@click.option(
+    "--algo",
+    type=click.Choice(["maisac", "ippo"]),
+    default="maisac",
+    show_default=True,
+    help="maisac: plain SB3 vs the batched update backends; ippo: today's one-game IPPO vs the fast "
+    "preset on batched games (planar game only).",
+)
+def bench_train_cmd(quick: bool, as_json: bool, env_kind: str, algo: str) -> None:
+    """Env steps/s of 4-learner training, today's path vs the batched one, in the same run."""
+    from hptvsim.bench.train import bench_train, bench_train_ippo
 
+    if algo == "ippo":
+        if env_kind not in ("auto", "hptvsim"):
+            raise click.BadParameter(
+                f"--algo ippo runs on the planar game; got --env {env_kind}", param_hint="--env"
+            )
+        emit(bench_train_ippo(quick=quick), as_json)
+        return
     emit(bench_train(quick=quick, env_kind=env_kind), as_json)
 
 

@@ -22,9 +22,10 @@ from typing import Any
 
 from hptvsim.bench.common import BenchResult, Row
 
-__all__ = ["bench_train"]
+__all__ = ["bench_train", "bench_train_ippo"]
 
 FLOOR = "plain SB3 MAISAC (4 x SAC.train), utd 1"
+IPPO_FLOOR = "today's IPPO (4 x SB3 PPO, one game)"
 
 
 def _env_factory(env_kind: str) -> tuple[Callable[[], Any], str]:
@@ -49,16 +50,19 @@ def _env_factory(env_kind: str) -> tuple[Callable[[], Any], str]:
     return toy, "toy 3v1 pursuit, 16 range beams (hptvsim.envs not available)"
 
 
-def _measure(factory: Callable[[], Any], sac: Any, *, warmup: int, steps: int, seed: int) -> float:
-    """Seconds per env step of the joint MAISAC loop after ``warmup`` untimed steps."""
+def _measure(
+    factory: Callable[[], Any], sac: Any, *, warmup: int, steps: int, seed: int, ippo: bool = False
+) -> float:
+    """Seconds per env step of the joint MAISAC (or IPPO) loop after ``warmup`` untimed steps."""
     import torch
 
     from hptvsim.train.common import Transition, agent_spaces
+    from hptvsim.train.ippo import IPPO
     from hptvsim.train.maisac import MAISAC
 
     torch.manual_seed(seed)
     env = factory()
-    learner = MAISAC.create(agent_spaces(env), sac, seed=seed)
+    learner: Any = (IPPO if ippo else MAISAC).create(agent_spaces(env), sac, seed=seed)
     obs, _ = env.reset(seed=seed)
     episode = 0
 
@@ -126,4 +130,73 @@ def bench_train(*, quick: bool = False, env_kind: str = "auto") -> BenchResult:
         note = f"{floor_cost / best[name]:.2f}x the floor's env steps/s" if name != FLOOR else "peer"
         result.rows.append(Row(name, best[name], note))
     result.targets[variants[-1][0]] = 1.0 / 3.0
+    return result
+
+
+def _batched_ippo_rate(seconds: float, seed: int) -> tuple[float, int]:
+    """Game steps per second of the ``fast`` IPPO preset training all 4 agents on the source game."""
+    import tempfile
+    from pathlib import Path
+
+    from hptvsim.envs.games import make_game
+    from hptvsim.train.batched_run import fast_preset, train_batched
+
+    cfg = dataclasses.replace(
+        fast_preset("ippo"),
+        name="bench-ippo",
+        seeds=(seed,),
+        stages=(),
+        fixed={},
+        budget_steps=10**12,
+        train_budget_s=seconds,
+        eval_every_s=1e12,  # evaluated at the start and the end only, outside the timed training
+        eval_episodes=2,
+        checkpoint_every_s=1e12,
+        device="cpu",
+    )
+    rows: list[dict[str, Any]] = []
+
+    def game(num_envs: int, seed: int) -> Any:
+        return make_game("source", num_envs=num_envs, seed=seed, task="pursuit", threads=1)
+
+    with tempfile.TemporaryDirectory() as tmp:
+        train_batched(cfg, game, Path(tmp), progress=False, on_eval=rows.append)
+    last = rows[-1]
+    return float(last["game_steps"]) / float(last["train_s"]), int(last["game_steps"])
+
+
+def bench_train_ippo(*, quick: bool = False, fast_seconds: float | None = None) -> BenchResult:
+    """Env steps/s of 4-learner IPPO: today's path (one game, SB3 PPO, Table II) vs the fast preset.
+
+    Both train all four agents (3 pursuers, 1 evader) of the source scenario's 3-vs-1 pursuit, on
+    one torch thread, rollouts and PPO updates included (the floor is timed over whole rollouts:
+    two of Table II's 2048 steps, one of 256 in quick mode). The fast row is
+    :func:`hptvsim.train.batched_run.train_batched` with the shipped ``fast`` preset
+    (``configs/train/fast.toml``: B games stepped as one batch, every agent's networks updated
+    together) for a fixed training time (``fast_seconds``; default 120 s, 20 s quick), evaluations
+    not counted. Target: >= 10x.
+    """
+    import torch
+
+    from hptvsim.train.batched_run import fast_preset
+    from hptvsim.train.config import PPOConfig
+
+    torch.set_num_threads(1)
+    factory, env_name = _env_factory("hptvsim")
+    ppo = PPOConfig(n_steps=256) if quick else PPOConfig()
+    cost = _measure(factory, ppo, warmup=8, steps=(1 if quick else 2) * ppo.n_steps, seed=0, ippo=True)
+    seconds = fast_seconds if fast_seconds is not None else (20.0 if quick else 120.0)
+    rate, game_steps = _batched_ippo_rate(seconds, seed=0)
+    preset = fast_preset("ippo").ppo
+    fast = f"fast preset: B = {preset.num_envs} games, {preset.n_steps}-step rollouts"
+    result = BenchResult(
+        title=f"IPPO training, 4 learners (2x256), {env_name}, 1 torch thread",
+        unit="env-step",
+        floor=IPPO_FLOOR,
+    )
+    result.rows.append(Row(IPPO_FLOOR, cost, f"Table II PPO, n_steps {ppo.n_steps}"))
+    result.rows.append(
+        Row(fast, 1.0 / rate, f"{rate * cost:.1f}x the floor's env steps/s ({game_steps:,} steps)")
+    )
+    result.targets[fast] = 0.1
     return result

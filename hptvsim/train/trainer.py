@@ -34,7 +34,13 @@ from typing import Any
 
 import numpy as np
 
-from hptvsim.train.checkpoint import LoopState, has_checkpoint, load_checkpoint, save_checkpoint
+from hptvsim.train.checkpoint import (
+    CHECKPOINT_DIR,
+    LoopState,
+    has_checkpoint,
+    load_checkpoint,
+    save_checkpoint,
+)
 from hptvsim.train.common import (
     Transition,
     agent_spaces,
@@ -305,6 +311,7 @@ def train(
     stop_after: int | None = None,
     stop_requested: Callable[[], bool] | None = None,
     on_stage_end: Callable[[int, Path], None] | None = None,
+    on_checkpoint: Callable[[int, Path], None] | None = None,
     label: str | None = None,
     update_config: bool = False,
     log: Callable[[str], None] | None = None,
@@ -329,6 +336,9 @@ def train(
             once, and the cut episode is replayed on resume, as after Ctrl-C). The result then
             has ``finished`` false.
         on_stage_end: Called with (stage index, stage model folder) after each stage.
+        on_checkpoint: Called with (env steps so far, the checkpoint folder) after each
+            checkpoint taken inside a stage (its ``models/`` hold every learner's SB3 zip), e.g.
+            to evaluate the models as the run goes; the run waits while it runs.
         label: Name of the run's group in figures (a sweep's setting), kept in ``run.json``.
         update_config: On resume, go on with ``cfg`` where it differs from the saved config in
             what is not trained yet (:func:`resume_changes`); it becomes the run's
@@ -419,6 +429,7 @@ def train(
                     progress,
                     stop_after,
                     stop_requested,
+                    on_checkpoint,
                 )
             finally:
                 env.close()
@@ -488,6 +499,7 @@ def _run_stage(
     progress: bool,
     stop_after: int | None,
     stop_requested: Callable[[], bool] | None = None,
+    on_checkpoint: Callable[[int, Path], None] | None = None,
 ) -> bool:
     """Train one stage to its budget; returns True when stopped early (``stop_after``, ``stop_requested``)."""
     stage = cfg.stages[idx]
@@ -514,6 +526,8 @@ def _run_stage(
             state.log_offsets["episodes"] = episode_log_start
         state.last_checkpoint_step = state.global_step
         save_checkpoint(run_dir, state, learner)
+        if on_checkpoint is not None:
+            on_checkpoint(state.global_step, run_dir / CHECKPOINT_DIR)
 
     def log_updates() -> None:
         stats = learner.pop_stats()

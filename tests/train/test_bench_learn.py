@@ -41,10 +41,11 @@ def test_the_sb3_and_benchmarl_rows_train_and_evaluate(tmp_path: Path) -> None:
     """Today's one-game SB3 path and BenchMARL's ISAC on the TorchRL env, one evaluation each."""
     from hptvsim.bench.learn import run_benchmarl, run_sb3
 
-    sb3 = run_sb3(1.0, 0.7, 2, tmp_path, chunk=50)
+    sb3 = run_sb3(4.0, 0.7, 2, tmp_path, chunk=50)  # one run, evaluated at its checkpoints
     steps = [n for _, n, _ in sb3.points]
-    assert steps == [50 * (k + 1) for k in range(len(steps))]  # evaluated after every chunk
-    assert sb3.points[-1][0] >= 1.0 and all(0.0 <= c <= 1.0 for _, _, c in sb3.points)  # to its cap
+    assert steps[:-1] == [50 * (k + 1) for k in range(len(steps) - 1)] and len(steps) >= 2  # every chunk
+    assert steps[-1] > steps[-2]  # and where its cap stopped it
+    assert sb3.points[-1][0] >= 4.0 and all(0.0 <= c <= 1.0 for _, _, c in sb3.points)  # to its cap
     assert sorted(p.name for p in (tmp_path / "sb3-one-game/checkpoint/models").glob("*.zip")) == [
         "pursuer_0.zip",
         "pursuer_1.zip",
