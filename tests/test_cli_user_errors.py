@@ -122,6 +122,15 @@ def work(tmp_path_factory: pytest.TempPathFactory) -> Path:
     (folder / "garbage.bin").write_bytes(b"\x00garbage\xff" * 8)
     (folder / "garbage.pt").write_bytes(b"\x00garbage\xff" * 8)
     (folder / "empty").mkdir()
+    # the target scenario with 8 sonar beams: the shipped planar models observe 16
+    import tomllib
+
+    from hptvsim._paths import shipped_dir
+    from hptvsim._toml import dump_toml
+
+    data = tomllib.loads((shipped_dir("scenarios") / "target.toml").read_text())
+    data.setdefault("sensors", {}).setdefault("sonar", {})["beams"] = 8
+    (folder / "beams8.toml").write_text(dump_toml(data))
     return folder
 
 
@@ -146,6 +155,32 @@ CASES: dict[str, tuple[list[str], tuple[str, ...]]] = {
             "2",
         ],
         ("maisac-pursuer_0.zip", "acts in (2,)", "3d game takes 3"),
+    ),
+    "episode-model-of-another-layout": (  # named neither the model nor the agent before
+        [
+            "episode",
+            "--scenario",
+            "beams8.toml",
+            "--policy",
+            f"pursuer_0=sb3:{PLANAR_MODEL}",
+            "--max-steps",
+            "2",
+        ],
+        ("maisac-pursuer_0.zip: the model observes (26,) but pursuer_0's observation has 12 values",),
+    ),
+    "evaluate-model-of-another-layout": (
+        [
+            "evaluate",
+            "--env",
+            "hptvsim:beams8.toml/pursuit",
+            "--pursuers",
+            f"sb3:{PLANAR_MODEL}",
+            "--evaders",
+            "scripted:potential_field",
+            "--episodes",
+            "1",
+        ],
+        ("maisac-pursuer_0.zip: the model observes (26,) but pursuer_0's observation has 12 values",),
     ),
     "episode-model-garbage": (
         ["episode", "--policy", "pursuer_0=sb3:garbage.bin", "--max-steps", "2"],
@@ -263,6 +298,17 @@ def test_a_wrong_argument_gives_one_line_without_a_traceback(
     line = error_line(outcomes[case])
     for text in CASES[case][1]:
         assert text in line, line
+
+
+def test_episode_and_evaluate_refuse_a_model_that_does_not_fit_alike(
+    outcomes: dict[str, subprocess.CompletedProcess[str]],
+) -> None:
+    """One check of a model against the scenario (:func:`hptvsim.train.policy.check_observation`
+    through the zoo's loader): the same line and exit code from both commands."""
+    for pair in (("episode-model-of-another-layout", "evaluate-model-of-another-layout"),):
+        episode, evaluate = (outcomes[name] for name in pair)
+        assert error_line(episode) == error_line(evaluate)
+        assert episode.returncode == evaluate.returncode == 1
 
 
 def test_every_command_has_a_case() -> None:

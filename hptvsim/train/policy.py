@@ -120,7 +120,9 @@ class SB3Policy:
         return result
 
 
-def check_observation(shape: tuple[int, ...], obs_size: int, *, extra: int = 0) -> None:
+def check_observation(
+    shape: tuple[int, ...], obs_size: int, *, extra: int = 0, model: Path | str | None = None, agent: str = ""
+) -> None:
     """The one check of a model's observation shape against an agent's observation.
 
     Args:
@@ -128,15 +130,19 @@ def check_observation(shape: tuple[int, ...], obs_size: int, *, extra: int = 0) 
         obs_size: Values in the agent's observation.
         extra: Values appended to it for the model
             (:meth:`~hptvsim.envs.protocol.Game.observation_extension`).
+        model: The model's file, named first in the message (as the action check does).
+        agent: The agent, named in the message.
 
     Raises:
         ValueError: The shapes differ (the model was trained on another layout).
     """
     expected = obs_size + extra
     if tuple(shape) != (expected,):
+        where = f"{model}: " if model is not None else ""
+        whose = f"{agent}'s" if agent else "the agent's"
         raise ValueError(
-            f"the model observes {tuple(shape)} but the agent's observation has {obs_size} values; it was "
-            "trained on another layout (another beam count; a 3-D model plays on a scenario whose "
+            f"{where}the model observes {tuple(shape)} but {whose} observation has {obs_size} values; it "
+            "was trained on another layout (another beam count; a 3-D model plays on a scenario whose "
             "[sensors.sonar3d] has its beams)"
         )
 
@@ -173,7 +179,9 @@ def _fit(path: Path, observation: tuple[int, ...], action: tuple[int, ...], game
         )
     size = int(game.observation_space(agent).shape[0])
     extension = _extension(game, agent, observation)
-    check_observation(observation, size, extra=0 if extension is None else extension.size)
+    check_observation(
+        observation, size, extra=0 if extension is None else extension.size, model=path, agent=agent
+    )
     return extension is not None
 
 

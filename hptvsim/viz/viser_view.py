@@ -30,6 +30,10 @@ frame, its hits and its goal at their depths, a line from it down to the seabed 
 a depth cue), the site's edge drawn at the surface, and the camera placed lower so that depths
 show. The camera's far plane is raised so a 400 m site is not clipped. The policy pickers offer
 the policies of the chosen scenario's game only (:func:`hptvsim.catalog.policies`).
+
+**Labels.** Each vehicle's name stands over it on a dark grey leader line, lifted so that the labels
+of vehicles close together on the screen stack instead of overlapping (:func:`label_lifts`), as
+the browser that moved its camera last sees them (:class:`LabelCamera`).
 """
 
 from __future__ import annotations
@@ -58,7 +62,16 @@ from hptvsim.palette import SONAR_HIT_COLOR
 from hptvsim.sensors.sonar3d import rotation_zyx
 from hptvsim.viz.style import depth_colors, hex_rgb
 
-__all__ = ["Launcher", "LiveView", "SceneRenderer", "distance_plot", "plotted_agents", "start_live_view"]
+__all__ = [
+    "LabelCamera",
+    "Launcher",
+    "LiveView",
+    "SceneRenderer",
+    "distance_plot",
+    "label_lifts",
+    "plotted_agents",
+    "start_live_view",
+]
 
 log = logging.getLogger("hptvsim.viz.live_view")
 
@@ -69,6 +82,118 @@ DEPTH_BANDS = 8  # terrain meshes, one colour each (viser's simple meshes have o
 MIN_DISPLAY_RADIUS = 2.5  # m, vehicles drawn at least this large (the evader's radius is 0.2 m)
 TIME_LABEL = "time [s]"  # the x axis of the view's plots: simulated seconds
 GUIDE_COLOR = "#9aa5b1"  # reference lines of plots (the capture distance)
+LABEL_EM_PX = 12.0  # px, the em of viser's screen-space labels (font_screen_scale 1), at any zoom
+LABEL_CHAR_EM = 0.62  # width of a character of a vehicle's name [em] (system sans; generous)
+LABEL_HEIGHT_PX = 17.5  # px, a one-line label's box: line height (~1.2 em) and 0.2 of it as padding
+LABEL_GAP_PX = 4.0  # px, kept free between two labels
+LABEL_CLEARANCE_PX = 8.0  # px, at least between a vehicle's centre and the bottom of its label
+LABEL_VEHICLE_PX = 6.0  # px, half the square around a vehicle that other vehicles' labels keep clear of
+LABEL_VIEWPORT_PX = 600  # px, the view's height assumed until a browser reports its own
+UP_NED = np.array([0.0, 0.0, -1.0])  # up in NED: labels rise from their vehicle along it
+LEADER_COLOR = (50, 54, 60)  # a label's leader line: dark grey, as the label's text
+
+
+@dataclass(frozen=True)
+class LabelCamera:
+    """A perspective camera as labels are laid out for (a browser's, or the view's initial one).
+
+    Attributes:
+        position: Where it is [m] (NED).
+        look_at: The point it looks at [m].
+        fov: Vertical field of view [rad].
+        height_px: The view's height [px].
+    """
+
+    position: tuple[float, float, float]
+    look_at: tuple[float, float, float]
+    fov: float
+    height_px: float
+
+    def basis(self) -> tuple[F64, F64, F64]:
+        """Unit vectors forward, right and up on the screen (up: the one nearest to the world's up)."""
+        forward = np.asarray(self.look_at, dtype=np.float64) - np.asarray(self.position, dtype=np.float64)
+        forward /= max(float(np.linalg.norm(forward)), 1e-9)
+        right = np.cross(forward, UP_NED)
+        norm = float(np.linalg.norm(right))
+        right = right / norm if norm > 1e-9 else np.array([0.0, 1.0, 0.0])
+        return forward, right, np.cross(right, forward)
+
+    def focal_px(self) -> float:
+        """Pixels per unit of ``lateral / depth`` on the screen."""
+        return 0.5 * self.height_px / math.tan(0.5 * self.fov)
+
+
+def label_lifts(
+    points: npt.ArrayLike,
+    widths_px: Iterable[float],
+    camera: LabelCamera,
+    *,
+    min_lift: float = 0.0,
+) -> F64:
+    """How far above each vehicle [m] its label goes so that, as ``camera`` sees them, no two overlap.
+
+    Each label stands on a point straight above its vehicle (``-z``), its box centred over it
+    (viser's ``bottom-center`` anchor) and of a fixed size on the screen (viser's screen-space
+    labels: :data:`LABEL_HEIGHT_PX` high, ``widths_px`` wide). Labels are placed from the lowest
+    on the screen up: each as low as it can go, at least :data:`LABEL_CLEARANCE_PX` and
+    ``min_lift`` above its vehicle, and above every placed label its box would overlap (with
+    :data:`LABEL_GAP_PX` to spare), so labels of vehicles close together on the screen stack;
+    a label does not cover another vehicle either (a square of :data:`LABEL_VEHICLE_PX` around it).
+    Closer in, vehicles spread on the screen while labels keep their size, so a layout mostly
+    holds while a browser zooms; the view lays the labels out again when a camera moves.
+
+    Args:
+        points: ``(N, 3)`` the vehicles' positions [m], NED.
+        widths_px: Each label's width [px].
+        camera: The camera the layout is for.
+        min_lift: The least lift [m] (clear of the vehicle's body).
+
+    Returns:
+        ``(N,)`` lifts [m]; a vehicle behind the camera gets ``min_lift``.
+    """
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    widths = [float(w) for w in widths_px]
+    forward, right, up = camera.basis()
+    focal = camera.focal_px()
+    rel = pts - np.asarray(camera.position, dtype=np.float64)
+    depth = rel @ forward
+    lifts = np.full(len(pts), float(min_lift))
+    # a point lifted by L is seen at height (a + L b) / (c + L e) * focal: L for a wanted height
+    b, e = float(UP_NED @ up), float(UP_NED @ forward)
+    seen = [i for i in range(len(pts)) if depth[i] > 1e-6]
+    if abs(b) < 1e-6:  # looking straight down: lifting does not move a label on the screen
+        return lifts
+    sx = {i: float(rel[i] @ right) / depth[i] * focal for i in seen}
+    sy = {i: float(rel[i] @ up) / depth[i] * focal for i in seen}
+
+    def height_at(i: int, lift: float) -> float:
+        return float((rel[i] @ up + lift * b) / (depth[i] + lift * e) * focal)
+
+    def lift_for(i: int, y: float) -> float:
+        den = b - y * e / focal
+        return float((y * depth[i] / focal - rel[i] @ up) / den) if abs(den) > 1e-9 else float(min_lift)
+
+    bottoms = {i: max(height_at(i, min_lift), sy[i] + LABEL_CLEARANCE_PX) for i in seen}
+    # left, right, bottom, top [px] (y up) of what labels keep clear of: the other vehicles (a
+    # label never hides one) and the labels placed
+    r = LABEL_VEHICLE_PX
+    vehicles = {i: (sx[i] - r, sx[i] + r, sy[i] - r, sy[i] + r) for i in seen}
+    labels: list[tuple[float, float, float, float]] = []
+    for i in sorted(seen, key=lambda k: bottoms[k]):
+        half = 0.5 * widths[i] + 0.5 * LABEL_GAP_PX
+        left, right_edge = sx[i] - half, sx[i] + half
+        keep_clear = labels + [box for j, box in vehicles.items() if j != i]  # its own: below it
+        y = bottoms[i]
+        moved = True
+        while moved:
+            moved = False
+            for bl, br, bb, bt in keep_clear:
+                if left < br and bl < right_edge and y < bt + LABEL_GAP_PX and bb < y + LABEL_HEIGHT_PX:
+                    y = bt + LABEL_GAP_PX
+                    moved = True
+        labels.append((left, right_edge, y, y + LABEL_HEIGHT_PX))
+        lifts[i] = max(float(min_lift), lift_for(i, y))
+    return lifts
 
 
 def _quat_wxyz(psi: float, phi: float = 0.0, theta: float = 0.0) -> tuple[float, float, float, float]:
@@ -112,7 +237,11 @@ class SceneRenderer:
         self._colors: dict[str, tuple[int, int, int]] = {}
         self._beams: dict[str, F64] = {}  # per agent, (K, 3) unit beam vectors, body frame
         self._drops: Any = None  # 3-D game: a line from each vehicle down to the seabed
+        self._leaders: Any = None  # a line from each vehicle up to its label
+        self._labels: dict[str, Any] = {}  # each vehicle's name label
+        self._label_points: F64 | None = None  # (N, 3) where the vehicles were last drawn [m]
         self._shown_step: int | None = None  # the step last drawn (drawn again: trails stay)
+        self.label_camera: LabelCamera | None = None  # the camera labels are laid out for
 
     def clear(self) -> None:
         """Remove everything drawn."""
@@ -124,6 +253,9 @@ class SceneRenderer:
         self._sonar = None
         self._hits = None
         self._drops = None
+        self._leaders = None
+        self._labels = {}
+        self._label_points = None
         self._shown_step = None
 
     def set_static(self, static: EpisodeStatic) -> None:
@@ -176,7 +308,12 @@ class SceneRenderer:
                 rgb,
                 thickness=0.8,
             )
-            scene.add_label(f"/agents/{a.name}/label", a.name, position=(0.0, 0.0, -2.0 * r))
+            # the name stands over the vehicle, lifted clear of the others' (place_labels)
+            label = scene.add_label(
+                f"/labels/{a.name}", a.name, position=(0.0, 0.0, z), anchor="bottom-center"
+            )
+            self._labels[a.name] = label
+            self._handles.append(label)
             trail = scene.add_line_segments(
                 f"/trails/{a.name}", np.zeros((1, 2, 3), dtype=np.float32), rgb, thickness=0.5
             )
@@ -205,8 +342,18 @@ class SceneRenderer:
             precision="float32",  # float16 would place hits 200-400 m out up to 0.25 m off
         )
         self._handles += [self._sonar, self._hits]
+        n = len(static.agents)
+        # leaders in the labels' dark grey, not the vehicles' colours: a coloured line is a depth
+        # cue here (the altitude lines below), and a vehicle's colour marks its body and trail only
+        self._leaders = scene.add_line_segments(
+            "/labels/leaders",
+            np.zeros((n, 2, 3), dtype=np.float32),
+            LEADER_COLOR,
+            thickness=1.5,
+            thickness_units="screen",  # px: thin at any zoom
+        )
+        self._handles.append(self._leaders)
         if static.game == "3d":  # depth cues: each vehicle's altitude as a line to the seabed
-            n = len(static.agents)
             colors = np.array([self._colors[a.name] for a in static.agents], dtype=np.uint8)
             self._drops = scene.add_line_segments(
                 "/depth_lines",
@@ -225,6 +372,13 @@ class SceneRenderer:
         height = 0.8 if static.game == "planar" else 0.4  # x span above; lower: depths show
         cam.position = (cx - 0.75 * span, cy - 0.15 * span, z - height * span)
         cam.up = (0.0, 0.0, -1.0)
+        px, py, pz = (float(v) for v in cam.position)
+        self.label_camera = LabelCamera(  # the clients are aimed so: until one reports its own
+            position=(px, py, pz),
+            look_at=(cx, cy, z),
+            fov=float(cam.fov),
+            height_px=self.label_camera.height_px if self.label_camera is not None else LABEL_VIEWPORT_PX,
+        )
         for client in self.server.get_clients().values():
             self.aim(client)
 
@@ -247,6 +401,7 @@ class SceneRenderer:
         ray_cols: list[F64] = []
         hits: list[F64] = []
         drops = np.zeros((len(frame.agents), 2, 3), dtype=np.float32)  # m, vehicle to seabed
+        points = np.zeros((len(frame.agents), 3))  # m, where each vehicle is drawn
         if frame.step == 0:
             for t in self._trails.values():
                 t.clear()
@@ -259,6 +414,7 @@ class SceneRenderer:
                 phi, theta = a.phi or 0.0, a.theta or 0.0  # rad; level in the planar game
                 h["frame"].position = (a.x, a.y, z)
                 h["frame"].wxyz = _quat_wxyz(a.psi, phi, theta)
+                points[i] = (a.x, a.y, z)
                 if a.altitude is not None:
                     drops[i] = ((a.x, a.y, z), (a.x, a.y, z + a.altitude))
                 trail = self._trails[a.name]
@@ -299,6 +455,35 @@ class SceneRenderer:
                     hit_rgb = np.array(hex_rgb(SONAR_HIT_COLOR), np.uint8)
                     self._hits.colors = np.broadcast_to(hit_rgb, pts.shape).copy()
                 self._hits.visible = self.show_sonar and bool(hits)
+            self._label_points = points
+            self.place_labels()
+
+    def label_widths_px(self) -> list[float]:
+        """Each vehicle's label width on the screen [px] (an upper estimate: viser measures the text)."""
+        st = self.static
+        names = st.agent_names if st is not None else ()
+        return [(len(name) * LABEL_CHAR_EM + 0.24) * LABEL_EM_PX for name in names]
+
+    def place_labels(self) -> None:
+        """Lift each vehicle's name label so that labels of vehicles close on the screen do not overlap.
+
+        Laid out for :attr:`label_camera` (the browser that moved its camera last, else the view's
+        initial camera) with :func:`label_lifts`; a dark grey leader line joins each vehicle to its
+        label. Call after a camera moved (:meth:`show` calls it for each frame).
+        """
+        st, pts, cam = self.static, self._label_points, self.label_camera
+        if st is None or pts is None or cam is None or len(pts) != len(st.agents):
+            return
+        radius = [max(a.radius, MIN_DISPLAY_RADIUS) for a in st.agents]
+        lifts = label_lifts(pts, self.label_widths_px(), cam, min_lift=1.5 * max(radius))
+        tops = pts + lifts[:, None] * UP_NED
+        with self.server.atomic():
+            for a, top in zip(st.agents, tops, strict=True):
+                label = self._labels.get(a.name)
+                if label is not None:
+                    label.position = tuple(float(v) for v in top)
+            if self._leaders is not None:
+                self._leaders.points = np.stack([pts, tops], axis=1).astype(np.float32)
 
 
 def plotted_agents(static: EpisodeStatic) -> list[int]:
@@ -531,6 +716,7 @@ class LiveView:
         self._wanted: str | None = None
         self._statics: OrderedDict[str, Mapping[str, Any]] = OrderedDict()
         self._unfollow_at: float | None = None
+        self._labels_pending = False  # a "labels" request waits (camera moves come in bursts)
 
     # -- life cycle ------------------------------------------------------------------------------
 
@@ -597,8 +783,28 @@ class LiveView:
         return self
 
     def _on_connect(self, client: Any) -> None:
+        client.camera.on_update(self._on_camera)
         if self.renderer is not None and self.renderer.static is not None:
             self.renderer.aim(client)
+
+    def _on_camera(self, camera: Any) -> None:
+        """A browser's camera moved (or its view was resized): lay the labels out for it.
+
+        The browser that moved last is the one the labels fit (they are one set for all).
+        """
+        if self.renderer is None:
+            return
+        px, py, pz = (float(v) for v in camera.position)
+        lx, ly, lz = (float(v) for v in camera.look_at)
+        self.renderer.label_camera = LabelCamera(
+            position=(px, py, pz),
+            look_at=(lx, ly, lz),
+            fov=float(camera.fov),
+            height_px=float(max(1, camera.image_height)),
+        )
+        if not self._labels_pending:
+            self._labels_pending = True
+            self._post("labels")
 
     def stop(self) -> None:
         """Stop the simulation thread, the gateway and the server."""
@@ -801,6 +1007,9 @@ class LiveView:
             names = tuple(a.name for a in frame.agents) if frame is not None else ()
             if frame is not None and r.static is not None and names == r.static.agent_names:
                 r.show(frame)
+        elif req.kind == "labels":  # a browser's camera moved
+            self._labels_pending = False
+            self.renderer.place_labels()
         elif req.kind == "unfollow_later":
             self._unfollow_at = time.monotonic() + self.unfollow_delay
         elif req.kind == "unfollow" and self.following is not None:

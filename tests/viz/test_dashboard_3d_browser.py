@@ -147,8 +147,8 @@ def _check_depth_plot(page: Any, agents: list[dict[str, Any]], cursor: float | N
     )
     assert len(ticks) >= 3 and ticks[0][0] == 0, ticks
     assert all(b[1] > a[1] for a, b in itertools.pairwise(ticks)), ticks
-    # each agent's line is drawn in its colour where its depth puts it; where it meets lines drawn
-    # after it (agents at the same depth), as a band around them (draw.js coincidentBands)
+    # each agent's line is drawn in its colour where its depth puts it; where it meets other lines
+    # (agents at the same depth), they take turns every SHARE_PX columns (draw.js sharedRuns)
     area = plot["area"]
     assert area["flip"] and area["y0"] == 0
     t = np.asarray(got["t"])
@@ -167,28 +167,28 @@ def _check_depth_plot(page: Any, agents: list[dict[str, Any]], cursor: float | N
     with Image.open(BytesIO(base64.b64decode(got["image"].split(",", 1)[1]))) as im:
         rgb = np.asarray(im.convert("RGB"), dtype=np.int32)
     met = 0
+    share = 6 * len(agents)  # px: draw.js SHARE_PX columns for each line that can share a stretch
     for i, a in enumerate(agents):
+        others = [ys[b["name"]] for b in agents if b is not a]
         later = [ys[b["name"]] for b in agents[i + 1 :]]
         shown = []
         for j in range(len(rows)):
-            if cursor is not None and abs(sx[j] - cx) <= 3:
+            if cursor is not None and abs(sx[j] - cx) <= 3 + share:
                 continue
             y, x = int(ys[a["name"]][j]), int(sx[j])
             want = np.asarray(_rgb(a["color"]))
 
-            def seen(y0: int, y1: int, want: Any = want, x: int = x) -> bool:
-                return bool((np.abs(rgb[y0:y1, x - 1 : x + 2] - want).max(axis=-1) <= 40).any())
+            def seen(y0: int, y1: int, x0: int, x1: int, want: Any = want) -> bool:
+                return bool((np.abs(rgb[y0:y1, x0:x1] - want).max(axis=-1) <= 40).any())
 
-            # 1.7 px wide, antialiased; where lines drawn after it lie within 2 px, 2 px wider for
-            # each and for its offset to them, so it shows on both sides of them
-            over = [int(y[j]) for y in later if abs(y[j] - ys[a["name"]][j]) < 2]
-            met += bool(over)
-            if not over:
-                shown.append(seen(y - 1, y + 2))
+            # 1.7 px wide, antialiased, at its own height; where others lie within 2 px it shows in
+            # its turns only, so somewhere within one round of turns around this point
+            near = [o[j] for o in others if abs(o[j] - ys[a["name"]][j]) < 2]
+            met += any(abs(o[j] - ys[a["name"]][j]) < 2 for o in later)
+            if not near:
+                shown.append(seen(y - 1, y + 2, x - 1, x + 2))
             else:
-                top, bottom = min(over), max(over)
-                h = 2 + len(over)
-                shown.append(seen(top - h, top - 1) and seen(bottom + 2, bottom + h + 1))
+                shown.append(seen(y - 2, y + 3, x - share, x + share + 1))
         assert sum(shown) >= 0.8 * len(shown), (a["name"], sum(shown), len(shown))
     got["coincident"] = met  # points where a line met one drawn after it
     return got

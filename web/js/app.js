@@ -325,7 +325,7 @@ async function cancelCurrent() {
   try {
     await api(`/episodes/${state.current.id}/cancel`, { method: "POST" });
   } catch (err) {
-    $("live-text").textContent = `cannot cancel: ${err.message}`;
+    if (state.current) setStatus(state.current.status, `cannot cancel: ${err.message}`);
   }
 }
 
@@ -394,7 +394,7 @@ function drawEpisodePlots(st, series, cursor) {
     hline: pursuit ? { y: st.capture_distance, label: `capture (${st.capture_distance} m)` } : null,
     cursor,
   });
-  panelChart(
+  const terms = panelChart(
     $("plot-terms"),
     TERMS.map(([term, title]) => ({ title, ylabel: "reward", series: series.hasTerms ? mk(series.terms[term], info) : [] })),
     {
@@ -403,6 +403,8 @@ function drawEpisodePlots(st, series, cursor) {
       empty: series.hasTerms ? "no data yet" : "this episode was stored without its reward terms",
     },
   );
+  // what is drawn, for tests: each panel's plot area and data range, in TERMS' order
+  state.termsPlot = { terms: TERMS.map(([term]) => term), areas: terms };
   drawDepthPlot(st, series, cursor);
 }
 
@@ -448,12 +450,35 @@ state.map = map;
 state.rangeColor = rangeColor; // the sonar colour of a range fraction (tests check pixels against it)
 let redrawPending = false;
 
-function setStatus(status) {
+/** Order of an episode's statuses: a later one never gives way to an earlier one. */
+function statusRank(status) {
+  return status === "queued" ? 0 : status === "running" ? 1 : 2;
+}
+
+/**
+ * The watched episode's status, the one value its badge, the text beside it and its row in the
+ * list all show (`detail`: what the text says after it; undefined keeps the current one). A
+ * status older than the one shown (a list polled before the stream's news) changes nothing.
+ */
+function setStatus(status, detail) {
+  const c = state.current;
+  if (!c) return;
+  if (statusRank(status) < statusRank(c.status)) status = c.status;
+  c.status = status;
+  if (detail !== undefined) c.detail = detail;
   const b = $("live-status");
   b.textContent = status;
   b.className = `badge ${status}`;
   $("cancel-button").hidden = !ACTIVE.has(status);
-  if (state.current) state.current.status = status;
+  const ep = c.episode;
+  $("live-text").textContent = `${ep.scenario}, seed ${ep.seed}: ${status}${c.detail ? `, ${c.detail}` : ""}`;
+  const listed = state.episodes.find((e) => e.id === c.id);
+  if (listed) listed.status = status;
+  const row = document.querySelector(`#episode-table tbody tr[data-id="${CSS.escape(c.id)}"] .badge`);
+  if (row && row.textContent !== status) {
+    row.textContent = status;
+    row.className = `badge ${status}`;
+  }
 }
 
 function setTimeline(enabled, n = 0) {
@@ -466,14 +491,13 @@ function setTimeline(enabled, n = 0) {
 
 function watch(ep) {
   if (state.current?.es) state.current.es.close();
-  state.current = { id: ep.id, static: null, series: null, traj: null, es: null, status: ep.status, episode: ep };
+  state.current = { id: ep.id, static: null, series: null, traj: null, es: null, status: ep.status, detail: "", episode: ep };
   history.replaceState(null, "", `#episode=${ep.id}`);
   $("live-id").textContent = ep.id;
   $("live-metrics").replaceChildren();
   $("live-links").replaceChildren();
   $("live-progress").style.width = "0%";
-  $("live-text").textContent = `${ep.scenario}, seed ${ep.seed}: ${ep.status}`;
-  setStatus(ep.status);
+  setStatus(ep.status, "");
   setTimeline(false);
   $("plot-depth").hidden = gameOf(ep.scenario) !== "3d"; // until the episode's static part says
   highlightRow();
@@ -482,7 +506,7 @@ function watch(ep) {
     return;
   }
   const es = openEvents(`${API}/episodes/${ep.id}/events?static=true&frames=true`, (why) => {
-    if (mine()) $("live-text").textContent += ` (stream closed: ${why})`;
+    if (mine()) setStatus(state.current.status, `${state.current.detail} (stream closed: ${why})`);
   });
   state.current.es = es;
   const mine = () => state.current && state.current.es === es;
@@ -511,7 +535,7 @@ function watch(ep) {
     const d = JSON.parse(e.data);
     const max = d.max_steps || state.current.static?.max_steps || 1;
     $("live-progress").style.width = `${Math.min(100, (100 * d.step) / max)}%`;
-    $("live-text").textContent = `step ${d.step} of at most ${max}, t = ${(d.t ?? d.time ?? 0).toFixed(1)} s`;
+    setStatus(state.current.status, `step ${d.step} of at most ${max}, t = ${(d.t ?? d.time ?? 0).toFixed(1)} s`);
   });
   es.addEventListener("frame", (e) => {
     if (!mine() || !state.current.static) return;
@@ -537,14 +561,14 @@ async function showFinished(id) {
     const ep = await api(`/episodes/${id}`);
     if (state.current !== c) return;
     c.episode = ep;
-    setStatus(ep.status);
     $("live-progress").style.width = ep.status === "finished" ? "100%" : $("live-progress").style.width;
     const sum = ep.summary;
-    $("live-text").textContent =
-      `${ep.scenario}, seed ${ep.seed}: ${ep.status}` +
-      (sum ? `, ${sum.outcome} after ${sum.steps} steps (${sum.sim_time.toFixed(1)} s simulated, ` +
-        `${sum.wall_time.toFixed(2)} s wall)` : "") +
-      (ep.error ? ` (${ep.error})` : "");
+    const detail = [
+      sum ? `${sum.outcome} after ${sum.steps} steps (${sum.sim_time.toFixed(1)} s simulated, ` +
+        `${sum.wall_time.toFixed(2)} s wall)` : "",
+      ep.error ? `(${ep.error})` : "",
+    ].filter(Boolean).join(" ");
+    setStatus(ep.status, detail);
     showMetrics(sum);
     showLinks(ep);
     if (!c.static) {
@@ -567,7 +591,7 @@ async function showFinished(id) {
       scrubTo(traj.step.length - 1);
     }
   } catch (err) {
-    $("live-text").textContent = `cannot load episode ${id}: ${err.message}`;
+    if (state.current === c) setStatus(c.status, `cannot load episode ${id}: ${err.message}`);
   }
 }
 
@@ -655,7 +679,8 @@ function link(href, text, name) {
     if (!apiKey()) return; // no key: the plain link works
     ev.preventDefault();
     download(href, name || a.download || href.split("/").pop()).catch((err) => {
-      $("live-text").textContent += ` (${err.message})`;
+      const c = state.current;
+      if (c) setStatus(c.status, `${c.detail ? `${c.detail} ` : ""}(${err.message})`);
     });
   });
   return a;
@@ -696,6 +721,13 @@ async function refreshList() {
   try {
     const page = await api(`/episodes?${params}`);
     state.episodes = page.items;
+    const c = state.current;
+    const listed = c && state.episodes.find((e) => e.id === c.id);
+    if (listed) {
+      // the list and the watched episode show one status: the later of what each has heard
+      if (statusRank(listed.status) > statusRank(c.status)) setStatus(listed.status);
+      listed.status = c.status;
+    }
     $("episode-count").textContent = `${state.episodes.length} shown of ${page.total}`;
     renderList();
   } catch (err) {
@@ -791,8 +823,11 @@ function updateCompareButton() {
 
 // --- comparing episodes on one timeline --------------------------------------------------------
 
+let compareTurn = 0; // the latest comparison asked for: an older one still loading stops
+
 /** Load episodes and show them side by side on one synchronised timeline (simulated time). */
 async function compare(ids, scroll = true) {
+  const turn = ++compareTurn;
   ids = [...new Set(ids)].slice(0, 4);
   const box = $("compare-maps");
   box.replaceChildren();
@@ -807,6 +842,7 @@ async function compare(ids, scroll = true) {
         api(`/episodes/${id}/static`),
         api(`/episodes/${id}/trajectory?format=json`),
       ]);
+      if (turn !== compareTurn) return;
       checkSchema("EpisodeStatic", st);
       checkSchema("Trajectories", traj);
       const fig = document.createElement("figure");
@@ -836,7 +872,7 @@ async function compare(ids, scroll = true) {
       items.push({ id, episode, static: st, traj, map: m });
     }
   } catch (err) {
-    $("compare-title").textContent = `cannot compare: ${err.message}`;
+    if (turn === compareTurn) $("compare-title").textContent = `cannot compare: ${err.message}`;
     return;
   }
   // one timeline: the union of the episodes' times at the finest step
@@ -914,6 +950,7 @@ function compareTable(items) {
 }
 
 function closeCompare() {
+  compareTurn += 1; // a comparison still loading stops
   stopPlaying();
   state.compare = null;
   $("compare").hidden = true;
@@ -938,6 +975,41 @@ function pollList() {
     if (!document.hidden) await refreshList();
     pollList();
   }, busy ? 3000 : 15000);
+}
+
+// --- the address's fragment ----------------------------------------------------------------------
+
+let hashTurn = 0; // the latest fragment followed: an older one still loading gives way
+
+/**
+ * Show what the address's fragment names: `#episode=ID` watches that episode, `#compare=ID,ID`
+ * compares those (closing a comparison the fragment no longer names). Called at start and on
+ * every `hashchange`; the page's own rewrites of the fragment (history.replaceState) fire none.
+ */
+async function followHash(scroll) {
+  const turn = ++hashTurn;
+  const hash = new URLSearchParams(location.hash.slice(1));
+  const episode = hash.get("episode");
+  const ids = (hash.get("compare") || "").split(",").filter(Boolean);
+  if (episode && episode !== state.current?.id) {
+    try {
+      const ep = await api(`/episodes/${encodeURIComponent(episode)}`);
+      if (turn === hashTurn) watch(ep);
+    } catch (err) {
+      if (turn === hashTurn) $("form-error").textContent = `no episode ${episode}: ${err.message}`;
+    }
+  }
+  if (turn !== hashTurn) return;
+  if (ids.length) {
+    const shown = state.compare?.items.map((it) => it.id).join(",");
+    if (shown !== [...new Set(ids)].slice(0, 4).join(",")) {
+      state.compareIds = new Set(ids);
+      renderList();
+      await compare(ids, scroll);
+    }
+  } else if (state.compare || !$("compare").hidden) {
+    closeCompare();
+  }
 }
 
 // --- start ------------------------------------------------------------------------------------
@@ -984,18 +1056,9 @@ async function start() {
     await loadConfig();
     await loadChoices();
     await refreshList();
-    // a link names what to show: #episode=ID or #compare=ID,ID
-    const hash = new URLSearchParams(location.hash.slice(1));
-    if (hash.get("episode")) {
-      const ep = await api(`/episodes/${encodeURIComponent(hash.get("episode"))}`).catch(() => null);
-      if (ep) watch(ep);
-    }
-    if (hash.get("compare")) {
-      const ids = hash.get("compare").split(",").filter(Boolean);
-      ids.forEach((id) => state.compareIds.add(id));
-      renderList();
-      await compare(ids, false);
-    }
+    await followHash(false);
+    // a new fragment (typed, a link followed, history's back and forward) shows what it names
+    window.addEventListener("hashchange", () => followHash(true));
     pollList();
     document.body.dataset.ready = "true";
   } catch (err) {

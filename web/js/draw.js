@@ -290,6 +290,12 @@ export class TopDownMap {
     if (!this.compact && shade) this.colourBar(ctx, sx + this.siteW + 14, sy, shade.range);
     this.northArrow(ctx, sx + this.siteW - 18, sy + 10);
     this.scaleBar(ctx, sx + 10, sy + this.siteH - 12);
+    // what labels keep clear of besides each other (the caption's box: see draw)
+    const bar = niceStep(st.site.size[1] / 5) * this.scale;
+    this.furniture = [
+      [sx + this.siteW - 31, sy + 8, 26, 26], // the north arrow
+      [sx + 6, sy + this.siteH - 28, bar + 8, 22], // the scale bar
+    ];
     for (const a of st.agents) {
       if (!a.goal) continue;
       const [gx, gy] = this.px(a.goal[0], a.goal[1]);
@@ -591,33 +597,78 @@ export class TopDownMap {
   }
 
   /**
-   * A 3-D-game vehicle's depth beside its marker: "z 28.4 m". placed: the boxes of the labels
-   * drawn already; the label takes the first place beside the marker that overlaps none of them.
+   * Each 3-D-game vehicle's depth beside its marker: "z 28.4 m", in its colour.
+   *
+   * Labels never overlap each other, a marker, a goal label or the chart's furniture (north
+   * arrow, scale bar, caption: the boxes in `placed`), and stay inside the site. Each takes the
+   * first free place of a search outward from its marker: rows beside it (right, then left; above,
+   * then below), then farther columns. A label that is not next to its marker (vehicles close
+   * together push it away) gets a leader line in its colour from the marker to it. Where no place
+   * is free, the one that overlaps least.
+   *
+   * @param {CanvasRenderingContext2D} ctx
+   * @param {Array<{name, x, y, z}>} agents the vehicles (those with a finite z are labelled)
+   * @param {Map<string, {color: string}>} info each vehicle's static part
+   * @param {Array<[number, number, number, number]>} placed boxes [x, y, w, h] to keep clear of;
+   *   the labels' boxes are added
+   * @returns {Array<{name, box: number[], leader: number[] | null}>} where each label went (and its
+   *   leader line [x0, y0, x1, y1] [px]); kept as this.labels for tests
    */
-  depthLabel(ctx, a, color, placed) {
-    const [px, py] = this.px(a.x, a.y);
-    const text = `z ${a.z.toFixed(1)} m`;
+  depthLabels(ctx, agents, info, placed) {
     ctx.font = FONT;
-    const w = ctx.measureText(text).width + 4;
     const h = 14;
     const [sx, sy] = [this.ox, this.oy];
-    const places = [];
-    for (let row = 0; row < 4; row++) {
-      for (const side of [1, -1]) {
-        const x = side > 0 ? px + 10 : px - 10 - w;
-        places.push([x, py - 17 - h * row], [x, py + 3 + h * row]);
+    const overlap = (x, y, w, b) =>
+      Math.max(0, Math.min(x + w, b[0] + b[2]) - Math.max(x, b[0])) * Math.max(0, Math.min(y + h, b[1] + b[3]) - Math.max(y, b[1]));
+    const out = [];
+    for (const a of agents) {
+      if (!Number.isFinite(a.z)) continue;
+      const [px, py] = this.px(a.x, a.y);
+      const text = `z ${a.z.toFixed(1)} m`;
+      const w = ctx.measureText(text).width + 4;
+      const places = [];
+      for (let col = 0; col < 3; col++) {
+        for (let row = 0; row < (col ? 8 : 12); row++) {
+          for (const side of [1, -1]) {
+            const x = side > 0 ? px + 10 + col * (w + 6) : px - 10 - w - col * (w + 6);
+            places.push([x, py - 17 - h * row, col + row], [x, py + 3 + h * row, col + row]);
+          }
+        }
       }
+      places.sort((p, q) => p[2] - q[2]); // nearer rings first (stable: right before left, above before below)
+      const inSite = ([x, y]) => x >= sx && x + w <= sx + this.siteW && y >= sy && y + h <= sy + this.siteH;
+      const inside = places.filter(inSite);
+      const cost = ([x, y]) => placed.reduce((sum, b) => sum + overlap(x, y, w, b), 0);
+      const [x, y, ring] = inside.find((q) => cost(q) === 0) ||
+        (inside.length ? inside.reduce((best, q) => (cost(q) < cost(best) ? q : best)) : places[0]);
+      placed.push([x, y, w, h]);
+      // a label away from its marker: a line from the marker's edge to the label's nearest point
+      let leader = null;
+      if (ring > 0) {
+        const [nx, ny] = [Math.min(Math.max(px, x), x + w), Math.min(Math.max(py, y), y + h)];
+        const d = Math.hypot(nx - px, ny - py);
+        if (d > 8) leader = [px + ((nx - px) * 6.5) / d, py + ((ny - py) * 6.5) / d, nx, ny];
+      }
+      out.push({ name: a.name, text, color: info.get(a.name)?.color || "#fff", box: [x, y, w, h], leader });
     }
-    const inSite = ([x, y]) => x >= sx && x + w <= sx + this.siteW && y >= sy && y + h <= sy + this.siteH;
-    const free = ([x, y]) => placed.every((b) => x + w <= b[0] || b[0] + b[2] <= x || y + h <= b[1] || b[1] + b[3] <= y);
-    const [x, y] = places.find((q) => inSite(q) && free(q)) || places.find(inSite) || places[0];
-    placed.push([x, y, w, h]);
-    ctx.fillStyle = "rgba(13, 21, 32, 0.72)";
-    ctx.fillRect(x, y, w, h);
-    ctx.fillStyle = color;
-    ctx.textAlign = "left";
-    ctx.textBaseline = "middle";
-    ctx.fillText(text, x + 2, y + 7.5);
+    for (const l of out) {
+      if (!l.leader) continue;
+      ctx.strokeStyle = l.color;
+      ctx.lineWidth = 1.2;
+      ctx.beginPath();
+      ctx.moveTo(l.leader[0], l.leader[1]);
+      ctx.lineTo(l.leader[2], l.leader[3]);
+      ctx.stroke();
+    }
+    for (const { box: [x, y, w], text, color } of out) {
+      ctx.fillStyle = "rgba(13, 21, 32, 0.72)";
+      ctx.fillRect(x, y, w, h);
+      ctx.fillStyle = color;
+      ctx.textAlign = "left";
+      ctx.textBaseline = "middle";
+      ctx.fillText(text, x + 2, y + 7.5);
+    }
+    return out;
   }
 
   draw() {
@@ -686,19 +737,22 @@ export class TopDownMap {
         ctx.stroke();
       }
     }
+    const now = this.time();
+    ctx.font = FONT;
+    const clock = now && !this.compact ? `t = ${now[0].toFixed(1)} s (step ${now[1]})` : "";
+    const label = [this.caption, clock].filter(Boolean).join(" · ");
+    this.labels = [];
     if (this.is3d) {
-      // markers are not to be covered by labels: they count as placed boxes
+      // markers, goal labels and the chart's furniture are not to be covered by labels
       const placed = agents.map((a) => this.px(a.x, a.y)).map(([x, y]) => [x - 7, y - 7, 14, 14]);
-      placed.push(...(this.goalLabels || []));
-      for (const a of agents) if (Number.isFinite(a.z)) this.depthLabel(ctx, a, info.get(a.name)?.color || "#fff", placed);
+      placed.push(...(this.goalLabels || []), ...(this.furniture || []));
+      if (label) placed.push([sx + 4, sy + 4, ctx.measureText(label).width + 8, 17]);
+      this.labels = this.depthLabels(ctx, agents, info, placed);
     }
     ctx.restore();
-    const now = this.time();
     ctx.font = FONT;
     ctx.textAlign = "left";
     ctx.textBaseline = "top";
-    const clock = now && !this.compact ? `t = ${now[0].toFixed(1)} s (step ${now[1]})` : "";
-    const label = [this.caption, clock].filter(Boolean).join(" · ");
     if (label) {
       const w = ctx.measureText(label).width;
       ctx.fillStyle = "rgba(13, 21, 32, 0.7)";
@@ -725,9 +779,9 @@ export class TopDownMap {
 }
 
 const LINE_WIDTH = 1.7; // a plotted line [px]
-const BAND_STEP = 2; // how much wider a line is drawn for each line after it that it coincides with [px]
 const COINCIDE_PX = 2; // lines closer than this on screen coincide [px]
-const BAND_MIN_PX = 6; // shorter coincidences (lines crossing) get no band [px]
+const SHARE_PX = 6; // where lines coincide, each is drawn in turn for this many pixel columns [px]
+const SHARE_MIN_PX = 2 * SHARE_PX; // shorter coincidences (lines crossing) are drawn as crossings [px]
 
 /** Every how many points a line of n points is drawn: at most ~2 points per pixel column. */
 function pointStride(n, plotW) {
@@ -736,62 +790,76 @@ function pointStride(n, plotW) {
 
 /**
  * Where solid lines of one panel coincide on screen (closer than COINCIDE_PX, with the same time
- * points), so that the later line would hide the earlier one: for each earlier line, the runs of
- * points to draw widened under the normal lines, LINE_WIDTH + BAND_STEP per later line it meets
- * there, plus twice the largest offset to them (so that the band sticks out on both sides of
- * every one). Three pursuers at one depth then show as crimson around violet around green.
+ * points), so that the line drawn last would hide the others there. In such a stretch the lines
+ * take turns: the pixel columns are cut into SHARE_PX-wide slots (counted from the plot's left
+ * edge, the same for every line), and of g coinciding lines the one at place p in the group is
+ * drawn in the slots whose number is p modulo g only. Every line keeps its width and its colour
+ * (no band, no marker), and three pursuers at one depth show as one line dashed in their three
+ * colours in turn.
+ *
+ * Groups are the lines whose screen heights at a point lie within COINCIDE_PX of a neighbour's
+ * (sorted by height); a stretch is the run of points over which a line's group stays the same, so
+ * all lines of a group have the same stretches. Stretches narrower than SHARE_MIN_PX are lines
+ * crossing, drawn as they are.
  *
  * @param {Array<{xs, ys, dash?, fill?}>} series
+ * @param {(x: number) => number} X the panel's data-to-screen map of x [px]
  * @param {(y: number) => number} Y the panel's data-to-screen map of y [px]
  * @param {number} plotW the plot's width [px] (lines are compared at ~2 points per pixel column)
- * @param {number} xPerPx the x data range of one pixel (runs shorter than BAND_MIN_PX get no band)
- * @returns {Array<{s, runs: Array<[number, number, number]>}>} runs: first and last point index
- *   and the line width [px], for the lines that need a band.
+ * @returns {Map<object, Array<{x0: number, x1: number, place: number, size: number}>>} for each
+ *   series that shares, its stretches: from x0 to x1 [px] it is drawn in the slots of its place.
  */
-export function coincidentBands(series, Y, plotW, xPerPx) {
+export function sharedRuns(series, X, Y, plotW) {
   const solid = series.filter((s) => !s.dash && !s.fill && s.xs.length > 1);
-  const out = [];
-  solid.forEach((s, i) => {
+  const out = new Map();
+  const done = new Set();
+  for (const s of solid) {
+    if (done.has(s)) continue;
     const n = s.xs.length;
     const sameTimes = (o) => o.xs === s.xs || (o.xs.length === n && o.xs[0] === s.xs[0] && o.xs[n - 1] === s.xs[n - 1]);
-    const later = solid.slice(i + 1).filter(sameTimes);
-    if (!later.length) return;
+    const lines = solid.filter((o) => !done.has(o) && sameTimes(o));
+    lines.forEach((o) => done.add(o));
+    if (lines.length < 2) continue;
     const stride = pointStride(n, plotW);
-    const runs = [];
-    let run = null;
-    const close = (k) => {
-      if (run) runs.push([run[0], k, run[1]]);
-      run = null;
-    };
-    let prev = 0;
-    for (let k = 0; k < n; k += stride) {
-      const y = s.ys[k];
-      let width = 0;
-      if (Number.isFinite(y) && Number.isFinite(s.xs[k])) {
-        let met = 0, off = 0;
-        for (const o of later) {
-          const d = Number.isFinite(o.ys[k]) ? Math.abs(Y(o.ys[k]) - Y(y)) : Infinity;
-          if (d < COINCIDE_PX) { met += 1; off = Math.max(off, d); }
+    const ks = [];
+    for (let k = 0; k < n; k += stride) ks.push(k);
+    if (ks[ks.length - 1] !== n - 1) ks.push(n - 1);
+    // each line's group at each point: the indices (in `lines`) of the lines it coincides with
+    const keys = lines.map(() => new Array(ks.length).fill(""));
+    ks.forEach((k, j) => {
+      const at = [];
+      lines.forEach((o, i) => {
+        const y = o.ys[k];
+        if (Number.isFinite(y) && Number.isFinite(o.xs[k])) at.push([Y(y), i]);
+      });
+      at.sort((a, b) => a[0] - b[0]);
+      for (let a = 0; a < at.length; ) {
+        let b = a;
+        while (b + 1 < at.length && at[b + 1][0] - at[b][0] < COINCIDE_PX) b += 1;
+        if (b > a) {
+          const members = at.slice(a, b + 1).map((m) => m[1]).sort((u, v) => u - v);
+          const key = members.join(",");
+          for (const i of members) keys[i][j] = key;
         }
-        // wide enough to stick out on both sides of the farthest of them (offset in 0.5 px steps)
-        if (met) width = LINE_WIDTH + BAND_STEP * met + Math.ceil(2 * off);
+        a = b + 1;
       }
-      if (run && width !== run[1]) close(width ? k : prev);
-      if (width && !run) run = [k, width];
-      prev = k;
-    }
-    close(prev);
-    // lines crossing meet for a few pixels only: no band there, the crossing shows both
-    // (runs that touch, where only the width changes, are one coincidence)
-    const long = [];
-    for (let a = 0; a < runs.length; ) {
-      let b = a;
-      while (b + 1 < runs.length && runs[b + 1][0] === runs[b][1]) b += 1;
-      if (Math.abs(s.xs[runs[b][1]] - s.xs[runs[a][0]]) >= BAND_MIN_PX * xPerPx) long.push(...runs.slice(a, b + 1));
-      a = b + 1;
-    }
-    if (long.length) out.push({ s, runs: long });
-  });
+    });
+    lines.forEach((o, i) => {
+      const runs = [];
+      for (let j = 0; j < ks.length; ) {
+        const key = keys[i][j];
+        let e = j;
+        while (e + 1 < ks.length && keys[i][e + 1] === key) e += 1;
+        if (key) {
+          const [x0, x1] = [X(o.xs[ks[j]]), X(o.xs[ks[e]])];
+          const members = key.split(",").map(Number);
+          if (x1 - x0 >= SHARE_MIN_PX) runs.push({ x0, x1, place: members.indexOf(i), size: members.length });
+        }
+        j = e + 1;
+      }
+      if (runs.length) out.set(o, runs);
+    });
+  }
   return out;
 }
 
@@ -934,24 +1002,28 @@ export function panelChart(canvas, panels, options = {}) {
       }
       if (first !== null) { ctx.lineTo(lastX, bottom); ctx.closePath(); ctx.fill(); }
     }
-    // where solid lines coincide, the ones drawn first are widened there so that each shows as a
-    // band around the lines drawn after it (the last one drawn stays on top, 1.7 px wide)
-    const bands = coincidentBands(p.series, Y, W - m.l - m.r, (x1 - x0) / (W - m.l - m.r));
-    for (const { s, runs } of bands) {
-      ctx.strokeStyle = s.color;
-      for (const [k0, k1, width] of runs) {
-        ctx.lineWidth = width;
-        ctx.beginPath();
-        let started = false;
-        for (let k = k0; k <= k1; k++) {
-          const x = X(s.xs[k]), y = Y(s.ys[k]);
-          if (!Number.isFinite(x) || !Number.isFinite(y)) { started = false; continue; }
-          if (!started) { ctx.moveTo(x, y); started = true; } else ctx.lineTo(x, y);
-        }
-        ctx.stroke();
-      }
-    }
+    // where solid lines coincide, they take turns slot by slot (sharedRuns): each line is
+    // clipped away from the slots of the others, so each shows in its own colour, none hidden
+    const shared = sharedRuns(p.series, X, Y, W - m.l - m.r);
+    ctx.lineJoin = "round"; // no miter spikes where a line turns sharply (a step of a running sum)
     for (const s of p.series) {
+      const runs = shared.get(s);
+      if (runs) {
+        // the plot area less the others' slots (rectangles that do not overlap: the even-odd
+        // rule cuts them out of the area)
+        ctx.save();
+        ctx.beginPath();
+        ctx.rect(m.l, top, W - m.l - m.r, ph);
+        for (const { x0, x1, place, size } of runs) {
+          for (let c = Math.floor((x0 - m.l) / SHARE_PX); m.l + c * SHARE_PX < x1; c++) {
+            if (((c % size) + size) % size === place) continue;
+            const a = Math.max(x0, m.l + c * SHARE_PX);
+            const b = Math.min(x1, m.l + (c + 1) * SHARE_PX);
+            if (b > a) ctx.rect(a, top, b - a, ph);
+          }
+        }
+        ctx.clip("evenodd");
+      }
       ctx.strokeStyle = s.color;
       ctx.lineWidth = LINE_WIDTH;
       ctx.setLineDash(s.dash || []);
@@ -967,7 +1039,9 @@ export function panelChart(canvas, panels, options = {}) {
       if (started && k % stride !== 0 && Number.isFinite(s.ys[k])) ctx.lineTo(X(s.xs[k]), Y(s.ys[k]));
       ctx.stroke();
       ctx.setLineDash([]);
+      if (runs) ctx.restore();
     }
+    ctx.lineJoin = "miter";
     if (Number.isFinite(options.cursor)) {
       ctx.strokeStyle = "#ffffff";
       ctx.lineWidth = 1;
