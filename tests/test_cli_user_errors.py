@@ -182,6 +182,20 @@ CASES: dict[str, tuple[list[str], tuple[str, ...]]] = {
         ],
         ("maisac-pursuer_0.zip: the model observes (26,) but pursuer_0's observation has 12 values",),
     ),
+    "evaluate-zip-of-another-layout": (  # zip: skipped the check before ("Error: Error: ...")
+        [
+            "evaluate",
+            "--env",
+            "hptvsim:beams8.toml/pursuit",
+            "--pursuers",
+            f"zip:{PLANAR_MODEL}",
+            "--evaders",
+            "scripted:potential_field",
+            "--episodes",
+            "1",
+        ],
+        ("maisac-pursuer_0.zip: the model observes (26,) but pursuer_0's observation has 12 values",),
+    ),
     "episode-model-garbage": (
         ["episode", "--policy", "pursuer_0=sb3:garbage.bin", "--max-steps", "2"],
         ("garbage.bin", "not an SB3 SAC or PPO file"),

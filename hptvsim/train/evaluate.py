@@ -173,6 +173,16 @@ def _load_sb3(path: Path) -> Any:
     return load_sb3_model(path)
 
 
+def _load_fitting(path: Path, env: Any, agent: str) -> Any:
+    """An SB3 model that observes what ``agent`` observes in ``env`` (the one observation check)."""
+    from hptvsim.train.policy import check_observation
+
+    model = _load_sb3(path)
+    size = int(np.prod(env.observation_space(agent).shape))
+    check_observation(tuple(model.observation_space.shape), size, model=path, agent=agent)
+    return model
+
+
 def sb3_policy(model: Any) -> Policy:
     """A deterministic policy from an SB3 model (actions clipped to its action space)."""
     low, high = model.action_space.low, model.action_space.high
@@ -246,9 +256,9 @@ def policy_from_spec(spec: str, env: Any, agent: str, *, named: NamedPolicy | No
         file = folder / f"{agent}.zip"
         if not file.is_file():
             raise FileNotFoundError(f"{folder} has no model for {agent!r}")
-        return sb3_policy(_load_sb3(file))
+        return sb3_policy(_load_fitting(file, env, agent))
     if kind == "zip":
-        return sb3_policy(_load_sb3(Path(rest)))
+        return sb3_policy(_load_fitting(Path(rest), env, agent))
     if kind == "scripted" and not hasattr(env, "core"):
         raise ValueError(f"scripted policies need the underwater game (hptvsim.envs); {env!r} is not")
     if hasattr(env, "core"):  # the underwater game: a named policy (scripted ones included)

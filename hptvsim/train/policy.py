@@ -130,7 +130,7 @@ def check_observation(
         obs_size: Values in the agent's observation.
         extra: Values appended to it for the model
             (:meth:`~hptvsim.envs.protocol.Game.observation_extension`).
-        model: The model's file, named first in the message (as the action check does).
+        model: The model's file, named (its file name only) first in the message.
         agent: The agent, named in the message.
 
     Raises:
@@ -138,7 +138,7 @@ def check_observation(
     """
     expected = obs_size + extra
     if tuple(shape) != (expected,):
-        where = f"{model}: " if model is not None else ""
+        where = f"{Path(model).name}: " if model is not None else ""  # a name, never a server's path
         whose = f"{agent}'s" if agent else "the agent's"
         raise ValueError(
             f"{where}the model observes {tuple(shape)} but {whose} observation has {obs_size} values; it "
