@@ -54,7 +54,8 @@ unit: setup system-deps
 test: lint typecheck unit
 
 # The paper's section V on the pursuit game (configs/reproduce/section5.toml): 27 runs of
-# 150k env steps, two side by side, then docs/reproduction.md. Many hours on 2 cores: stop it any
+# 150k env steps, two side by side, 3 DT steps on the base runs (Figs. 14-17), then
+# docs/reproduction.md. Many hours on 2 cores: stop it any
 # time and run it again to go on (finished runs are kept, killed ones resume; finished runs'
 # results are archived in docs/reproduction/results/, committed, so a fresh clone skips them).
 reproduce: setup

@@ -12,7 +12,9 @@ Above the policy zoo (:mod:`hptvsim.zoo`), which sits above training and offline
 * :mod:`hptvsim.experiments.sweeps`: settings x seeds on Ray (``hptvsim sweep``);
 * :mod:`hptvsim.experiments.figures`, :mod:`hptvsim.experiments.stats`,
   :mod:`hptvsim.experiments.reproduce`: the paper's figures and the reproduction of section V
-  with intervals over seeds (``hptvsim figures``, ``hptvsim reproduce``);
+  with intervals over seeds (``hptvsim figures``, ``hptvsim reproduce``), whose DT steps (the
+  offline stage on the reproduction's own experts, over seeds) are
+  :mod:`hptvsim.experiments.repro_dt`;
 * :mod:`hptvsim.experiments.cli`: their commands.
 
 Nothing below imports this package; it imports nothing above the zoo and the catalog.

@@ -425,7 +425,11 @@ def register(main: click.Group) -> None:
         "--workers", type=click.IntRange(1, 64), default=None, help="Runs side by side (default: the plan's)."
     )
     @click.option(
-        "--experiment", "experiments", multiple=True, help="Only this experiment's runs (repeatable)."
+        "--experiment",
+        "experiments",
+        multiple=True,
+        help="Only this experiment's runs (repeatable); 'dt': the plan's DT steps and the expert runs "
+        "they need.",
     )
     @click.option("--seed", "seeds", type=int, multiple=True, help="Only this training seed (repeatable).")
     @click.option("--report-only", is_flag=True, help="Write the report from the runs found; train nothing.")
@@ -433,8 +437,8 @@ def register(main: click.Group) -> None:
         "--status",
         "status_only",
         is_flag=True,
-        help="Print each run's state and env steps (run folders and archive), and the running sweep's rate "
-        "and time left; write and train nothing.",
+        help="Print each run's state and env steps (run folders and archive), each DT step's state, and the "
+        "running sweep's rate and time left; write and train nothing.",
     )
     @click.option("--no-figures", is_flag=True, help="Write the report without figures.")
     def reproduce_cmd(
@@ -458,8 +462,11 @@ def register(main: click.Group) -> None:
         steps per run. Run the same command again to go on.
         """
         from hptvsim.experiments.reproduce import (
+            DT_EXPERIMENT,
             archive_dir,
+            dt_status,
             load_plan,
+            plan_dt_jobs,
             plan_jobs,
             reproduce,
             resolve_plan_path,
@@ -475,7 +482,8 @@ def register(main: click.Group) -> None:
         try:
             plan = load_plan(resolve_plan_path(plan_file))
             for e in experiments:
-                plan.experiment(e)
+                if not (e == DT_EXPERIMENT and plan.dt is not None):
+                    plan.experiment(e)
             bad = [s for s in seeds if s not in plan.seeds]
             if bad:
                 raise ConfigError(
@@ -484,8 +492,9 @@ def register(main: click.Group) -> None:
         except ConfigError as exc:
             raise click.ClickException(str(exc)) from None
         except KeyError as exc:
+            valid = [e.id for e in plan.experiments] + ([DT_EXPERIMENT] if plan.dt is not None else [])
             raise click.ClickException(
-                f"--experiment {exc.args[0]!r} is unknown; valid: {', '.join(e.id for e in plan.experiments)}"
+                f"--experiment {exc.args[0]!r} is unknown; valid: {', '.join(valid)}"
             ) from None
         out = out_dir if out_dir is not None else Path("hptvsim-out") / "reproduce" / plan.name
         if status_only:
@@ -496,10 +505,15 @@ def register(main: click.Group) -> None:
             n_done = sum(1 for _, state, _, _ in rows if state.startswith("finished"))
             steps = sum(min(done, total) for _, _, done, total in rows)
             all_steps = sum(total for *_, total in rows)
+            dts = dt_status(plan, out, archive_dir(report, plan))
+            for dt_job, state in dts:
+                click.echo(f"{dt_job.run_dir:<{width}}  {'DT step':>21}  {state}")
+            n_dt = sum(1 for _, state in dts if state.startswith("finished"))
             click.echo(
                 f"{n_done} of {len(rows)} runs finished; {steps:,} of {all_steps:,} env steps "
                 f"({100.0 * steps / max(all_steps, 1):.1f} %); runs in {out}, "
                 f"archive {archive_dir(report, plan)}"
+                + (f"; {n_dt} of {len(dts)} DT steps finished" if dts else "")
             )
             click.echo(sweep_eta(out, all_steps - steps))
             return
@@ -507,7 +521,10 @@ def register(main: click.Group) -> None:
             click.echo(str(write_report(plan, out, report, figures=not no_figures)))
             return
         n = len(plan_jobs(plan, experiments=experiments or None, seeds=seeds or None))
-        runs = f"{n} run" + ("" if n == 1 else "s")
+        n_dt = len(plan_dt_jobs(plan, experiments=experiments or None, seeds=seeds or None))
+        runs = (
+            f"{n} run" + ("" if n == 1 else "s") + (f" and {n_dt} DT step{'s' * (n_dt != 1)}" if n_dt else "")
+        )
         click.echo(f"{runs} in {out} ({workers or plan.workers} side by side); report: {report}")
         note = workers_warning(workers or plan.workers)
         if note:

@@ -230,6 +230,7 @@ def collect(
     num_envs: int = 50,
     seed: int = 0,
     max_steps: int | None = None,
+    options: Mapping[str, Any] | None = None,
     per: Literal["agent", "role"] = "agent",
     name: str = "expert",
     out: Path = DEFAULT_DATASET_DIR,
@@ -250,7 +251,12 @@ def collect(
         num_envs: Environments stepped together.
         seed: Seed of the first batch (batch ``j``: ``seed + j``); stochastic policies get
             ``seed + agent index``.
-        max_steps: Override the scenario's step limit.
+        max_steps: Override the scenario's step limit (over ``options``' ``max_steps``).
+        options: The game's keyword arguments (:class:`~hptvsim.envs.core.GameCore`: ``task``,
+            ``extended_obs``, ``max_steps``, ``reward``, ``vehicle_parameters``, ...), as a
+            training stage's ``env.options`` gives them, so that experts trained in that game
+            play it here. With options, no Gymnasium spec is stored with the datasets (the
+            registered single-agent views take none of them).
         per: ``"agent"``: one dataset per agent; ``"role"``: one per role (all its agents' episodes).
         name: Dataset name; ids are ``hptvsim/<scenario>/<name>-<agent or role>-v0``.
         out: The datasets folder.
@@ -275,7 +281,10 @@ def collect(
     if num_envs < 1 or episodes < 1:
         raise ValueError(f"episodes = {episodes}, num_envs = {num_envs}: both must be integers >= 1")
     sc = planar_scenario(scenario, "hptvsim collect")
-    core = GameCore(sc, num_envs=min(num_envs, episodes), max_steps=max_steps, seed=seed)
+    game = dict(options or {})
+    if max_steps is not None:
+        game["max_steps"] = max_steps
+    core = GameCore(sc, num_envs=min(num_envs, episodes), seed=seed, **game)
     try:
         specs = resolve_policy_specs(core, pursuers=pursuers, evader=evader, overrides=overrides)
         groups: dict[str, list[str]] = {}
@@ -337,7 +346,9 @@ def collect(
                 ref_min = float(np.mean([random_returns[a] for a in agents])) if random_returns else None
                 i0 = idx[0]
                 box = _action_space(limits[i0])
-                env = _env_spec(core, agents[0], specs, max_steps) if len(agents) == 1 else None
+                env = (
+                    _env_spec(core, agents[0], specs, max_steps) if len(agents) == 1 and not options else None
+                )
                 dataset = minari.create_dataset_from_buffers(
                     dataset_id=ids[g],
                     buffer=buffers,
@@ -359,6 +370,7 @@ def collect(
                         "scenario": core.scenario.name,
                         "scenario_source": str(core.scenario.source),
                         "task": core.task.kind,
+                        "game_options": dict(game),  # the GameCore keywords beside the scenario
                         # the reward weights behind the returns (a DT's targets are in them)
                         "reward": {k: float(getattr(core.task.reward, k)) for k in REWARD_PRESETS["paper"]},
                         "agents": list(agents),

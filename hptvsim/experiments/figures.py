@@ -780,6 +780,8 @@ class ClaimPanel:
         xlabel: The trend's axis with its unit (comparisons: empty).
         limits: The range the metric cannot leave (a rate: 0 to 1); the means' intervals are
             cut to it, as in the report's tables.
+        reference: A value the claim compares the mean with (a threshold), drawn as a grey
+            dashed line (``None``: none).
     """
 
     title: str
@@ -788,6 +790,7 @@ class ClaimPanel:
     summary: str
     xlabel: str = ""
     limits: tuple[float, float] = (-math.inf, math.inf)
+    reference: float | None = None
 
 
 SEED_COLORS = (
@@ -856,6 +859,8 @@ def claims_figure(panels: Sequence[ClaimPanel], *, caption: str = "", columns: i
                     capsize=3,
                     linewidth=1,
                 )
+        if panel.reference is not None:
+            ax.axhline(panel.reference, color="grey", linestyle="--", linewidth=0.8)
         if trend and len(set(xs_all)) > 1:
             b, a = np.polyfit(np.asarray(xs_all), np.asarray(ys_all), 1)
             line = np.array([min(xs_all), max(xs_all)])
@@ -886,6 +891,8 @@ def claims_figure(panels: Sequence[ClaimPanel], *, caption: str = "", columns: i
         "dots: one training seed each (a seed's colour is the same in every panel); "
         "comparisons: black = mean over seeds with its 95 % t interval; trends: dashed = least-squares line"
     )
+    if any(p.reference is not None for p in panels):
+        text += "; grey dashed: the value a claim compares the mean with"
     _caption(fig, (caption + "; " if caption else "") + text)
     return fig
 

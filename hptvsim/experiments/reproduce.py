@@ -17,7 +17,12 @@ paper's statements, each a comparison or a trend of one metric). :func:`reproduc
 3. evaluates every finished stage of every run on fixed seeds (``hptvsim.offline.rollout.play``:
    the same spawn poses and noise for every run): the run's agents against each other, the
    run's pursuers against a scripted evader, and the run's evader against scripted pursuers;
-4. writes the report (Markdown, with figures drawn by :func:`hptvsim.experiments.figures.make_figures`
+4. with a ``[dt]`` table, runs the offline stage of ETFDU once the expert runs it names have
+   finished: per expert run, its experts' datasets, Decision Transformers trained on them and
+   their evaluation on the same fixed episodes (:mod:`hptvsim.experiments.repro_dt`, Figs.
+   14-17), judged by the ``[[dt.claim]]`` statements; ``--experiment dt`` runs only these steps
+   and the expert runs they need;
+5. writes the report (Markdown, with figures drawn by :func:`hptvsim.experiments.figures.make_figures`
    from each experiment's folder, i.e. ``hptvsim figures OUT/experiments/<id>``) from whatever
    results exist, naming what is missing.
 
@@ -26,7 +31,9 @@ Folders::
     OUT/plan.json                    the resolved plan and every job
     OUT/runs/<setting>-seed<k>/      a training run (hptvsim.train.trainer) plus eval/<stage>.json
     OUT/experiments/<id>/sweep.json  the runs of one experiment with their labels (for figures)
+    OUT/dt/<setting>-seed<k>/        a DT step: datasets, DT run, evaluation (repro_dt)
     <report stem>/results/<run>/     a finished run's results, archived beside the report
+    <report stem>/results/dt-<...>/  a finished DT step's results (loss.csv, eval.json, ...)
 
 The archive (:func:`archive_finished`) keeps what the report reads of every finished run (its
 config, ``run.json``, ``summary.json``, the episode and update logs, the stages' ``stage.json``
@@ -76,6 +83,25 @@ from typing import Any, Literal
 import numpy as np
 
 from hptvsim._process import pid_alive, usable_cores
+from hptvsim.experiments.repro_dt import (
+    DT_METRICS,
+    DTClaim,
+    DTJob,
+    DTResults,
+    DTSpec,
+    FixedEpisodes,
+    StageGame,
+    archive_dt,
+    collect_dt,
+    dt_claim_result,
+    dt_figures,
+    dt_progress,
+    dt_spec,
+    eval_core,
+    parse_dt,
+    restore_dt,
+    run_dt,
+)
 from hptvsim.experiments.stats import Interval, difference, mean_interval, slope, verdict
 from hptvsim.train.batched_run import (
     BatchedRunConfig,
@@ -106,8 +132,10 @@ __all__ = [
     "build_config",
     "claim_count",
     "collect",
+    "dt_status",
     "load_plan",
     "plan_dir",
+    "plan_dt_jobs",
     "plan_jobs",
     "reproduce",
     "resolve_plan_path",
@@ -127,6 +155,8 @@ TRAIN_METRICS = ("train_final", "train_mean", "train_var")
 RunConfig = TrainConfig | BatchedRunConfig
 """A run's config: one game (the ``paper`` regime) or batched games (``fast``)."""
 PAPER_BUDGET_STEPS = 100 * 6000  # env steps per stage in the paper: 100 episodes x T = 6000
+DT_EXPERIMENT = "dt"
+"""``--experiment dt``: the plan's DT steps and the expert runs they need."""
 
 
 # --- the plan -----------------------------------------------------------------------------------
@@ -254,6 +284,13 @@ class Plan:
     fixed: Mapping[str, Any] = field(default_factory=dict)
     regime: Literal["paper", "fast"] = "paper"
     beside: Path | None = None
+    dt: DTSpec | None = None
+
+    @property
+    def fixed_episodes(self) -> FixedEpisodes:
+        """The evaluation's fixed episodes (every run's and every DT's)."""
+        ev = self.evaluation
+        return FixedEpisodes(ev.episodes, ev.num_envs, ev.seed)
 
     def experiment(self, exp_id: str) -> Experiment:
         """The experiment named ``exp_id``."""
@@ -326,7 +363,7 @@ def load_plan(path: Path | str) -> Plan:
         "plan",
         data,
         {"name", "config", "seeds", "workers", "evaluation", "setting", "experiment", "claim"}
-        | {"budget_note", "set", "regime", "beside"},
+        | {"budget_note", "set", "regime", "beside", "dt"},
     )
     if "config" not in data:
         raise _err(path, "'config' (the base training config) is required")
@@ -417,6 +454,8 @@ def load_plan(path: Path | str) -> Plan:
     ids = [e.id for e in experiments]
     if len(set(ids)) != len(ids):
         raise _err(path, "experiment ids must be unique")
+    if "dt" in data and DT_EXPERIMENT in ids:
+        raise _err(path, f"experiment id {DT_EXPERIMENT!r} names the [dt] steps; give the experiment another")
 
     claims: list[Claim] = []
     for raw in data.get("claim", []):
@@ -476,6 +515,20 @@ def load_plan(path: Path | str) -> Plan:
         regime=regime,
         beside=_beside_path(path, data.get("beside")),
     )
+    if "dt" in data:
+        if not isinstance(data["dt"], dict):
+            raise _err(path, "dt must be a table ([dt])")
+        plan = dataclasses.replace(
+            plan,
+            dt=parse_dt(
+                path,
+                data["dt"],
+                settings=list(settings),
+                seeds=plan.seeds,
+                taken_ids=[c.id for c in claims],
+                evaluation=plan.fixed_episodes,
+            ),
+        )
     for s in settings.values():  # fail now, not in a worker an hour later
         cfg = build_config(s, plan.seeds[0], plan.fixed)
         if is_batched(cfg) != (regime == "fast"):
@@ -498,6 +551,13 @@ def load_plan(path: Path | str) -> Plan:
         first = build_config(plan.settings[exp.entries[0].setting], plan.seeds[0], plan.fixed)
         if c.stage not in [st.name for st in first.stages]:
             raise _err(path, f"claim {c.id!r}: stage {c.stage!r} is not a stage of {exp.entries[0].setting}")
+    if plan.dt is not None:
+        experts = build_config(plan.settings[plan.dt.setting], plan.dt.seeds[0], plan.fixed)
+        names = [st.name for st in experts.stages]
+        if plan.dt.stage not in names:
+            raise _err(
+                path, f"[dt] stage {plan.dt.stage!r} is not a stage of {plan.dt.setting} ({', '.join(names)})"
+            )
     return plan
 
 
@@ -639,16 +699,37 @@ def plan_jobs(
 
     Args:
         plan: The plan.
-        experiments: Only these experiments' runs (default: all).
+        experiments: Only these experiments' runs (default: all); :data:`DT_EXPERIMENT` (``dt``)
+            stands for the expert runs of the plan's DT steps.
         seeds: Only these seeds (default: the plan's).
     """
-    exps = [plan.experiment(e) for e in experiments] if experiments else list(plan.experiments)
+    every = [e.id for e in plan.experiments] + ([DT_EXPERIMENT] if plan.dt is not None else [])
+    chosen = list(experiments) if experiments else every
+    exps = [plan.experiment(e) for e in chosen if not (e == DT_EXPERIMENT and plan.dt is not None)]
     order: list[str] = []
     for e in exps:
         for en in e.entries:
             if en.setting not in order:
                 order.append(en.setting)
-    return [ReproJob(s, seed, f"runs/{s}-seed{seed}") for seed in (seeds or plan.seeds) for s in order]
+    experts: set[tuple[str, int]] = set()
+    if plan.dt is not None and DT_EXPERIMENT in chosen:
+        experts = {(plan.dt.setting, k) for k in plan.dt.seeds}
+        order += [plan.dt.setting] if plan.dt.setting not in order else []
+    return [
+        ReproJob(s, seed, f"runs/{s}-seed{seed}")
+        for seed in (seeds or plan.seeds)
+        for s in order
+        if any(en.setting == s for e in exps for en in e.entries) or (s, seed) in experts
+    ]
+
+
+def plan_dt_jobs(
+    plan: Plan, *, experiments: Sequence[str] | None = None, seeds: Sequence[int] | None = None
+) -> list[DTJob]:
+    """The plan's DT steps: all of them, none when ``experiments`` leaves out ``dt``, those of ``seeds``."""
+    if plan.dt is None or (experiments and DT_EXPERIMENT not in experiments):
+        return []
+    return plan.dt.jobs(seeds or None)
 
 
 @dataclass(frozen=True)
@@ -785,11 +866,108 @@ def run_job(plan_path: str, job: ReproJob, out: str) -> dict[str, Any]:
     }
 
 
-def run_unit(plan_path: str, unit: ReproJob | ReproGroup, out: str) -> dict[str, Any]:
-    """Run a job (:func:`run_job`) or a group of seeds (:func:`run_group`) in a worker."""
+Unit = ReproJob | ReproGroup | DTJob
+"""What a worker of the sweep runs: a run, a setting's seeds together, or a DT step."""
+
+
+def run_unit(plan_path: str, unit: Unit, out: str) -> dict[str, Any]:
+    """Run a job (:func:`run_job`), a group of seeds (:func:`run_group`) or a DT step (:func:`run_dt_job`)."""
     if isinstance(unit, ReproGroup):
         return run_group(plan_path, unit, out)
+    if isinstance(unit, DTJob):
+        return run_dt_job(plan_path, unit, out)
     return run_job(plan_path, unit, out)
+
+
+def expert_game(plan: Plan, out: Path, experts_dir: str) -> StageGame:
+    """The game of a DT step's experts: their stage's, from their run's saved config.
+
+    Raises:
+        ConfigError: The run's config has no such stage, or it is not the underwater game.
+    """
+    assert plan.dt is not None
+    stages = {st.name: st for st in eval_stages(load_saved_config(out / experts_dir))}
+    st = stages.get(plan.dt.stage)
+    if st is None or st.env.kind != "hptvsim":
+        raise ConfigError(f"{experts_dir}: no underwater-game stage {plan.dt.stage!r} to take experts from")
+    return StageGame(st.env.scenario, st.env.task, dict(st.env.options))
+
+
+def _expert_state(plan: Plan, out: Path, job: DTJob, run_dir: str) -> tuple[str, bool]:
+    """A DT step's expert run folder: its state (:class:`Results`) and whether it has the stage's models."""
+    assert plan.dt is not None
+    state = _progress_of(out / run_dir, build_config(plan.settings[job.setting], job.seed, plan.fixed))
+    return state, any((out / run_dir / "stages" / plan.dt.stage).glob("*.zip"))
+
+
+def expert_source(plan: Plan, out: Path, job: DTJob) -> str | None:
+    """The finished run whose stage models are a DT step's experts (``None`` while there is none).
+
+    Its expert run, else the retraining of it (:attr:`~hptvsim.experiments.repro_dt.DTJob.retrain_dir`).
+    """
+    for run_dir in (job.expert_dir, job.retrain_dir):
+        if _expert_state(plan, out, job, run_dir) == ("finished", True):
+            return run_dir
+    return None
+
+
+def expert_retraining(plan: Plan, out: Path, dt_jobs: Sequence[DTJob]) -> list[ReproJob]:
+    """The expert runs to train again for DT steps: those finished with results only (archived).
+
+    Each trains the same setting and seed into the step's ``retrain_dir``; the archived results of
+    the expert run stay as they are (and keep being reported).
+    """
+    todo = []
+    for job in dt_jobs:
+        assert plan.dt is not None
+        expected = dt_spec(plan.dt, job, out, plan.fixed_episodes)
+        if dt_progress(out / job.run_dir, expected, plan.dt.updates) == "finished":
+            continue
+        if (
+            _expert_state(plan, out, job, job.expert_dir) == ("finished", False)
+            and expert_source(plan, out, job) is None
+        ):
+            todo.append(ReproJob(job.setting, job.seed, job.retrain_dir))
+    return todo
+
+
+def dt_blocker(plan: Plan, out: Path, job: DTJob) -> str | None:
+    """Why a DT step cannot start yet (what it waits for); ``None`` when it can.
+
+    A finished step can always "start" (it says it is done). Otherwise a finished run with its
+    stage's models must be there: its expert run, or the retraining of a run restored from the
+    archive (:func:`expert_retraining`).
+    """
+    assert plan.dt is not None
+    expected = dt_spec(plan.dt, job, out, plan.fixed_episodes)
+    if dt_progress(out / job.run_dir, expected, plan.dt.updates) == "finished" or expert_source(
+        plan, out, job
+    ):
+        return None
+    state, _ = _expert_state(plan, out, job, job.expert_dir)
+    if state != "finished":
+        return f"waits for {job.expert_dir} ({state})"
+    again, _ = _expert_state(plan, out, job, job.retrain_dir)
+    return f"waits for {job.retrain_dir}, {job.expert_dir} trained again for its models ({again})"
+
+
+def run_dt_job(plan_path: str, job: DTJob, out: str) -> dict[str, Any]:
+    """One DT step in a worker (:func:`hptvsim.experiments.repro_dt.run_dt`), holding its folder's lock."""
+    plan = load_plan(plan_path)
+    assert plan.dt is not None
+    with _run_lock(Path(out) / job.run_dir):
+        experts = expert_source(plan, Path(out), job)
+        if experts is None:  # finished before (archived), or called too early
+            experts = job.expert_dir
+        return run_dt(
+            job,
+            Path(out),
+            plan.dt,
+            experts_dir=experts,
+            game=expert_game(plan, Path(out), experts),
+            evaluation=plan.fixed_episodes,
+            stop_requested=_stop_requested,
+        )
 
 
 def run_group(plan_path: str, group: ReproGroup, out: str) -> dict[str, Any]:
@@ -883,14 +1061,9 @@ def evaluate_stage(models: Path, stage: Any, spec: EvalSpec) -> dict[str, Any]:
         raise ConfigError(
             f"stage {stage.name}: only the underwater game (kind 'hptvsim') is evaluated, not {env.kind!r}"
         )
-    options = dict(env.options)
-    core = GameCore(
-        env.scenario,
-        num_envs=min(spec.num_envs, spec.episodes),
-        task=env.task,
-        seed=spec.seed,
-        threads=1,
-        **options,
+    core: GameCore = eval_core(
+        StageGame(env.scenario, env.task, dict(env.options)),
+        FixedEpisodes(spec.episodes, spec.num_envs, spec.seed),
     )
     try:
         pursuers = [a for a, p in zip(core.agents, core.pursuer, strict=True) if p]
@@ -1165,6 +1338,48 @@ def sweep_status(plan: Plan, out: Path, archive: Path) -> list[tuple[ReproJob, s
     return rows
 
 
+def dt_status(plan: Plan, out: Path, archive: Path) -> list[tuple[DTJob, str]]:
+    """Every DT step's state without writing anything: ``(step, state)``.
+
+    The state is that of the step's folder under ``out`` (:func:`hptvsim.experiments.repro_dt.dt_progress`),
+    ``"finished (archived)"`` for a step finished in ``archive`` only, and for a step not started
+    what it waits for.
+    """
+    if plan.dt is None:
+        return []
+    rows = []
+    for job in plan.dt.jobs():
+        expected = dt_spec(plan.dt, job, out, plan.fixed_episodes)
+        state = dt_progress(out / job.run_dir, expected, plan.dt.updates)
+        archived = dt_progress(archive / f"dt-{job.name}", expected, plan.dt.updates)
+        if state != "finished" and archived == "finished":
+            state = "finished (archived)"
+        elif state == "not started":
+            src = expert_source(plan, out, job)
+            expert = sweep_state(plan, out, archive, job.setting, job.seed)
+            if src is not None:
+                state = f"not started (experts: {src}, finished)"
+            elif expert.startswith("finished"):  # results only: no models
+                again, _ = _expert_state(plan, out, job, job.retrain_dir)
+                state = (
+                    f"not started ({job.expert_dir} has results only: the sweep first trains it again in "
+                    f"{job.retrain_dir}, {again})"
+                )
+            else:
+                state = f"not started (expert run {job.expert_dir}: {expert})"
+        rows.append((job, state))
+    return rows
+
+
+def sweep_state(plan: Plan, out: Path, archive: Path, setting: str, seed: int) -> str:
+    """One run's state as :func:`sweep_status` gives it."""
+    cfg = build_config(plan.settings[setting], seed, plan.fixed)
+    state = _progress_of(out / f"runs/{setting}-seed{seed}", cfg)
+    if state != "finished" and _progress_of(archive / f"{setting}-seed{seed}", cfg) == "finished":
+        return "finished (archived)"
+    return state
+
+
 def claim_result(plan: Plan, results: Results, claim: Claim) -> tuple[Interval, str]:
     """The claim's interval (difference or slope) and verdict."""
     groups = claim_groups(plan, results, claim)
@@ -1319,6 +1534,14 @@ def write_report(
         archive = archive_dir(report, p)
         restore_archived(p, o, archive)
         archive_finished(p, o, archive)
+        dt_results = None
+        dt_verdicts: dict[str, tuple[Interval, str]] = {}
+        if p.dt is not None:
+            restore_dt(p.dt, o, archive, p.fixed_episodes, lock=lambda d: _run_lock(d, wait_s=0.0))
+            archive_dt(p.dt, o, archive, p.fixed_episodes)
+            dt_results = collect_dt(p.dt, o, p.fixed_episodes)
+            for dcl in p.dt.claims:
+                dt_verdicts[dcl.id] = dt_claim_result(dcl, [v for _, v in dt_results.by_seed(dcl.metric)])
         results = collect(p, o)
         jobs = plan_jobs(p)
         cmd = c or f"hptvsim reproduce --plan {_rel(p.path)} --out {_rel(o)} --report {_rel(report)}"
@@ -1332,6 +1555,8 @@ def write_report(
                 done=sum(1 for j in jobs if results.progress[(j.setting, j.seed)] == "finished"),
                 jobs=len(jobs),
                 verdicts={cl.id: claim_result(p, results, cl) for cl in p.claims},
+                dt=dt_results,
+                dt_verdicts=dt_verdicts,
             )
         )
     report.parent.mkdir(parents=True, exist_ok=True)
@@ -1355,7 +1580,7 @@ def write_report(
             f"Machine: {machine_summary()}. Written {time.strftime('%Y-%m-%d %H:%M')}."
         )
         w("")
-    w(_STATS_TEXT.format(n=len(plan.claims)))
+    w(_STATS_TEXT.format(n=len(plan.claims) + (len(plan.dt.claims) if plan.dt is not None else 0)))
     w("")
     if two:
         _side_by_side(regimes, w)
@@ -1395,6 +1620,8 @@ class _Regime:
     done: int
     jobs: int
     verdicts: dict[str, tuple[Interval, str]]
+    dt: DTResults | None = None
+    dt_verdicts: dict[str, tuple[Interval, str]] = field(default_factory=dict)
 
 
 def _regime_title(r: _Regime) -> str:
@@ -1420,6 +1647,54 @@ def _claim_what(c: Claim) -> str:
         f"difference {c.compare[0]} - {c.compare[1]}"
         if c.compare
         else f"slope per unit of x ({c.trend} claimed)"
+    )
+
+
+def _dt_claim_what(c: DTClaim) -> str:
+    """What a DT claim's interval is of: the mean over DT seeds, less the threshold when there is one."""
+    sign = "<" if c.direction == "less" else ">"
+    if c.threshold == 0.0:
+        return f"mean over DT seeds ({sign} 0 claimed)"
+    return f"mean over DT seeds - {c.threshold:g} ({sign} 0 claimed)"
+
+
+def _dt_effect_noun(c: DTClaim) -> str:
+    """How :func:`excluded_effect` names a DT claim's effect."""
+    return "mean" if c.threshold == 0.0 else f"departure from {c.threshold:g}"
+
+
+def _dt_metric_column(c: DTClaim, spec: DTSpec) -> str:
+    """The verdict tables' "metric (stage)" cell of a DT claim."""
+    return f"{DT_METRICS[c.metric].text} (DTs on `{spec.setting}`'s `{spec.stage}` experts)"
+
+
+def _dt_measure_text(c: DTClaim, iv: Interval, v: str) -> str:
+    text = f"{_dt_claim_what(c)}: {iv.format()}"
+    if v == "not resolved" and iv.resolved:
+        text += f"; {excluded_effect(iv, _dt_effect_noun(c))}"
+    return text
+
+
+def dt_claim_count(results: DTResults, c: DTClaim) -> str:
+    """What a DT claim's interval rests on: ``3 DT seeds``."""
+    n = len(results.by_seed(c.metric))
+    return f"{n} DT seed{'s' * (n != 1)}"
+
+
+def _dt_tally_text(r: _Regime) -> str:
+    """``DT claims, at 2 of 3 DT steps: **1 of 4 hold, ...**`` (lower case first)."""
+    assert r.plan.dt is not None
+    assert r.dt is not None
+    tally = {
+        v: sum(1 for _, x in r.dt_verdicts.values() if x == v)
+        for v in ("holds", "does not hold", "not resolved")
+    }
+    n_steps = len(r.plan.dt.seeds)
+    return (
+        f"DT claims, at {r.dt.finished} of {n_steps} DT steps: **{tally['holds']} of "
+        f"{len(r.plan.dt.claims)} hold, {tally['does not hold']} do not hold, {tally['not resolved']} "
+        "are not resolved**."
+        + (" Unfinished DT steps may change any of them." if r.dt.finished < n_steps else "")
     )
 
 
@@ -1462,6 +1737,37 @@ def _side_by_side(regimes: Sequence[_Regime], w: Callable[[str], None]) -> None:
             + " | ".join(cells)
             + f" | {agree} |"
         )
+    dt_ids = [c.id for c in a.plan.dt.claims] if a.plan.dt is not None else []
+    dt_ids += [c.id for c in b.plan.dt.claims if c.id not in dt_ids] if b.plan.dt is not None else []
+    for cid in dt_ids:
+        cells = []
+        verdicts = []
+        measured = True
+        first: tuple[DTClaim, DTSpec] | None = None
+        for r in (a, b):
+            dcl = next((x for x in r.plan.dt.claims if x.id == cid), None) if r.plan.dt is not None else None
+            if dcl is None or r.dt is None or r.plan.dt is None:
+                cells += ["-", "-", "-"]
+                verdicts.append(None)
+                measured = False
+                continue
+            first = first or (dcl, r.plan.dt)
+            iv, v = r.dt_verdicts[cid]
+            measured = measured and iv.resolved
+            cells += [_dt_measure_text(dcl, iv, v), dt_claim_count(r.dt, dcl), f"**{v}**"]
+            verdicts.append(v)
+        assert first is not None
+        if not measured:
+            agree = "not compared: no data yet"
+        else:
+            agree = "agree" if verdicts[0] == verdicts[1] else "**differ**"
+            if verdicts[0] != verdicts[1]:
+                differ.append(cid)
+        w(
+            f"| {cid} | {first[0].statement} | {_dt_metric_column(first[0], first[1])} | "
+            + " | ".join(cells)
+            + f" | {agree} |"
+        )
     w("")
     for r in regimes:
         tally = {
@@ -1474,6 +1780,8 @@ def _side_by_side(regimes: Sequence[_Regime], w: Callable[[str], None]) -> None:
             f"{tally['not resolved']} are not resolved**."
             + (" Unfinished runs may change any verdict." if r.done < r.jobs else "")
         )
+        if r.dt is not None:
+            w(f"- {r.plan.name}, " + _dt_tally_text(r))
     w(
         "- The regimes' verdicts differ on "
         + (", ".join(differ) if differ else "no claim")
@@ -1536,20 +1844,46 @@ def _regime_body(
             f"| {c.id} | {c.statement} | {metric_text(c.metric)} ({c.stage}) | "
             f"{_claim_what(c)}: {iv.format()} | {claim_count(plan, results, c)} | {bold} | {excl} |"
         )
+    if plan.dt is not None and r.dt is not None:
+        for dc in plan.dt.claims:
+            iv, v = r.dt_verdicts[dc.id]
+            bold = f"**{v}**"
+            if v == "not resolved" and not iv.resolved:
+                bold += " (no finished DT runs)" if iv.n == 0 else f" (n = {iv.n}: too few DT seeds)"
+            excl = excluded_effect(iv, _dt_effect_noun(dc)) if v == "not resolved" else "-"
+            w(
+                f"| {dc.id} | {dc.statement} | {_dt_metric_column(dc, plan.dt)} | "
+                f"{_dt_claim_what(dc)}: {iv.format()} | {dt_claim_count(r.dt, dc)} | {bold} | {excl} |"
+            )
     w("")
     w(
         f"At {r.done} of {r.jobs} runs: **{tally['holds']} of {len(plan.claims)} claims hold, "
         f"{tally['does not hold']} do not hold, {tally['not resolved']} are not resolved**."
         + (" Unfinished runs may change any verdict." if r.done < r.jobs else "")
     )
+    if r.dt is not None:
+        w("")
+        w(_dt_tally_text(r)[0].upper() + _dt_tally_text(r)[1:])
     w("")
     w(f"Each verdict regenerates with `{r.cmd} --report-only`.")
     w("")
     _seeds_section(
-        plan, results, r.verdicts, fig_root, figures, w, f"{r.done} of {r.jobs} runs finished", report, level
+        plan,
+        results,
+        r.verdicts,
+        fig_root,
+        figures,
+        w,
+        f"{r.done} of {r.jobs} runs finished",
+        report,
+        level,
+        dt=r.dt,
+        dt_verdicts=r.dt_verdicts,
     )
     for exp in plan.experiments:
         _experiment_section(plan, exp, results, out, fig_root, figures, w, report, level)
+    if plan.dt is not None and r.dt is not None:
+        _dt_section(r, fig_root, figures, w, report, level)
     w(f"{h} Runs")
     w("")
     w("| run folder | setting | seed | config | state |")
@@ -1574,6 +1908,128 @@ def _regime_body(
         w("")
 
 
+def _dt_section(
+    r: _Regime, fig_root: Path, figures: bool, w: Callable[[str], None], report: Path, level: int
+) -> None:
+    """The report's section on the DT steps (Figs. 14-17): what ran, the figures, every DT seed."""
+    plan, dt = r.plan, r.dt
+    spec = plan.dt
+    assert spec is not None
+    assert dt is not None
+    h = "#" * level
+    setting = plan.settings[spec.setting]
+    n = len(spec.seeds)
+    w(f"{h} Decision Transformer pursuers: the offline stage of ETFDU (Figs. 14-17)")
+    w("")
+    w(
+        f"- Experts: the pursuers and the evader of `{spec.setting}` ({setting.label}) at the end of its "
+        f"stage `{spec.stage}`, the runs of seeds {', '.join(map(str, spec.seeds))}, as the paper "
+        'selects "the expert policy of the UUV in the target scenario ... to generate an offline dataset" '
+        'and lets "the trained spherical robot act as the target". An expert run restored from the '
+        "archive has its results but no models: its setting and seed are then trained again in "
+        "`dt/<setting>-seed<k>/expert/` for the experts (the table's expert run column says which), "
+        "the archived results staying as reported above."
+    )
+    w(
+        f"- Data: {spec.episodes} episodes of each expert run's agents in that stage's game (batch j "
+        f"reset with seed {spec.collect_seed} + j, {spec.num_envs} per batch, apart from the evaluation's "
+        "seeds), one Minari dataset per pursuer: the paper's three DT models, one per UUV."
+    )
+    overrides = ", ".join(f"`{k} = {v}`" for k, v in spec.overrides.items())
+    w(
+        f"- Training: one DT run per expert run, its DT seed the run's seed; `{_rel(spec.config)}` with "
+        f"{spec.updates:,} gradient updates per model{(', ' + overrides) if overrides else ''}. Loss: the "
+        "action MSE of Eq. 32 on actions scaled to [-1, 1]; its initial value is the first `loss.csv` "
+        "row (the mean over the first `log_every` updates), its final value the last."
+    )
+    w(
+        f"- Evaluation: the DT pursuers, each conditioned on the `{spec.target}` return of its data, "
+        f"against the expert run's evader on the plan's {plan.evaluation.episodes} fixed episodes (the "
+        "episodes every run above is evaluated on). An episode ends when a pursuer comes within l_max "
+        "(a capture), so here the rate of episodes within l_max is the capture rate, and no pursuer "
+        "gets within l_min without ending the episode at l_max first: the paper's \"rarely below the "
+        "minimum safe distance\" has nothing to test in this game. Fig. 15 (one episode's tracks) "
+        "is not drawn here."
+    )
+    w(
+        f"- Folders: `{_rel(r.out)}/dt/<setting>-seed<k>/` (datasets, DT run, `eval.json`); each finished "
+        f"step's results (`spec.json`, `loss.csv`, `eval.json`, `summary.json`; no datasets, no models) "
+        f"are archived in `{_rel(r.archive)}/dt-<setting>-seed<k>/`. DT steps finished: {dt.finished} of {n}."
+    )
+    w("")
+    if figures:
+        fig_dir = fig_root / "dt"
+        written = dt_figures(dt, fig_dir)
+        for stale in set(fig_dir.glob("*.png")) - set(written) if fig_dir.is_dir() else ():
+            stale.unlink()
+        if written:
+            w(
+                "Training loss per DT seed (Fig. 14; a DT seed in its training seed's colour throughout), "
+                "and the DT pursuers' distance to the evader (Figs. 16-17):"
+            )
+            w("")
+            for p in written:
+                w(f"![{p.stem}]({os.path.relpath(p, report.parent)})")
+        else:
+            w("No finished DT step yet: no figures.")
+        w("")
+    w(
+        "| DT seed | expert run | data per pursuer (episodes, steps) | experts' capture rate (same "
+        "episodes) | loss first -> last, per model | DT capture rate | collision rate | within l_max "
+        "| distance slope (m/s) | state |"
+    )
+    w("|---|---|---|---|---|---|---|---|---|---|")
+    for job in spec.jobs():
+        k = job.seed
+        got = dt.values.get(k, {})
+        summary = _read_summary(dt.folders[k] / "summary.json")
+        coll = summary.get("collect", {})
+        data = (
+            f"{coll['episodes'][0]:,}, {'/'.join(f'{x:,}' for x in coll['steps'])}"
+            if coll.get("episodes") and coll.get("steps")
+            else "-"
+        )
+        tr = summary.get("train", {})
+        experts_from = str(summary.get("experts_from", job.expert_dir))
+        loss = (
+            "; ".join(f"{a:.3g} -> {b:.3g}" for a, b in zip(tr["first_loss"], tr["last_loss"], strict=True))
+            if tr.get("first_loss")
+            else "-"
+        )
+        expert = summary.get("experts_capture_rate")
+        if expert is None and experts_from == job.expert_dir:
+            expert = (
+                r.results.values.get((job.setting, k), {}).get(spec.stage, {}).get("eval.self.capture_rate")
+            )
+
+        cells = [
+            f"{got[name]:.3g}" if name in got else "-"
+            for name in ("capture_rate", "collision_rate", "within_l_max_rate", "distance_slope")
+        ]
+        w(
+            f"| {k} | `{experts_from}` | {data} | {'-' if expert is None else f'{expert:.3g}'} | {loss} | "
+            + " | ".join(cells)
+            + f" | {dt.progress[k]} |"
+        )
+    w("")
+    missing = [j for j in spec.jobs() if dt.progress[j.seed] != "finished"]
+    if missing:
+        w(
+            f"**Missing:** {len(missing)} DT step(s) not finished: "
+            f"{', '.join(f'`{j.run_dir}`' for j in missing)}. `hptvsim reproduce` (or its "
+            "`--experiment dt`) runs them once their expert runs have finished."
+        )
+        w("")
+
+
+def _read_summary(path: Path) -> dict[str, Any]:
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return {}
+    return data if isinstance(data, dict) else {}
+
+
 def metric_unit(metric: str) -> str:
     """A metric's axis label with its unit, e.g. ``reward (dimensionless)``."""
     name = metric.split(".")[-1] if metric.startswith("eval.") else metric.split(".")[0]
@@ -1596,11 +2052,17 @@ def _seeds_section(
     runs_text: str,
     report: Path,
     level: int = 2,
+    *,
+    dt: DTResults | None = None,
+    dt_verdicts: Mapping[str, tuple[Interval, str]] | None = None,
 ) -> None:
     """The report's "every seed behind the verdicts": a panel per claim and a table of the values.
 
-    ``runs_text`` (e.g. "27 of 27 runs finished") goes into the figure's caption.
+    ``runs_text`` (e.g. "27 of 27 runs finished") goes into the figure's caption. With ``dt``
+    (the plan's DT results) and their verdicts, the DT claims get a panel and rows too, a DT
+    seed in its training seed's colour.
     """
+    dt_claims = plan.dt.claims if plan.dt is not None and dt is not None else ()
     w(f"{'#' * (level + 1)} Every seed behind the verdicts")
     w("")
     if figures:
@@ -1622,6 +2084,21 @@ def _seeds_section(
                     limits=metric_range(c.metric),
                 )
             )
+        for dc in dt_claims:
+            assert dt is not None
+            assert dt_verdicts is not None
+            iv, v = dt_verdicts[dc.id]
+            info = DT_METRICS[dc.metric]
+            panels.append(
+                ClaimPanel(
+                    title=f"{dc.id}: {info.text}",
+                    ylabel=info.axis,
+                    groups=(("DT pursuers", None, tuple(dt.by_seed(dc.metric))),),
+                    summary=f"{_dt_claim_what(dc)}: {iv.format()}: {v}",
+                    limits=(info.low, info.high),
+                    reference=dc.threshold,
+                )
+            )
         fig = claims_figure(panels, caption=f"{plan.name}: {runs_text}")
         fig_root.mkdir(parents=True, exist_ok=True)
         path = fig_root / "claims.png"
@@ -1641,6 +2118,11 @@ def _seeds_section(
             got = dict(points)
             cells = [f"{got[k]:.3g}" if k in got else "-" for k in plan.seeds]
             w(f"| {c.id} | {label} | " + " | ".join(cells) + " |")
+    for dc in dt_claims:
+        assert dt is not None
+        got = dict(dt.by_seed(dc.metric))
+        cells = [f"{got[k]:.3g}" if k in got else "-" for k in plan.seeds]
+        w(f"| {dc.id} | DT pursuers (DT seed = expert run's seed) | " + " | ".join(cells) + " |")
     w("")
     w("A `-` is a run that has not finished the claim's stage.")
     w("")
@@ -1896,7 +2378,7 @@ def sweep_eta(out: Path, remaining: int, now: float | None = None, stale_s: floa
     )
 
 
-def _status_line(job: ReproJob | ReproGroup, st: Mapping[str, Any]) -> str:
+def _status_line(job: Unit, st: Mapping[str, Any]) -> str:
     """``[HH:MM:SS] <status> <run folder> (<why> | in <minutes>)``: one line of the sweep's log."""
     why = st.get("error") or st.get("note")
     tail = f" ({why})" if why else f" in {st['seconds'] / 60:.1f} min"
@@ -1904,7 +2386,7 @@ def _status_line(job: ReproJob | ReproGroup, st: Mapping[str, Any]) -> str:
 
 
 def _stop_workers(
-    pending: Mapping[Future[dict[str, Any]], ReproJob | ReproGroup],
+    pending: Mapping[Future[dict[str, Any]], Unit],
     grace_s: float,
     log: Callable[[str], None],
 ) -> None:
@@ -1946,8 +2428,10 @@ def reproduce(
 
     Runs already finished are skipped, and so are runs whose results are archived beside the
     report (restored first, :func:`restore_archived`); killed ones resume. Each run is archived
-    as soon as it finishes. The report is written at the end, and also when the sweep is
-    interrupted, from whatever is finished.
+    as soon as it finishes. The plan's DT steps (:func:`plan_dt_jobs`) start once their expert
+    runs have finished (a step whose expert run does not finish in this sweep is skipped, said
+    in the log) and are archived likewise. The report is written at the end, and also when the
+    sweep is interrupted, from whatever is finished.
 
     Interrupted (Ctrl-C, or SIGTERM to this process), every run in progress stops at the end of
     its episode with a checkpoint, so nothing is lost and a resumed run stays bit-identical; a
@@ -1960,8 +2444,9 @@ def reproduce(
         out: Folder of the runs.
         report: The Markdown report to write.
         workers: Processes training side by side (default: the plan's).
-        experiments: Only these experiments' runs (the report still covers all).
-        seeds: Only these seeds.
+        experiments: Only these experiments' runs (the report still covers all); ``dt``: the DT
+            steps and the expert runs they need.
+        seeds: Only these seeds (runs and DT steps).
         progress: A progress bar over the env steps of every run (with its rate and the time
             left), naming the runs training.
         figures: Draw the figures.
@@ -1971,9 +2456,20 @@ def reproduce(
     out.mkdir(parents=True, exist_ok=True)
     archive = archive_dir(report, plan)
     restored = restore_archived(plan, out, archive, log)
+    if plan.dt is not None:
+        restored += restore_dt(
+            plan.dt, out, archive, plan.fixed_episodes, lock=lambda d: _run_lock(d, wait_s=0.0), log=log
+        )
     if restored:
         log(f"restored from {archive}: {', '.join(restored)}")
     jobs = plan_jobs(plan, experiments=experiments, seeds=seeds)
+    dt_jobs = plan_dt_jobs(plan, experiments=experiments, seeds=seeds)
+    retrain = expert_retraining(plan, out, dt_jobs)  # experts restored from the archive have no models
+    if retrain:
+        log(
+            "trained again for their models, as the DT steps' experts (the archived results stay): "
+            + ", ".join(f"{j.run_dir} ({j.setting}, seed {j.seed})" for j in retrain)
+        )
     (out / "plan.json").write_text(
         json.dumps(
             {
@@ -1981,6 +2477,8 @@ def reproduce(
                 "name": plan.name,
                 "seeds": list(plan.seeds),
                 "jobs": [dataclasses.asdict(j) for j in jobs],
+                "dt_jobs": [dataclasses.asdict(j) for j in dt_jobs],
+                "expert_retraining": [dataclasses.asdict(j) for j in retrain],
             },
             indent=2,
         )
@@ -1989,7 +2487,10 @@ def reproduce(
     n = workers or plan.workers
     statuses: dict[str, dict[str, Any]] = {}
     bar: Any = None
-    stages = {j.run_dir: build_config(plan.settings[j.setting], j.seed, plan.fixed).stages for j in jobs}
+    stages = {
+        j.run_dir: build_config(plan.settings[j.setting], j.seed, plan.fixed).stages
+        for j in [*jobs, *retrain]
+    }
     budgets = {run: budget_steps(sts) for run, sts in stages.items()}
     by_steps = all(st.budget_steps for sts in stages.values() for st in sts)  # else no total: no ETA
 
@@ -2006,7 +2507,7 @@ def reproduce(
             return
         bar.update(max(0, steps - bar.n))
         names = ", ".join(Path(r).name for r in training if r in running) or "-"
-        bar.set_postfix_str(f"runs finished {finished}/{len(jobs)}, training: {names}", refresh=True)
+        bar.set_postfix_str(f"runs finished {finished}/{len(budgets)}, training: {names}", refresh=True)
 
     if progress:
         from hptvsim._output import progress_bar
@@ -2027,15 +2528,30 @@ def reproduce(
     previous_term = None  # SIGTERM (kill, docker stop) stops the sweep as Ctrl-C does
     if threading.current_thread() is threading.main_thread():
         previous_term = signal.signal(signal.SIGTERM, _raise_interrupt)
-    pending: dict[Future[dict[str, Any]], ReproJob | ReproGroup] = {}
+    pending: dict[Future[dict[str, Any]], Unit] = {}
     running: set[str] = set()
+
+    def skip(unit: Unit, why: str) -> None:
+        statuses[unit.run_dir] = {"run_dir": unit.run_dir, "status": "skipped", "note": why}
+        log(_status_line(unit, statuses[unit.run_dir]))
+
+    def next_unit(queue: list[Unit]) -> Unit | None:  # a DT step only once its experts are there
+        for unit in queue:
+            if not isinstance(unit, DTJob) or dt_blocker(plan, out, unit) is None:
+                queue.remove(unit)
+                return unit
+        return None
+
     try:
-        queue = plan_units(plan, jobs)
+        queue: list[Unit] = [*plan_units(plan, jobs), *plan_units(plan, retrain), *dt_jobs]
         while queue or pending:
-            while queue and len(pending) < n:
-                job = queue.pop(0)
+            while len(pending) < n and (job := next_unit(queue)) is not None:
                 log(f"[{time.strftime('%H:%M:%S')}] start {job.run_dir}")
                 pending[pool.submit(run_unit, str(plan.path), job, str(out))] = job
+            if not pending:  # what is left waits for runs that did not finish in this sweep
+                for unit in queue:
+                    skip(unit, (dt_blocker(plan, out, unit) if isinstance(unit, DTJob) else None) or "-")
+                break
             running = {
                 r
                 for j in pending.values()
@@ -2054,6 +2570,8 @@ def reproduce(
                 if st["status"] in ("trained", "resumed"):  # kept beside the report at once
                     try:
                         archive_finished(plan, out, archive)
+                        if plan.dt is not None:
+                            archive_dt(plan.dt, out, archive, plan.fixed_episodes)
                     except OSError as exc:  # a full disk, say: the run is safe in its folder
                         log(f"archiving into {archive} failed ({exc}); the next report or sweep tries again")
     except KeyboardInterrupt:

@@ -30,7 +30,7 @@ import math
 import os
 import time
 import tomllib
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -440,6 +440,7 @@ def train(
     progress: bool = True,
     tensorboard: bool = True,
     stop_after: int | None = None,
+    stop_requested: Callable[[], bool] | None = None,
 ) -> TrainResult:
     """Train (or resume) a run (see the module docstring).
 
@@ -451,6 +452,9 @@ def train(
         tensorboard: Write TensorBoard events.
         stop_after: Stop (with a checkpoint) after this many updates in total, as if killed
             there (tests of resuming).
+        stop_requested: Asked after every update; when it returns true, training stops there
+            with a checkpoint (the result's ``updates`` says where), and the same call goes on
+            from it, as after ``stop_after``.
 
     Raises:
         ValueError: ``run_dir`` holds a run with a different config.
@@ -523,6 +527,7 @@ def train(
     if acc is not None:
         acc_loss[:], acc_norm[:], acc_n = np.asarray(acc[0]), np.asarray(acc[1]), int(acc[2])
     t0 = time.perf_counter()
+    done = start
 
     def checkpoint(update: int) -> None:
         wall = wall0 + time.perf_counter() - t0
@@ -585,10 +590,14 @@ def train(
                     bar.set_postfix(loss=" ".join(f"{x:.4f}" for x in mean_loss))
             if bar is not None:
                 bar.update(1)
-            if update % cfg.checkpoint_every == 0 or update == end:
+            done = update
+            asked = update < end and stop_requested is not None and stop_requested()
+            if update % cfg.checkpoint_every == 0 or update == end or asked:
                 # csv rows up to here are on disk before the checkpoint names this update
                 csv_file.flush()
                 checkpoint(update)
+            if asked:
+                break
         if end == start and not (run_dir / "dt.pt").is_file():  # finished before: keep the policy file
             checkpoint(end)
     finally:
@@ -600,7 +609,7 @@ def train(
     return TrainResult(
         run_dir=run_dir,
         policy_path=run_dir / "dt.pt",
-        updates=end,
+        updates=done,
         first_loss=_first_logged(loss_csv, len(data)),
         last_loss=_last_logged(loss_csv, len(data)),
         wall_s=wall0 + time.perf_counter() - t0,

@@ -10,7 +10,7 @@ import pytest
 from offline_helpers import TINY_STEPS
 
 from hptvsim.envs.core import GameCore
-from hptvsim.experiments.collect import collect, resolve_policy_specs
+from hptvsim.experiments.collect import CollectResult, collect, resolve_policy_specs
 from hptvsim.offline.dataset import (
     Trajectories,
     load_trajectories,
@@ -231,3 +231,42 @@ def test_trajectories_from_episodes_skips_empty() -> None:
     np.testing.assert_allclose(tr.returns_to_go, [3.0, 2.0])
     with pytest.raises(ValueError, match="no steps"):
         Trajectories.from_episodes([], action_low=[-1.0], action_high=[1.0])
+
+
+def test_options_collect_in_a_training_stages_game(tmp_path: Path) -> None:
+    """``options`` (a training stage's ``env.options``) reach the game: the extended observation
+    that the reproduction's experts were trained on, and the stage's reward weights, recorded
+    with the data (a DT counts its returns-to-go in them); no Gymnasium spec is stored."""
+    reward = {"delta_C": 0.02, "delta_E1": 2.5, "delta_E2": 0.1, "crash_penalty": 500.0}  # not the scenario's
+
+    def scripted(
+        out: Path, *, max_steps: int | None = None, options: dict[str, object] | None = None
+    ) -> CollectResult:
+        return collect(
+            scenario="target",
+            pursuers="scripted:pure_pursuit",
+            evader="scripted:potential_field",
+            episodes=2,
+            num_envs=2,
+            seed=0,
+            ref_episodes=0,
+            out=out,
+            max_steps=max_steps,
+            options=options,
+        )
+
+    plain = scripted(tmp_path / "plain", max_steps=10)
+    res = scripted(
+        tmp_path / "staged",
+        options={"task": "pursuit", "extended_obs": True, "max_steps": 12, "reward": reward},
+    )
+    a = open_dataset(plain.datasets[0].dataset_id, tmp_path / "plain")
+    b = open_dataset(res.datasets[0].dataset_id, tmp_path / "staged")
+    assert b.observation_space.shape[0] == a.observation_space.shape[0] + 6  # the extended values
+    assert a.spec.env_spec is not None and b.spec.env_spec is None
+    meta = b.storage.metadata["hptvsim"]
+    assert meta["max_steps"] == 12 and meta["game_options"]["extended_obs"] is True
+    assert meta["reward"]["delta_E1"] == pytest.approx(2.5) and meta["reward"]["delta_C"] == pytest.approx(
+        0.02
+    )
+    assert a.storage.metadata["hptvsim"]["reward"]["delta_E1"] != pytest.approx(2.5)

@@ -65,6 +65,29 @@ def test_resume_after_a_kill_equals_one_run(dial_root: Path, tmp_path: Path) -> 
     assert again.resumed_from == 12
 
 
+def test_a_run_asked_to_stop_checkpoints_there_and_resumes_to_the_same_model(
+    dial_root: Path, tmp_path: Path
+) -> None:
+    """``stop_requested`` (a sweep's Ctrl-C): the run stops after the update it was asked at, with a
+    checkpoint between the periodic ones, and the same call goes on from it to the same model."""
+    cfg = _cfg(dial_root)
+    straight = train(cfg, tmp_path / "a", progress=False, tensorboard=False)
+    asked = iter([False] * 4 + [True])  # asked after the 5th update; checkpoints fall every 3
+    stopped = train(
+        cfg, tmp_path / "b", progress=False, tensorboard=False, stop_requested=lambda: next(asked)
+    )
+    assert stopped.updates == 5
+    assert torch.load(tmp_path / "b" / "checkpoint.pt", weights_only=False)["update"] == 5
+    resumed = train(cfg, tmp_path / "b", progress=False, tensorboard=False, stop_requested=lambda: False)
+    assert resumed.resumed_from == 5 and resumed.updates == straight.updates == 12
+    a = load_policy_file(tmp_path / "a" / "dt.pt")["state_dict"]
+    b = load_policy_file(tmp_path / "b" / "dt.pt")["state_dict"]
+    for key in a:
+        torch.testing.assert_close(a[key], b[key], rtol=0, atol=0)
+    rows = [(tmp_path / d / "loss.csv").read_text().splitlines() for d in ("a", "b")]
+    assert [r.split(",")[:4] for r in rows[0]] == [r.split(",")[:4] for r in rows[1]]
+
+
 def test_a_finished_run_trains_on_when_updates_grow(dial_root: Path, tmp_path: Path) -> None:
     """Raising ``updates`` resumes a run to the new total, as if it had been set from the start."""
     straight = train(

@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 from train_helpers import ROOT
 
+from hptvsim.experiments.repro_dt import ARCHIVE_FILES
 from hptvsim.experiments.reproduce import build_config, load_plan, plan_jobs, write_report
 from hptvsim.train.batched_run import BatchedRunConfig
 from hptvsim.train.config import ConfigError, TrainConfig, load_config
@@ -161,7 +162,14 @@ def test_a_report_without_runs_says_what_is_missing(tmp_path: Path) -> None:
     n = len(plan.claims)
     assert f"At 0 of 18 runs: **0 of {n} claims hold, 0 do not hold, {n} are not resolved**." in text
     assert "Unfinished runs may change any verdict." in text
-    assert f"no correction for testing {n} claims at once" in text
+    assert plan.dt is not None
+    n_dt = len(plan.dt.claims)
+    assert f"no correction for testing {n + n_dt} claims at once" in text  # the DT claims count too
+    assert text.count("**not resolved** (no finished DT runs)") == n_dt
+    assert (
+        f"DT claims, at 0 of 2 DT steps: **0 of {n_dt} hold, 0 do not hold, {n_dt} are not resolved**" in text
+    )
+    assert "No finished DT step yet: no figures." in text and "**Missing:** 2 DT step(s)" in text
     for exp in plan.experiments:
         assert f"({exp.figure})" in text
     assert "![claims](report/claims.png)" in text and (tmp_path / "report/claims.png").is_file()
@@ -269,6 +277,11 @@ def test_reproduce_end_to_end_at_toy_size(tmp_path: Path) -> None:
     r = _reproduce(tmp_path)
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
     plan = load_plan(PLANS / "toy.toml")
+    assert plan.dt is not None
+    for k in plan.dt.seeds:  # each DT step once its expert run had finished
+        log = r.stdout
+        assert f"trained dt/base-seed{k}" in log
+        assert log.index(f"trained runs/base-seed{k}") < log.index(f"start dt/base-seed{k}")
     text = (tmp_path / "report.md").read_text()
     assert "Runs finished: 18 of 18" in text and "**Missing:**" not in text
     assert "## Budget" in text and "## Verdicts" in text and "## Runs" in text
@@ -283,6 +296,30 @@ def test_reproduce_end_to_end_at_toy_size(tmp_path: Path) -> None:
         assert re.search(r"\[-?[\d.e+-]+, -?[\d.e+-]+\]", row), (
             f"no interval: {row}"
         )  # 2 seeds: intervals exist
+    dt_rows = [line for line in verdicts_table.splitlines() if re.match(r"\| D\d", line)]
+    assert [r.split("|")[1].strip() for r in dt_rows] == [c.id for c in plan.dt.claims]
+    for row in dt_rows:  # the DT claims: 2 DT seeds each, an interval, a verdict
+        assert re.search(r"\*\*(holds|does not hold|not resolved)\*\*", row), row
+        assert "| 2 DT seeds |" in row and re.search(r"\[-?[\d.e+-]+, -?[\d.e+-]+\]", row), row
+    assert re.search(r"DT claims, at 2 of 2 DT steps: \*\*\d+ of 4 hold", text)
+    dt_section = text.split("## Decision Transformer pursuers")[1].split("\n## ")[0]
+    assert "**Missing:**" not in dt_section
+    for k in plan.dt.seeds:
+        assert re.search(
+            rf"\| {k} \| `runs/base-seed{k}` \| 4, \d+/\d+/\d+ \| [\d.]+ \| .* \| finished \|", dt_section
+        )
+        step = tmp_path / "runs-root" / "dt" / f"base-seed{k}"
+        ev = json.loads((step / "eval.json").read_text())
+        assert (
+            len(ev["episodes"]) == plan.evaluation.episodes
+            and ev["evaluation"]["seed"] == plan.evaluation.seed
+        )
+        assert (step / "run" / "dt.pt").is_file()
+        assert (
+            len((step / "run" / "loss.csv").read_text().splitlines()) == 1 + 3 * 3
+        )  # 6 updates, logged every 2
+        kept = tmp_path / "report" / "results" / f"dt-base-seed{k}"  # archived: results only
+        assert {str(p.relative_to(kept)) for p in kept.rglob("*") if p.is_file()} == set(ARCHIVE_FILES)
     tally = re.search(r"At 18 of 18 runs: \*\*(\d+) of (\d+) claims hold, (\d+) do not hold, (\d+) are", text)
     assert tally is not None and "Unfinished runs may change" not in text
     verdicts = [re.search(r"\*\*(holds|does not hold|not resolved)\*\*", row) for row in rows]
@@ -297,13 +334,16 @@ def test_reproduce_end_to_end_at_toy_size(tmp_path: Path) -> None:
         for low, high in re.findall(r"\[(-?[\d.e+-]+), (-?[\d.e+-]+)\]", line) if bounded else []:
             assert float(low) >= 0.0 and (not name.endswith("rate") or float(high) <= 1.0), line
     figs = sorted((tmp_path / "report").rglob("*.png"))
-    assert {p.parent.name for p in figs} == {e.id for e in plan.experiments} | {"report"}
+    assert {p.parent.name for p in figs} == {e.id for e in plan.experiments} | {"report", "dt"}
+    assert [p.name for p in figs if p.parent.name == "dt"] == ["dt_distance.png", "dt_loss.png"]
     assert [p.name for p in figs if p.parent.name == "report"] == ["claims.png"]
     seed_rows = [
         line
         for line in text.splitlines()
         if re.match(r"\| C\w+ \| [^|]+ \| -?[\d.e+]+ \| -?[\d.e+]+ \|$", line)
     ]
+    dt_seed_rows = [line for line in text.splitlines() if re.match(r"\| D\w+ \| DT pursuers", line)]
+    assert len(dt_seed_rows) == len(plan.dt.claims)
     assert len(seed_rows) == sum(
         2 if c.compare else len(plan.experiment(c.experiment).entries) for c in plan.claims
     )
@@ -335,6 +375,30 @@ def test_reproduce_end_to_end_at_toy_size(tmp_path: Path) -> None:
     assert {Path(p).name for p in again.stdout.split()} == {
         p.name for p in figs if p.parent.name == "ent_coef"
     }
+    # --status lists the DT steps
+    status = _reproduce(tmp_path, "--status")
+    assert status.returncode == 0, status.stderr
+    for k in plan.dt.seeds:
+        assert re.search(rf"^dt/base-seed{k} +DT step +finished$", status.stdout, re.M), status.stdout
+    assert "; 2 of 2 DT steps finished" in status.stdout
+    # a fresh clone has the runs' results but not their models: a DT step not archived trains its
+    # expert run again beside them (the same run, bit for bit, in this regime), then itself
+    import shutil
+
+    shutil.rmtree(tmp_path / "report" / "results" / "dt-base-seed1")
+    clone = _reproduce(
+        tmp_path, "--experiment", "dt", "--seed", "1", "--no-figures", "--out", str(tmp_path / "clone")
+    )
+    assert clone.returncode == 0, clone.stdout[-3000:] + clone.stderr[-3000:]
+    assert "trained dt/base-seed1/expert" in clone.stdout and "trained dt/base-seed1 " in clone.stdout
+    retrained = tmp_path / "clone" / "dt" / "base-seed1" / "expert"
+    assert not (tmp_path / "clone" / "runs" / "base-seed1" / "stages" / "target" / "pursuer_0.zip").exists()
+    first = tmp_path / "runs-root" / "runs" / "base-seed1"
+    for name in ("episodes.csv", "eval/target.json"):
+        assert (retrained / name).read_bytes() == (first / name).read_bytes(), name
+    summary = json.loads((tmp_path / "clone" / "dt" / "base-seed1" / "summary.json").read_text())
+    assert summary["experts_from"] == "dt/base-seed1/expert"
+    assert (tmp_path / "report" / "results" / "dt-base-seed1" / "summary.json").is_file()  # archived again
 
 
 def _snapshot(root: Path) -> dict[str, str]:
@@ -367,6 +431,14 @@ def test_two_regimes_end_to_end_at_toy_size_side_by_side(tmp_path: Path) -> None
         assert row.rstrip().endswith(("| agree |", "| **differ** |")), row
     assert re.search(r"- toy, at 18 of 18 runs: \*\*\d+ of 12 claims hold", both)
     assert re.search(r"- toy-fast, at 27 of 27 runs: \*\*\d+ of 12 claims hold", both)
+    assert plan.dt is not None
+    dt_rows = [line for line in both.splitlines() if re.match(r"\| D\d", line)]
+    assert [row.split("|")[1].strip() for row in dt_rows] == [c.id for c in plan.dt.claims]
+    for row in dt_rows:  # the DT claims side by side: toy's 2 DT seeds, toy-fast's 3
+        assert len(re.findall(r"\*\*(holds|does not hold|not resolved)\*\*", row)) == 2, row
+        assert "| 2 DT seeds |" in row and "| 3 DT seeds |" in row, row
+        assert row.rstrip().endswith(("| agree |", "| **differ** |")), row
+    assert re.search(r"- toy-fast, DT claims, at 3 of 3 DT steps: \*\*\d+ of 4 hold", both)
     assert "## toy: one game, Table II" in text and "## toy-fast: batched games, fast regime" in text
     log = r.stdout + r.stderr
     for sid in plan.settings:  # each setting's seeds in one worker
