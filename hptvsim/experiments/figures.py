@@ -167,6 +167,9 @@ def _t_half(arr: np.ndarray) -> np.ndarray:
 
 
 def _caption(fig: Any, text: str) -> None:
+    """A grey caption at the figure's foot; one not wrapped yet is wrapped to the figure's width."""
+    if "\n" not in text:  # about 0.55 em a character at 7 pt
+        text = textwrap.fill(text, max(40, int(fig.get_figwidth() * 72.0 / (7.0 * 0.55)) - 4))
     fig.text(0.01, 0.005, text, fontsize=7, color="#555555", ha="left", va="bottom")
 
 

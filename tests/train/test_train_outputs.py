@@ -558,3 +558,21 @@ def test_the_claims_figure_shows_every_seed_in_its_colour_and_the_intervals_the_
         assert legend[:3] == ["seed 0", "seed 1", "seed 2"]
     finally:
         plt.close(fig)
+
+
+def test_a_long_figure_caption_is_wrapped_to_the_figures_width() -> None:
+    """A caption longer than its figure is wide wraps instead of running off the edge."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from hptvsim.experiments.figures import _caption
+
+    fig = plt.figure(figsize=(4.0, 3.0))
+    _caption(fig, "word " * 60)
+    fig.canvas.draw()
+    (text,) = fig.texts
+    box = text.get_window_extent()
+    assert "\n" in text.get_text() and box.x1 <= fig.bbox.x1  # within the figure
+    plt.close(fig)
