@@ -72,7 +72,7 @@ import math
 import os
 import shutil
 import time
-from collections.abc import Callable, Collection, Mapping, Sequence
+from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
 from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -942,10 +942,13 @@ def dt_claim_result(claim: DTClaim, values: Sequence[float]) -> tuple[Interval, 
 # --- the archive ---------------------------------------------------------------------------------
 
 
-def _copy_files(src: Path, dst: Path) -> bool:
-    """Copy :data:`ARCHIVE_FILES` present in ``src`` over ``dst``'s; whether anything changed."""
+def copy_changed(src: Path, dst: Path, files: Iterable[str | Path]) -> bool:
+    """Copy ``files`` present in ``src`` over ``dst``'s where they differ; whether anything changed.
+
+    Each file is written atomically; the archive of runs and that of DT steps share this.
+    """
     changed = False
-    for rel in ARCHIVE_FILES:
+    for rel in files:
         a, b = src / rel, dst / rel
         if not a.is_file() or (b.is_file() and b.read_bytes() == a.read_bytes()):
             continue
@@ -955,6 +958,11 @@ def _copy_files(src: Path, dst: Path) -> bool:
         tmp.replace(b)
         changed = True
     return changed
+
+
+def _copy_files(src: Path, dst: Path) -> bool:
+    """Copy :data:`ARCHIVE_FILES` present in ``src`` over ``dst``'s; whether anything changed."""
+    return copy_changed(src, dst, ARCHIVE_FILES)
 
 
 def archive_dt(spec: DTSpec, out: Path, archive: Path, evaluation: FixedEpisodes) -> list[str]:

@@ -93,6 +93,7 @@ from hptvsim.experiments.repro_dt import (
     StageGame,
     archive_dt,
     collect_dt,
+    copy_changed,
     dt_claim_result,
     dt_figures,
     dt_progress,
@@ -1253,17 +1254,7 @@ def _result_files(run_dir: Path) -> list[Path]:
 
 def _copy_results(src: Path, dst: Path) -> bool:
     """Copy the result files of ``src`` over those of ``dst``; whether anything changed."""
-    changed = False
-    for rel in _result_files(src):
-        a, b = src / rel, dst / rel
-        if b.is_file() and b.read_bytes() == a.read_bytes():
-            continue
-        b.parent.mkdir(parents=True, exist_ok=True)
-        tmp = b.with_name(b.name + ".tmp")
-        shutil.copyfile(a, tmp)
-        tmp.replace(b)
-        changed = True
-    return changed
+    return copy_changed(src, dst, _result_files(src))
 
 
 def archive_finished(plan: Plan, out: Path, archive: Path) -> list[str]:
