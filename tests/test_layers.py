@@ -47,6 +47,7 @@ LAYERS: Final[tuple[Layer, ...]] = (
         "helpers",
         (
             "hptvsim",
+            "hptvsim._files",
             "hptvsim._lazy",
             "hptvsim._output",
             "hptvsim._paths",
@@ -55,7 +56,8 @@ LAYERS: Final[tuple[Layer, ...]] = (
             "hptvsim.native",
             "hptvsim.palette",
         ),
-        "what every layer shares and nothing simulates: shipped-data paths, lazy package attributes, "
+        "what every layer shares and nothing simulates: files written whole or not at all, "
+        "shipped-data paths, lazy package attributes, "
         "process helpers, what commands print, TOML writing, the one loader of C kernels (compiled "
         "at first use), the agents' colours",
     ),

@@ -24,7 +24,6 @@ import contextlib
 import dataclasses
 import json
 import math
-import os
 import platform
 import re
 import time
@@ -32,6 +31,8 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
+
+from hptvsim._files import atomic_path, write_atomic
 
 if TYPE_CHECKING:
     from hptvsim.episodes.frames import AgentInfo
@@ -162,15 +163,12 @@ def versions() -> dict[str, str]:
     return out
 
 
-def _write_atomic(path: Path, text: str) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
-
-
 def write_json_atomic(path: Path, data: Any) -> None:
-    """Write JSON so that readers see the old file or the whole new one, never a part."""
-    _write_atomic(path, json.dumps(data, allow_nan=False))
+    """Write JSON so that readers see the old file or the whole new one, never a part.
+
+    A write that fails (a full disk) leaves the old file and no temporary (:mod:`hptvsim._files`).
+    """
+    write_atomic(path, json.dumps(data, allow_nan=False))
 
 
 _PARTS: collections.OrderedDict[tuple[str, Any], Any] = collections.OrderedDict()
@@ -228,9 +226,7 @@ def write_outputs(
     from hptvsim.service.downloads import row_group_rows
 
     out_dir.mkdir(parents=True, exist_ok=True)
-    _write_atomic(
-        out_dir / STATIC_FILE, json.dumps(static if static is not None else result.static.to_dict())
-    )
+    write_atomic(out_dir / STATIC_FILE, json.dumps(static if static is not None else result.static.to_dict()))
     cols = result.trajectories.columns()  # the schema's long layout, in its order
     fields = []
     arrays = []
@@ -242,10 +238,9 @@ def write_outputs(
         fields.append(pa.field(name, kind, metadata=trajectory.field_metadata(col.unit)))  # SI unit
     table = pa.Table.from_arrays(arrays, schema=pa.schema(fields))
     traj = out_dir / TRAJECTORY_FILE
-    tmp = out_dir / (TRAJECTORY_FILE + ".tmp")
-    # row groups of a few MB, so that a download reads any range of rows in bounded memory
-    pq.write_table(table, tmp, row_group_size=row_group_rows(table))
-    os.replace(tmp, traj)
+    with atomic_path(traj) as tmp:
+        # row groups of a few MB, so that a download reads any range of rows in bounded memory
+        pq.write_table(table, tmp, row_group_size=row_group_rows(table))
     recording = result.recording_path
     data = {
         "summary": summary_dict(result.summary),
@@ -364,7 +359,10 @@ def run_job(spec: JobSpec, emit: Emit, should_stop: Callable[[], str | None]) ->
 
 
 class InteractiveEpisode:
-    """An episode a client steps: its agents in ``spec.control`` are external, the rest on policies.
+    """An episode a client steps: the agents in ``spec.control``, the rest on their policies.
+
+    A controlled agent without a policy in ``spec.policies`` is external: every step must give
+    its action. One with a policy (a fallback) follows it in the steps that leave it out.
 
     Args:
         spec: The episode (``mode="interactive"``).
@@ -377,7 +375,7 @@ class InteractiveEpisode:
         self.spec = spec
         policies = dict(spec.policies)
         for agent in spec.control:
-            policies[agent] = EXTERNAL
+            policies.setdefault(agent, EXTERNAL)
         self.stepper = EpisodeStepper(
             spec.scenario,
             policies,
@@ -388,6 +386,7 @@ class InteractiveEpisode:
             recorder=recorder(spec.recording_path),
         )
         self.control = tuple(spec.control)
+        self._must_act = tuple(a for a in self.control if a not in spec.policies)
         self.started = time.perf_counter()
         self._next_frame = 0.0
         unknown = [a for a in self.control if a not in self.stepper.agents]
@@ -445,7 +444,10 @@ class InteractiveEpisode:
         return _progress(f.step, self.stepper.static.max_steps, f.time, self.started)
 
     def step(self, actions: dict[str, Any]) -> dict[str, Any]:
-        """One step with the controlled agents' ``[v, omega]`` (every active controlled agent must act).
+        """One step with the controlled agents' ``[v, omega]``.
+
+        Every active controlled agent without a fallback policy must act; one with a fallback
+        that ``actions`` leaves out follows its policy in this step.
 
         Raises:
             ValueError: An agent not controlled by the client, a missing, malformed or
@@ -458,10 +460,13 @@ class InteractiveEpisode:
                 )
         frame = self.stepper.frame
         active = {a.name for a in frame.agents if a.active}
-        missing = [a for a in self.control if a in active and a not in actions]
+        missing = [a for a in self._must_act if a in active and a not in actions]
         if missing:
             shape = "[v, omega, w_z]" if self.stepper.game == "3d" else "[v, omega]"
-            raise ValueError(f"actions.{missing[0]}: missing; give {shape} for every controlled agent")
+            raise ValueError(
+                f"actions.{missing[0]}: missing; give {shape} for every controlled agent that has "
+                "no policy (policies.<agent>)"
+            )
         try:
             frame = self.stepper.step({a: v for a, v in actions.items() if a in active})
         except ValueError as exc:

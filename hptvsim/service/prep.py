@@ -22,6 +22,7 @@ import traceback
 from pathlib import Path
 from typing import Any
 
+from hptvsim._files import atomic_path
 from hptvsim.service.validation import ApiError
 from hptvsim.service.workers import HostError, HostProcess
 
@@ -84,9 +85,8 @@ def _prep_main(conn: multiprocessing.connection.Connection, memory_mb: int | Non
                 from hptvsim.world.render import render_scenario
 
                 out = Path(args["path"])
-                tmp = out.with_suffix(".tmp.png")
-                render_scenario(shipped_scenario(args["name"]), tmp)
-                tmp.replace(out)
+                with atomic_path(out, suffix=".tmp.png") as tmp:
+                    render_scenario(shipped_scenario(args["name"]), tmp)
                 payload = str(out)
             elif op == "preview":
                 payload = _preview(args["name"], args["path"])

@@ -16,6 +16,9 @@ time to ``HPTVSIM_EPISODE_CPU_S``, and an episode past either fails naming the l
 worker process runs one task and exits (``max_calls=1``), as a pool worker retires after a limit:
 the limits, which a process cannot raise again, never carry over to another episode. A failure
 is told to the client in a short message; the traceback goes to the log.
+
+A local Ray started here requires a token on every port it opens (:func:`require_ray_token`):
+Ray binds them on the node's address, reachable from other machines and users.
 """
 
 from __future__ import annotations
@@ -23,7 +26,9 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import secrets
 import shutil
+import sys
 import tempfile
 import threading
 import time
@@ -45,6 +50,49 @@ CHUNK_BYTES = 8 << 20
 """Bytes [B] of one object of an episode's file on its way back to the API."""
 STREAM_AHEAD = 4
 """Objects a task yields ahead of what the API has taken (Ray's generator backpressure)."""
+
+
+def require_ray_token(*, keyed: bool = True) -> None:
+    """Make the local Ray cluster this process starts refuse every client without a secret.
+
+    Ray listens on the node's address on purpose (its GCS, raylets, object managers, workers and
+    runtime-env agent on every interface, 127.0.0.1 resolved to a reachable address); without
+    authentication anyone who reaches those ports runs code on the service's machine. Ray's
+    token authentication (Ray >= 2.52, ``RAY_AUTH_MODE=token``) makes every one of its RPC and
+    HTTP entry points refuse a call without the token: this sets it, with a fresh random token
+    per service start that only this process and its children hold (the environment of a
+    process is readable by its user alone; Ray 2.60's own default for a local cluster is a
+    token shared by every Ray cluster of the user, written to ``~/.ray/auth_token``, and
+    ``RAY_AUTH_MODE=disabled`` turns it off). A mode the operator set
+    is kept, but a service with an API key refuses to start a cluster without a token. A
+    cluster named by ``RAY_ADDRESS`` is the operator's: give it and the service
+    ``RAY_AUTH_MODE=token`` and the same ``RAY_AUTH_TOKEN``.
+
+    Call it before ``ray`` is first imported in the process: Ray reads its mode at import.
+
+    Args:
+        keyed: The service has an API key (then every port it opens must refuse keyless clients).
+
+    Raises:
+        RuntimeError: ``RAY_AUTH_MODE`` turns the token off in a keyed service; Ray was
+            imported already with no mode set (this process could not join the cluster it starts).
+    """
+    mode = os.environ.get("RAY_AUTH_MODE")
+    if mode:
+        if mode.lower() != "token" and keyed:
+            raise RuntimeError(
+                f"RAY_AUTH_MODE={mode} would leave the ports of Ray's local cluster open to clients "
+                "without the service's API key; unset it (the service then sets a token of its "
+                "own) or set RAY_AUTH_MODE=token"
+            )
+        return
+    if "ray" in sys.modules:
+        raise RuntimeError(
+            "the Ray executor must set RAY_AUTH_MODE=token before Ray is imported; it was imported "
+            "already (set RAY_AUTH_MODE=token and RAY_AUTH_TOKEN in the service's environment)"
+        )
+    os.environ["RAY_AUTH_MODE"] = "token"
+    os.environ["RAY_AUTH_TOKEN"] = secrets.token_hex(32)
 
 
 class _Control:
@@ -177,6 +225,9 @@ class RayExecutor:
 
     def start(self) -> None:
         """Connect to (or start) Ray and the control actor."""
+        if not self.settings.ray_address:
+            # before Ray is imported: it reads its mode once, at import
+            require_ray_token(keyed=bool(self.settings.api_key))
         import ray
 
         if not ray.is_initialized():

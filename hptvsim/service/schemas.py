@@ -103,15 +103,11 @@ def shipped_scenario_rules(default: str = "source") -> dict[str, Any]:
     inline scenario, an object, has its own: its agents are known once it is built, and the
     server names the field of any such problem).
 
-    An agent is either controlled or given a policy, not both. Where a group has one agent
-    (which an interactive episode must control) the schema states it: no policy at all. For
-    the groups of four agents it is left to the server (422 naming ``policies.<agent>``): the
-    rule takes one branch per non-empty set of controlled agents (15 a group; no fewer cover
-    every split of the agents into controlled and driven ones), 36 branches in all, and the
-    canonical form that schemathesis's generator draws from (``jsonschema_rs.canonical``)
-    gives up on this body past 29 branches ("outgrew_intersections", measured with schemathesis
-    4.32), as it does for the rule written per agent (``if``/``then`` or ``anyOf``, which it
-    expands into the same branches): no case of the operation could be generated at all.
+    ``policies`` and ``control`` do not constrain each other: a controlled agent given a
+    policy follows it in the steps whose actions leave it out. (Before, that pair was refused,
+    a rule of one ``anyOf`` branch per set of controlled agents, 36 in all, past what the
+    generator schemathesis draws from can expand: ``jsonschema_rs.canonical`` gives up past
+    29; issue 33.)
     Loads the shipped scenarios (cached), so it is called when the OpenAPI document is made.
     """
     from hptvsim.catalog import policies, scenario_names, shipped_scenario
@@ -146,8 +142,6 @@ def shipped_scenario_rules(default: str = "source") -> dict[str, Any]:
     ]
     for members, names, allowed in groups.values():
         policies_rule = {"properties": allowed, "additionalProperties": False}
-        # one agent: the interactive episode controls it, so no agent is left for a policy
-        live_rule = policies_rule if len(names) > 1 else {"maxProperties": 0}
         need = ["scenario"] if default not in members else []  # no scenario: the default
         branches.append(
             {
@@ -161,7 +155,7 @@ def shipped_scenario_rules(default: str = "source") -> dict[str, Any]:
                 "title": f"{', '.join(members)}; interactive",
                 "properties": {
                     "scenario": {"enum": members},
-                    "policies": live_rule,
+                    "policies": policies_rule,
                     **_interactive(names),
                 },
                 "required": [*need, "mode", "control"],
@@ -193,15 +187,18 @@ class EpisodeCreate(Strict):
     )
     policies: dict[AgentName, str] = Field(
         default_factory=dict,
-        description="policy name per agent (GET /api/v1/policies); agents not named follow their "
-        "role's default: the shipped trained policy (GET /api/v1/policies, default_for), else "
-        "pure_pursuit for pursuers and potential_field for evaders",
+        description="policy name per agent (GET /api/v1/policies); for an agent in `control`, the "
+        "policy that acts for it in the steps whose actions leave it out (without one, every step "
+        "must give its action); agents neither named nor controlled follow their role's default: "
+        "the shipped trained policy (GET /api/v1/policies, default_for), else pure_pursuit for "
+        "pursuers and potential_field for evaders",
         max_length=64,
         json_schema_extra=NO_OTHER_KEYS,
     )
     control: list[AgentName] = Field(
         default_factory=list,
-        description="interactive mode: the agents the client steps",
+        description="interactive mode: the agents the client steps; one also given a policy "
+        "(policies.<agent>) follows it in the steps whose actions leave it out",
         max_length=64,
         json_schema_extra={"uniqueItems": True},
     )
@@ -320,7 +317,8 @@ class StepIn(Strict):
         default_factory=dict,
         description="[v, omega] per controlled agent (m/s, rad/s; clipped to the vehicle's limits); "
         "in the 3-D game [v, omega, w_z] (w_z: vertical speed, m/s, positive down); "
-        "agents left out keep still",
+        "an agent left out follows its policy if the episode gave it one (policies.<agent>); "
+        "every other active controlled agent must act",
         max_length=64,
         json_schema_extra=NO_OTHER_KEYS,
     )

@@ -412,8 +412,6 @@ def resolve_request(req: EpisodeCreate, settings: Settings) -> tuple[Resolved, A
         field = f"policies.{agent}"
         if agent not in agents:
             raise ApiError(422, f"{field}: unknown agent {agent!r}; agents: {', '.join(agents)}", field)
-        if agent in control:
-            raise ApiError(422, f"{field}: {agent} is stepped by the client (control)", field)
         try:
             policies[agent] = check_policy(name, roles[agent], scenario.simulation.game)
         except CatalogError as exc:

@@ -16,6 +16,8 @@ import numpy as np
 import torch
 from gymnasium import spaces
 
+from hptvsim._files import atomic_path, write_atomic
+
 __all__ = [
     "AgentSpaces",
     "MultiAgentLearner",
@@ -156,9 +158,8 @@ def save_replay_buffer(buffer: Any, path: Path) -> None:
     n = buffer.buffer_size if buffer.full else buffer.pos
     arrays = {name: getattr(buffer, name)[:n] for name in _BUFFER_ARRAYS}
     meta = np.array([buffer.pos, int(buffer.full), buffer.buffer_size], dtype=np.int64)
-    tmp = path.with_name(path.name + ".tmp.npz")
-    np.savez(tmp, meta=meta, **arrays)
-    os.replace(tmp, path)
+    with atomic_path(path, suffix=".tmp.npz") as tmp:
+        np.savez(tmp, meta=meta, **arrays)
 
 
 def load_replay_buffer(buffer: Any, path: Path) -> None:
@@ -179,10 +180,8 @@ def load_replay_buffer(buffer: Any, path: Path) -> None:
 
 
 def atomic_write_text(path: Path, text: str) -> None:
-    """Write a text file so that readers never see half of it."""
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
+    """Write a text file so that readers never see half of it (and a failed write leaves nothing)."""
+    write_atomic(path, text)
 
 
 def replace_dir(tmp: Path, final: Path) -> None:
@@ -199,10 +198,8 @@ def replace_dir(tmp: Path, final: Path) -> None:
 
 def dump_pickle(obj: Any, path: Path) -> None:
     """Pickle to a file atomically (RNG states, learner counters)."""
-    tmp = path.with_name(path.name + ".tmp")
-    with tmp.open("wb") as f:
+    with atomic_path(path) as tmp, tmp.open("wb") as f:
         pickle.dump(obj, f)
-    os.replace(tmp, path)
 
 
 def load_pickle(path: Path) -> Any:

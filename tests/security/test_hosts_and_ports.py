@@ -21,8 +21,10 @@ from __future__ import annotations
 import base64
 import hashlib
 import json
+import os
 import re
 import socket
+import sys
 from collections.abc import Iterator
 from typing import Any
 
@@ -245,3 +247,24 @@ def test_the_live_view_refuses_values_it_did_not_offer() -> None:
             client.close()
     finally:
         view.stop()
+
+
+def test_a_keyed_service_refuses_a_ray_cluster_without_a_token(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Ray's ports are reachable from the network; with an API key the service will not start a
+    local Ray whose operator turned its token off, and sets a fresh token of its own otherwise
+    (the slow tests/service/test_service_ray.py checks every port of such a cluster)."""
+    from hptvsim.service.ray_executor import require_ray_token
+
+    monkeypatch.setenv("RAY_AUTH_MODE", "disabled")
+    with pytest.raises(RuntimeError, match="RAY_AUTH_MODE=disabled"):
+        require_ray_token(keyed=True)
+    require_ray_token(keyed=False)  # no key: the operator's choice stands
+    monkeypatch.delenv("RAY_AUTH_MODE")
+    monkeypatch.delenv("RAY_AUTH_TOKEN", raising=False)
+    monkeypatch.delitem(sys.modules, "ray", raising=False)
+    require_ray_token(keyed=True)
+    first = os.environ["RAY_AUTH_TOKEN"]
+    assert os.environ["RAY_AUTH_MODE"] == "token" and len(first) == 64
+    monkeypatch.delenv("RAY_AUTH_MODE")
+    require_ray_token(keyed=True)
+    assert os.environ["RAY_AUTH_TOKEN"] != first  # made up at each start, never a fixed one

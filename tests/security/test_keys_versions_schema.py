@@ -156,14 +156,24 @@ CASES: list[tuple[str, dict[str, Any], bool]] = [
     ("the default scenario lacks the agent", {"policies": {"evader_1": "potential_field"}}, False),
     ("a key outside the agent pattern", {"scenario": "source", "policies": {"boss": "pure_pursuit"}}, False),
     (
-        "the one agent of a scenario both controlled and given a policy",
+        "the one agent of a scenario both controlled and given a (fallback) policy",
         {
             "scenario": "goto_tiny",
             "mode": "interactive",
             "control": ["evader_0"],
             "policies": {"evader_0": "random"},
         },
-        False,
+        True,
+    ),
+    (
+        "an agent of four both controlled and given a (fallback) policy",
+        {
+            "scenario": "source",
+            "mode": "interactive",
+            "control": ["evader_0", "pursuer_1"],
+            "policies": {"evader_0": "random", "pursuer_0": "pure_pursuit"},
+        },
+        True,
     ),
     (
         "the one agent controlled, no policy",
@@ -196,18 +206,6 @@ def test_the_schema_states_the_rules_between_fields(keyed: Server, api: httpx.Cl
             assert r.json()["errors"][0]["field"], name
     for episode_id in opened:
         api.post(f"/episodes/{episode_id}/cancel")
-    # the one rule left to the server (see shipped_scenario_rules and schemathesis.toml): in a
-    # scenario of several agents, one both controlled and given a policy; the schema allows it,
-    # the server names the field
-    both = {
-        "scenario": "source",
-        "mode": "interactive",
-        "control": ["evader_0"],
-        "policies": {"evader_0": "random"},
-    }
-    assert _valid(doc, body, both)
-    r = api.post("/episodes", json=both)
-    assert r.status_code == 422 and r.json()["errors"][0]["field"] == "policies.evader_0", r.text
 
 
 # --- 12: the dashboard keeps the key out of addresses ----------------------------------------------

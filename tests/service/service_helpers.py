@@ -112,6 +112,42 @@ def process_tree(pid: int) -> set[int]:
     return tree
 
 
+def listening_tcp(pid: int) -> set[tuple[str, int]]:
+    """``(address, port)`` of every TCP socket in LISTEN state that ``pid``'s tree holds.
+
+    Addresses as dotted IPv4 or ``[v6]``; a wildcard listener reads ``0.0.0.0`` or ``[::]``.
+    """
+    import ipaddress
+    import re
+
+    inodes: set[str] = set()
+    for p in process_tree(pid):
+        try:
+            fds = os.listdir(f"/proc/{p}/fd")
+        except OSError:
+            continue
+        for fd in fds:
+            try:
+                m = re.fullmatch(r"socket:\[(\d+)\]", os.readlink(f"/proc/{p}/fd/{fd}"))
+            except OSError:
+                continue
+            if m:
+                inodes.add(m.group(1))
+    found: set[tuple[str, int]] = set()
+    for table, size in (("/proc/net/tcp", 4), ("/proc/net/tcp6", 16)):
+        for line in Path(table).read_text().splitlines()[1:]:
+            cols = line.split()
+            if cols[3] != "0A" or cols[9] not in inodes:  # 0A: LISTEN
+                continue
+            hex_addr, hex_port = cols[1].split(":")
+            raw = bytes.fromhex(hex_addr)
+            # /proc writes the address as 32-bit words in host (little-endian) order
+            words = b"".join(raw[i : i + 4][::-1] for i in range(0, size, 4))
+            addr = ipaddress.ip_address(words)
+            found.add((str(addr) if size == 4 else f"[{addr}]", int(hex_port, 16)))
+    return found
+
+
 def open_files_under(srv: Server, folder: Path) -> list[str]:
     """``pid: path`` of every file under ``folder`` that a process of the service's tree holds open."""
     root = str(folder.resolve())

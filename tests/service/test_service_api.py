@@ -197,6 +197,56 @@ def test_interactive_over_rest_and_websocket(server: Server, api: httpx.Client) 
         assert client.static(ep["id"])["agents"][3]["policy"] == "external"
 
 
+def test_a_controlled_agent_with_a_policy_follows_it_in_steps_that_leave_it_out(
+    server: Server, api: httpx.Client
+) -> None:
+    """``control`` and ``policies`` together (issue 33): a controlled agent given a policy is
+    driven by it in the steps whose actions leave it out, and by the client in the others. Left
+    out in every step, the interactive episode equals the run episode with the same policies;
+    one step's action of the client's makes it differ there."""
+    policies = {"evader_0": "potential_field", "pursuer_0": "pure_pursuit"}
+    steps = 6
+    run = api.post(
+        "/episodes",
+        json={"scenario": "target", "seed": 5, "max_steps": steps, "policies": policies, "record": False},
+    )
+    assert run.status_code == 201, run.text
+    wait_final(api, run.json()["id"])
+    want = Trajectories.from_dict(api.get(f"/episodes/{run.json()['id']}/trajectory").json())
+    with Client(server.url) as client:
+        trajs = []
+        for control, first in ((["evader_0"], {}), (["evader_0", "pursuer_1"], {"evader_0": [0.0, 0.0]})):
+            ep = client.create_episode(
+                "target",
+                mode="interactive",
+                control=control,
+                policies=policies,
+                seed=5,
+                max_steps=steps,
+                record=False,
+            )
+            assert ep["policies"]["evader_0"] == "scripted:potential_field"
+            still = {a: [0.0, 0.0] for a in control[1:]}  # pursuer_1 has no policy: it must act
+            if still:
+                with pytest.raises(ServiceError) as err:
+                    client.step(ep["id"], first)
+                assert err.value.status == 422 and "actions.pursuer_1" in err.value.detail
+            for k in range(steps):
+                out = client.step(ep["id"], {**(first if k == 0 else {}), **still})
+                assert set(out["rewards"]) == set(control)
+                if out["done"]:
+                    break
+            wait_final(api, ep["id"])
+            trajs.append(Trajectories.from_dict(client.trajectories(ep["id"])))
+    left_out, overridden = trajs
+    for a in want.agents:
+        got = left_out.agent(a.name)
+        assert list(got.x) == list(a.x) and list(got.y) == list(a.y), a.name
+    ev = overridden.agent("evader_0")
+    assert ev.v_cmd[1] == 0.0 and want.agent("evader_0").v_cmd[1] != 0.0
+    assert list(ev.x) != list(want.agent("evader_0").x)
+
+
 def test_websocket_streams_a_run_episode(server: Server, api: httpx.Client) -> None:
     from websockets.sync.client import connect
 

@@ -10,7 +10,7 @@ from typing import Any
 
 import httpx
 import pytest
-from service_helpers import start_server, wait_final
+from service_helpers import listening_tcp, start_server, wait_final
 
 from hptvsim.viz.recording import read_recording
 
@@ -63,6 +63,59 @@ def test_episodes_run_as_ray_tasks(tmp_path: Path) -> None:
             assert api.post(f"/episodes/{long_id}/cancel").status_code == 200
             ep = wait_final(api, long_id, timeout=120)
             assert ep["status"] == "cancelled" and ep["summary"]["status"] == "cancelled"
+    finally:
+        srv.stop()
+
+
+# one method of each of Ray's gRPC services (GCS, raylet, object manager, core worker)
+RAY_METHODS = (
+    "/ray.rpc.NodeInfoGcsService/GetAllNodeInfo",
+    "/ray.rpc.NodeManagerService/GetNodeStats",
+    "/ray.rpc.ObjectManagerService/Pull",
+    "/ray.rpc.CoreWorkerService/NumPendingTasks",
+)
+
+
+def test_with_a_key_every_port_of_the_ray_executor_refuses_a_client_without_it(tmp_path: Path) -> None:
+    """Issue 33: a local Ray listens on the node's address; with the service's key set, every
+    TCP port of the service's process tree refuses a keyless client: the API answers 401, and
+    every port of Ray's (GCS, raylet, object manager, workers, runtime-env agent) refuses a call
+    without Ray's token (gRPC UNAUTHENTICATED, HTTP 401), which the service made up and holds."""
+    grpc = pytest.importorskip("grpc")
+    key = "ray-port-key"
+    srv = start_server(tmp_path / "ray", {"HPTVSIM_EXECUTOR": "ray", "HPTVSIM_API_KEY": key}, 180)
+    try:
+        with httpx.Client(base_url=f"{srv.url}/api/v1", timeout=60.0, headers={"X-API-Key": key}) as api:
+            ep = api.post("/episodes", json={"scenario": "goto_tiny", "max_steps": 20})
+            assert wait_final(api, ep.json()["id"], timeout=300)["status"] == "finished"
+            api_port = int(srv.url.rsplit(":", 1)[1])
+            ports = listening_tcp(srv.process.pid)
+            others = {(a, p) for a, p in ports if p != api_port}
+            assert len(others) >= 4, ports  # GCS, raylet, object manager, a worker at least
+            refused_grpc = 0
+            for addr, port in sorted(others):
+                host = "127.0.0.1" if addr in ("0.0.0.0", "[::]") else addr
+                codes = []
+                with grpc.insecure_channel(f"{host}:{port}") as channel:
+                    for method in RAY_METHODS:
+                        call = channel.unary_unary(
+                            method, request_serializer=lambda b: b, response_deserializer=lambda b: b
+                        )
+                        try:
+                            call(b"", timeout=10)
+                            codes.append("OK")
+                        except grpc.RpcError as exc:
+                            codes.append(exc.code().name)
+                assert "OK" not in codes, (addr, port, codes)
+                if "UNAUTHENTICATED" in codes:
+                    refused_grpc += 1
+                    continue
+                # not one of the gRPC services: an HTTP server (the runtime-env agent)
+                r = httpx.get(f"http://{host}:{port}/get_or_create_runtime_env", timeout=10)
+                assert r.status_code == 401, (addr, port, codes, r.status_code, r.text[:200])
+            assert refused_grpc >= 4, others
+            # without the key the API refuses too (tests/security/test_keyed_ports.py: every route)
+            assert httpx.get(f"{srv.url}/api/v1/episodes", timeout=30).status_code == 401
     finally:
         srv.stop()
 
