@@ -22,8 +22,9 @@ same seed because they run the same generated C on the same inputs.
 **Depth in the protocol's terms.** Every vehicle keeps the site's operating depth: its pose
 (:attr:`GameCore.poses`) has ``z`` = ``site.operating_depth`` and ``phi = theta = 0``, its
 velocity no heave, roll or pitch rate, its altitude is the seabed's depth under it less the
-operating depth (negative inside an obstacle), and a collision's causes are not told apart
-(``StepResult.causes`` is empty: ``seabed`` and ``surface`` are always False in the info).
+operating depth (negative inside an obstacle); ``seabed`` and ``surface`` are always False in
+the info (``StepResult.causes`` is empty), and a collision is with an obstacle, the site's
+edge or another vehicle (:meth:`GameCore.collided_with`).
 
 **The site's fence.** By default (``fence=True``) the outermost ring of cells of the obstacle
 map is solid: the sonar sees the edge of the site like a wall, so learners can avoid it, and
@@ -49,6 +50,7 @@ from hptvsim.envs.shared import (
     Backend,
     GameBase,
     check_actions,
+    collision_partners,
     common_overrides,
     scenario_argument,
     sonar_groups,
@@ -82,7 +84,7 @@ def _fenced(grid: OccupancyGrid) -> OccupancyGrid:
 
 
 _NO_CAUSES: Mapping[str, Bool] = MappingProxyType({})
-"""The planar game does not tell a collision's causes apart."""
+"""The planar game has no seabed or surface causes (:meth:`GameCore.collided_with` tells the rest)."""
 
 _SCALAR_POINTS: Final = 16
 """Up to this many vehicles in all, :attr:`GameCore.altitude` interpolates point by point."""
@@ -714,6 +716,29 @@ class GameCore(GameBase[ObsLayout]):
         if self.layout.extended:
             return None
         return ExtendedObservation(self, i, yaw=self.layout.yaw, azimuth=self.layout.azimuth)
+
+    def collided_with(self, result: StepResult, env: int) -> list[str]:
+        """What each agent touched in the last step (:meth:`~hptvsim.envs.protocol.Game.collided_with`).
+
+        An agent whose signed distance to the obstacle map fell below its radius touched an
+        ``obstacle``, or the ``site edge`` where the map without the fence is clear there;
+        other vehicles by name (closer than the sum of the radii, the task kernel's rule).
+        """
+        hit = result.flags.collision[env]
+        n = self.num_agents
+        if not hit.any():
+            return [""] * n
+        pos = self.state.positions[env]
+        radii = self.robots.radii
+        sdf = self.kernel.out.terrain[env]
+        kinds: list[list[str]] = []
+        for i in range(n):
+            if hit[i] and sdf[i] < radii[i]:
+                edge = self.fence and float(self.world.obstacles.distance(pos[i])) >= radii[i]
+                kinds.append(["site edge" if edge else "obstacle"])
+            else:
+                kinds.append([])
+        return collision_partners(self.agents, hit.tolist(), pos, radii, kinds)
 
     def global_state(self, env: int) -> F64:
         """``x, y, psi, u, v, r`` of every vehicle, flattened (N * 6)."""

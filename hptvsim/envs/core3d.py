@@ -92,6 +92,7 @@ from hptvsim.envs.shared import (
     Backend,
     GameBase,
     check_actions,
+    collision_partners,
     common_overrides,
     scenario_argument,
     sonar_groups,
@@ -668,6 +669,20 @@ class Game3DCore(GameBase[Obs3DLayout]):
             ValueError: Unknown agent.
         """
         self._agent(agent)
+
+    def collided_with(self, result: StepResult, env: int) -> list[str]:
+        """What each agent touched in the last step (:meth:`~hptvsim.envs.protocol.Game.collided_with`).
+
+        The ``seabed``, the ``surface``, other vehicles by name (closer than the sum of the radii).
+        """
+        hit = result.flags.collision[env]
+        n = self.num_agents
+        if not hit.any():
+            return [""] * n
+        seabed = result.causes["seabed"][env]
+        surface = result.causes["surface"][env]
+        kinds = [[k for k, c in (("seabed", seabed[i]), ("surface", surface[i])) if c] for i in range(n)]
+        return collision_partners(self.agents, hit.tolist(), self.poses[env, :, 0:3], self.radii, kinds)
 
     def global_state(self, env: int) -> F64:
         """``x, y, z, phi, theta, psi, u, v, w, p, q, r`` of every vehicle (N * 12)."""

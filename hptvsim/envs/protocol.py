@@ -44,6 +44,7 @@ from hptvsim.world.grid import OccupancyGrid
 from hptvsim.world.scenario import Scenario
 
 __all__ = [
+    "COLLISION_KINDS",
     "INFO_KEYS",
     "POSE_FIELDS",
     "RESET_INFO_KEYS",
@@ -77,6 +78,7 @@ INFO_KEYS = (
     "collision",  # any collision of this agent (the causes below, or-ed)
     "seabed",  # below its radius above the seabed
     "surface",  # within its radius of the surface
+    "collided_with",  # what it touched (COLLISION_KINDS or another agent's name); "" without a collision
     "out_of_site",  # its centre left the site
     "reached",  # goto: within its goal radius
     "r_C",  # Eq. 17, unweighted
@@ -84,6 +86,11 @@ INFO_KEYS = (
     "r_E2",  # Eq. 19, unweighted
 )
 """The keys of every agent's info, in every game (one set; see the module docstring)."""
+
+COLLISION_KINDS = ("seabed", "surface", "obstacle", "site edge")
+"""What an agent's collision can be with besides another vehicle (named by its agent name):
+the seabed and the surface (3-D game), an obstacle, the site's fence (``site edge``; planar
+game). :meth:`Game.collided_with` joins several with ``", "``."""
 
 RESET_INFO_KEYS = INFO_KEYS[: INFO_KEYS.index("step") + 1]
 """The keys of an agent's info after a reset (before any step): the pose, ``altitude``,
@@ -374,6 +381,17 @@ class Game(Protocol):
 
     def global_state(self, env: int) -> F64:
         """One environment's global state as one vector (for centralised critics)."""
+        ...
+
+    def collided_with(self, result: StepResult, env: int) -> list[str]:
+        """What each agent touched in the step of ``result`` in environment ``env``.
+
+        Per agent, in agent order: ``""`` where ``result.flags.collision`` is False, else the
+        :data:`COLLISION_KINDS` and the names of the other agents it touched, joined by ``", "``
+        (e.g. ``"seabed"``, ``"pursuer_1"``, ``"obstacle, evader_0"``). Call it right after the
+        step (it reads the game's current state); views report it as the info's
+        ``collided_with``.
+        """
         ...
 
     def commands(self, actions: npt.ArrayLike, agent: int | None = None) -> F64:

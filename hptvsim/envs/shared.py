@@ -37,6 +37,7 @@ __all__ = [
     "build_policies",
     "check_actions",
     "check_agent_action",
+    "collision_partners",
     "common_overrides",
     "info_arrays",
     "scenario_argument",
@@ -313,6 +314,36 @@ def check_agent_action(game: Game, agent: int, action: npt.ArrayLike, *, num_env
 # --- information -----------------------------------------------------------------------------------
 
 
+def collision_partners(
+    agents: Sequence[str], hit: Sequence[bool], positions: F64, radii: F64, kinds: Sequence[Sequence[str]]
+) -> list[str]:
+    """What each agent collided with, as :meth:`~hptvsim.envs.protocol.Game.collided_with` says it.
+
+    Args:
+        agents: The agents' names.
+        hit: Per agent, whether it collided (``flags.collision`` of one environment).
+        positions: ``(N, D)`` the agents' positions [m] (``D`` = 2 or 3).
+        radii: ``(N,)`` their radii [m].
+        kinds: Per agent, what of the world it touched (:data:`~hptvsim.envs.protocol.COLLISION_KINDS`),
+            as the game tells it.
+
+    Returns:
+        Per agent: ``""`` without a collision, else its kinds and the names of the agents it
+        touches (centres closer than the sum of their radii), joined by ``", "``.
+    """
+    p = np.asarray(positions, dtype=np.float64)
+    out: list[str] = []
+    for i, h in enumerate(hit):
+        if not h:
+            out.append("")
+            continue
+        what = list(kinds[i])
+        gap = np.linalg.norm(p - p[i], axis=-1) - (radii + radii[i])
+        what += [agents[j] for j in np.flatnonzero(gap < 0.0).tolist() if j != i]
+        out.append(", ".join(what))
+    return out
+
+
 def agent_infos(game: Game, result: StepResult | None, env: int) -> list[dict[str, Any]]:
     """Every agent's info in environment ``env`` (keys: :data:`~hptvsim.envs.protocol.INFO_KEYS`).
 
@@ -350,6 +381,7 @@ def agent_infos(game: Game, result: StepResult | None, env: int) -> list[dict[st
     n = len(poses)
     captured = bool(f.captured[env])
     collision = f.collision[env].tolist()
+    hit = game.collided_with(result, env) if True in collision else [""] * n
     causes = result.causes
     seabed = causes["seabed"][env].tolist() if "seabed" in causes else [False] * n
     surface = causes["surface"][env].tolist() if "surface" in causes else [False] * n
@@ -372,6 +404,7 @@ def agent_infos(game: Game, result: StepResult | None, env: int) -> list[dict[st
             "collision": collision[i],
             "seabed": seabed[i],
             "surface": surface[i],
+            "collided_with": hit[i],
             "out_of_site": out_of_site[i],
             "reached": reached[i],
             "r_C": r_C[i],
@@ -402,6 +435,10 @@ def info_arrays(game: Game, result: StepResult | None, agent: int) -> dict[str, 
     out["collision"] = f.collision[:, i].copy()
     for c in _CAUSES:
         out[c] = result.causes[c][:, i].copy() if c in result.causes else np.zeros(game.num_envs, dtype=bool)
+    hit = np.full(game.num_envs, "", dtype=object)
+    for env in np.flatnonzero(f.collision[:, i]).tolist():
+        hit[env] = game.collided_with(result, env)[i]
+    out["collided_with"] = hit
     out["out_of_site"] = f.out_of_site[:, i].copy()
     out["reached"] = f.reached[:, i].copy()
     out["r_C"] = t.r_C[:, i].copy()

@@ -63,6 +63,7 @@ __all__ = [
     "AgentInfo",
     "AgentState",
     "AgentTrajectory",
+    "CollisionEvent",
     "EpisodeMetrics",
     "EpisodeStatic",
     "EpisodeSummary",
@@ -369,6 +370,9 @@ class AgentState(SchemaObject):
         terminated: The agent's episode ended by a task rule at this step.
         truncated: The agent's episode hit the step limit at this step.
         collision: The agent touches terrain or another vehicle.
+        collided_with: What it touches when ``collision`` (the game's
+            :meth:`~hptvsim.envs.protocol.Game.collided_with`: ``seabed``, ``surface``,
+            ``obstacle``, ``site edge`` or other agents' names, joined by ``", "``), else None.
         out_of_site: The agent's centre left the site.
         reached: Goto: the agent is within its goal's radius.
         z: 3-D game: depth [m], positive down, else None (the site's operating depth).
@@ -400,6 +404,7 @@ class AgentState(SchemaObject):
     terminated: bool = False
     truncated: bool = False
     collision: bool = False
+    collided_with: str | None = None
     out_of_site: bool = False
     reached: bool = False
     z: float | None = None
@@ -444,6 +449,29 @@ class Frame(SchemaObject):
 
 
 @dataclass(frozen=True, kw_only=True)
+class CollisionEvent(SchemaObject):
+    """An agent's first collision in an episode: who, with what, when and where.
+
+    Attributes:
+        agent: The agent that collided.
+        collided_with: What it touched (as :attr:`AgentState.collided_with`).
+        step: The step at whose end it touched [steps].
+        time: Simulated time then [s].
+        x: North position of its centre [m].
+        y: East position of its centre [m].
+        z: Depth of its centre [m], positive down (3-D game; None in the planar game).
+    """
+
+    agent: str
+    collided_with: str
+    step: int
+    time: float
+    x: float
+    y: float
+    z: float | None = None
+
+
+@dataclass(frozen=True, kw_only=True)
 class EpisodeSummary(SchemaObject):
     """How an episode ended.
 
@@ -455,6 +483,7 @@ class EpisodeSummary(SchemaObject):
         wall_time: Wall-clock time the episode took [s].
         metrics: The evaluation metrics of the episode.
         recording: Path of its rerun recording, or None.
+        collisions: Each agent's first collision, in the order they happened.
     """
 
     status: Literal["finished", "cancelled"]
@@ -464,6 +493,7 @@ class EpisodeSummary(SchemaObject):
     wall_time: float
     metrics: EpisodeMetrics
     recording: str | None = None
+    collisions: tuple[CollisionEvent, ...] = ()
 
 
 # --- trajectories -----------------------------------------------------------------------------

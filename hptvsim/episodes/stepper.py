@@ -34,6 +34,7 @@ from hptvsim.envs.protocol import Game, Scene, StepResult
 from hptvsim.episodes.frames import (
     AgentState,
     AgentTrajectory,
+    CollisionEvent,
     EpisodeStatic,
     EpisodeSummary,
     Frame,
@@ -172,6 +173,8 @@ class _Meter:
         self.goto = goto
         self.captured_at: int | None = None
         self.collision = False
+        self.collisions: list[CollisionEvent] = []
+        self._collided: set[str] = set()
         self.distances: list[float] = []
         self.success: dict[str, bool] = {}
 
@@ -180,7 +183,21 @@ class _Meter:
             return
         if self.captured_at is None and frame.captured:
             self.captured_at = frame.step
-        self.collision = self.collision or any(a.collision for a in frame.agents)
+        for a in frame.agents:
+            if a.collision and a.name not in self._collided:  # its first (it stays in contact)
+                self.collision = True
+                self._collided.add(a.name)
+                self.collisions.append(
+                    CollisionEvent(
+                        agent=a.name,
+                        collided_with=a.collided_with or "",
+                        step=frame.step,
+                        time=frame.time,
+                        x=a.x,
+                        y=a.y,
+                        z=a.z,
+                    )
+                )
         d = [a.distance for a, p in zip(frame.agents, self.pursuer, strict=True) if p]
         if not d:
             d = [a.distance for a in frame.agents]
@@ -501,6 +518,7 @@ class EpisodeStepper:
             wall_time=time.perf_counter() - self._started,
             metrics=metrics,
             recording=str(self._recording_path) if self._recording_path is not None else None,
+            collisions=tuple(self._meter.collisions),
         )
 
     def trajectories(self) -> Trajectories:
@@ -603,6 +621,7 @@ class EpisodeStepper:
             falses = [False] * n
             terminated = truncated = collision = out_of_site = reached = falses
             captured = trunc_all = done = False
+            touched: list[str | None] = [None] * n
         else:
             f = result.flags
             columns.update(
@@ -618,6 +637,7 @@ class EpisodeStepper:
             terminated = result.terminated[0].tolist()
             truncated = result.truncated[0].tolist()
             collision = f.collision[0].tolist()
+            touched = [h or None for h in core.collided_with(result, 0)] if True in collision else [None] * n
             out_of_site = f.out_of_site[0].tolist()
             reached = f.reached[0].tolist()
             captured = bool(f.captured[0])
@@ -660,6 +680,7 @@ class EpisodeStepper:
                 terminated=terminated[i],
                 truncated=truncated[i],
                 collision=collision[i],
+                collided_with=touched[i],
                 out_of_site=out_of_site[i],
                 reached=reached[i],
                 z=z[i],

@@ -31,6 +31,9 @@ def _report_episode(result: Any, record: Path | None, json_out: Path | None, *, 
         f"{result.static.scenario}: {s.outcome} after {s.steps} steps ({s.sim_time:.1f} s simulated, "
         f"{s.wall_time:.2f} s wall)"
     )
+    for c in s.collisions:
+        where = f"({c.x:.1f}, {c.y:.1f}" + (f", {c.z:.1f}" if c.z is not None else "") + ") m"
+        click.echo(f"collision: {c.agent} with {c.collided_with} at {where}, t = {c.time:.1f} s (step {c.step})")
     click.echo(json.dumps(s.to_dict()["metrics"], indent=2))
     kept = f" ({note})" if note else ""
     if record is not None:

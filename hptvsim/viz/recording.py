@@ -220,6 +220,9 @@ class RecordingWriter:
         self._buf = self._new_buffer()
         self._history: list[list[tuple[float, float, float]]] = [[] for _ in self.names]
         self._history_steps: list[int] = []
+        self._collided: set[str] = set()
+        # first collisions not yet sent: (step, time [s], agent index, text, [x, y, z] [m])
+        self._collisions: list[tuple[int, float, int, str, tuple[float, float, float]]] = []
         self._closed = False
         self._write_static()
 
@@ -329,6 +332,11 @@ class RecordingWriter:
                 s["altitude"][i].append(math.nan if a.altitude is None else a.altitude)
                 s["w_cmd"][i].append(a.action[2] if len(a.action) > 2 else 0.0)
             self._history[i].append((a.x, a.y, z))
+            if a.collision and a.name not in self._collided:  # its first collision (contact lasts)
+                self._collided.add(a.name)
+                what = a.collided_with or "something"
+                text = f"{a.name} collided with {what} at ({a.x:.1f}, {a.y:.1f}, {z:.1f}) m"
+                self._collisions.append((frame.step, frame.time, i, text, (a.x, a.y, z)))
         self._history_steps.append(frame.step)
         if opts.sonar_every and frame.step % opts.sonar_every == 0 and frame.agents[0].ranges is not None:
             b.sonar_steps.append(frame.step)
@@ -424,6 +432,16 @@ class RecordingWriter:
                     indexes=tidx,
                     columns=rr.LineStrips3D.columns(strips=b.trails[i]).partition([1] * len(b.trails[i])),
                 )
+        for step, t, i, text, xyz in self._collisions:
+            # an event of its own: the text log and a marker where it happened
+            rec.set_time("step", sequence=step)
+            rec.set_time("sim_time", duration=t)
+            rec.log("events/collisions", rr.TextLog(text, level="WARN"))
+            rec.log(
+                f"world/collisions/{self.names[i]}",
+                rr.Points3D([xyz], colors=[hex_rgb(self.static.agents[i].color)], radii=[1.5], labels=[text]),
+            )
+        self._collisions = []
         self._buf = self._new_buffer()
         rec.flush(timeout_sec=10.0)
 

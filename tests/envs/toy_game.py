@@ -295,6 +295,9 @@ class EscortGame:
     def infos(self, result: StepResult | None, env: int) -> list[dict[str, Any]]:
         return agent_infos(self, result, env)
 
+    def collided_with(self, result: StepResult, env: int) -> list[str]:
+        return ["" for _ in self.agents]  # its vessels never collide
+
     def global_state(self, env: int) -> F64:
         return np.concatenate([self.poses[env], self.velocity[env]], axis=1).ravel()
 

@@ -587,6 +587,7 @@ async function showFinished(id) {
       c.series = seriesOfTrajectory(c.static, traj);
       map.caption = "";
       map.setReplay(traj);
+      map.setCollisions(sum?.collisions);
       setTimeline(true, traj.step.length);
       scrubTo(traj.step.length - 1);
     }
@@ -640,6 +641,12 @@ function play(button, get, set, n, duration) {
   player = { raf: requestAnimationFrame(tick) };
 }
 
+/** One collision of an episode's summary: with what, where [m] and when [s]. */
+function collisionText(c) {
+  const at = [c.x, c.y, ...(c.z === null || c.z === undefined ? [] : [c.z])].map((v) => v.toFixed(0));
+  return `${c.collided_with} at (${at.join(", ")}) m, ${c.time.toFixed(1)} s`;
+}
+
 function fmt(v, digits = 1) {
   return v === null || v === undefined ? "–" : typeof v === "number" ? v.toFixed(digits) : String(v);
 }
@@ -658,6 +665,7 @@ function showMetrics(sum) {
     ["final distance [m]", fmt(m.final_distance)],
     ["steps", String(sum.steps)],
   ];
+  for (const c of sum.collisions || []) items.push([`${c.agent} collided`, collisionText(c)]);
   for (const [name, value] of Object.entries(m.returns || {})) items.push([`return ${name}`, fmt(value, 1)]);
   for (const [label, value] of items) {
     const d = document.createElement("div");
@@ -869,6 +877,7 @@ async function compare(ids, scroll = true) {
       m.setStatic(st);
       m.caption = String.fromCharCode(65 + i);
       m.setReplay(traj);
+      m.setCollisions(sum?.collisions);
       items.push({ id, episode, static: st, traj, map: m });
     }
   } catch (err) {
@@ -941,7 +950,10 @@ function compareTable(items) {
       cell(it.episode.summary?.outcome || it.episode.status),
       cell(fmt(m.time_to_capture_s)),
       cell(fmt(m.min_distance)),
-      cell(m.collision ? "yes" : "no"),
+      cell(
+        (it.episode.summary?.collisions || []).map((c) => `${c.agent}: ${c.collided_with}`).join("; ") ||
+          (m.collision ? "yes" : "no"),
+      ),
       cell(rets, "policies"),
     );
     return tr;

@@ -136,6 +136,7 @@ export class TopDownMap {
     this.step = null;
     this.sonar = true;
     this.caption = "";
+    this.collisions = []; // each agent's first collision: {agent, collided_with, step, x, y}
   }
 
   /** Canvas pixel of the point x north, y east [m]. */
@@ -151,6 +152,7 @@ export class TopDownMap {
     this.frame = null;
     this.replay = null;
     this.step = null;
+    this.collisions = [];
     const [lx, ly] = st.site.size;
     const m = this.compact ? { l: 36, r: 8, t: 8, b: 30 } : { l: 50, r: 58, t: 10, b: 38 };
     const w = this.canvas.width - m.l - m.r;
@@ -172,7 +174,11 @@ export class TopDownMap {
   showFrame(frame) {
     this.frame = frame;
     this.replay = null;
+    if (frame.step === 0) this.collisions = [];
     for (const a of frame.agents) {
+      if (a.collision && a.collided_with && !this.collisions.some((c) => c.agent === a.name)) {
+        this.collisions.push({ agent: a.name, collided_with: a.collided_with, step: frame.step, x: a.x, y: a.y });
+      }
       const t = this.trails.get(a.name);
       if (!t) continue;
       if (frame.step === 0) t.length = 0;
@@ -180,6 +186,37 @@ export class TopDownMap {
       if (t.length > 8000) t.splice(0, t.length - 8000);
     }
     this.draw();
+  }
+
+  /** A finished episode's collisions (its summary's `collisions`), marked from their step on. */
+  setCollisions(list) {
+    this.collisions = (list || []).slice();
+    this.draw();
+  }
+
+  /** A cross and "agent: what" where each collision shown so far happened. */
+  drawCollisions(ctx, info) {
+    ctx.font = FONT;
+    ctx.textAlign = "left";
+    ctx.textBaseline = "bottom";
+    for (const c of this.collisions) {
+      if (this.replay && this.step !== null && c.step > this.replay.step[this.step]) continue;
+      const [px, py] = this.px(c.x, c.y);
+      ctx.strokeStyle = "#ff4d4d";
+      ctx.lineWidth = 2.5;
+      ctx.beginPath();
+      ctx.moveTo(px - 7, py - 7);
+      ctx.lineTo(px + 7, py + 7);
+      ctx.moveTo(px + 7, py - 7);
+      ctx.lineTo(px - 7, py + 7);
+      ctx.stroke();
+      const text = `${c.agent}: ${c.collided_with}`;
+      const w = ctx.measureText(text).width;
+      ctx.fillStyle = "rgba(13, 21, 32, 0.75)";
+      ctx.fillRect(px + 9, py - 26, w + 6, 16);
+      ctx.fillStyle = info.get(c.agent)?.color || "#fff";
+      ctx.fillText(text, px + 12, py - 11);
+    }
   }
 
   /** A finished episode's trajectories (frame schema `Trajectories`), shown step by step. */
@@ -737,6 +774,7 @@ export class TopDownMap {
         ctx.stroke();
       }
     }
+    this.drawCollisions(ctx, info);
     const now = this.time();
     ctx.font = FONT;
     const clock = now && !this.compact ? `t = ${now[0].toFixed(1)} s (step ${now[1]})` : "";

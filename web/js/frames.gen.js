@@ -119,6 +119,7 @@
  * @property {boolean} [terminated] The agent's episode ended by a task rule at this step.
  * @property {boolean} [truncated] The agent's episode hit the step limit at this step.
  * @property {boolean} [collision] The agent touches terrain or another vehicle.
+ * @property {(string | null)} [collided_with] What it touches when `collision` (the game's `hptvsim.envs.protocol.Game.collided_with`: `seabed`, `surface`, `obstacle`, `site edge` or other agents' names, joined by `", "`), else None.
  * @property {boolean} [out_of_site] The agent's centre left the site.
  * @property {boolean} [reached] Goto: the agent is within its goal's radius.
  * @property {(number | null)} [z] 3-D game: depth [m], positive down, else None (the site's operating depth).
@@ -138,6 +139,7 @@
  * @property {number} wall_time Wall-clock time the episode took [s].
  * @property {EpisodeMetrics} metrics The evaluation metrics of the episode.
  * @property {(string | null)} [recording] Path of its rerun recording, or None.
+ * @property {Array<CollisionEvent>} [collisions] Each agent's first collision, in the order they happened.
  */
 
 /**
@@ -153,6 +155,18 @@
  * @property {(number | null)} final_distance
  * @property {(number | null)} success_rate
  * @property {Object<string, number>} returns
+ */
+
+/**
+ * An agent's first collision in an episode: who, with what, when and where.
+ * @typedef {Object} CollisionEvent
+ * @property {string} agent The agent that collided.
+ * @property {string} collided_with What it touched (as `AgentState.collided_with`).
+ * @property {number} step The step at whose end it touched [steps].
+ * @property {number} time Simulated time then [s].
+ * @property {number} x North position of its centre [m].
+ * @property {number} y East position of its centre [m].
+ * @property {(number | null)} [z] Depth of its centre [m], positive down (3-D game; None in the planar game).
  */
 
 /**
@@ -941,6 +955,18 @@ export const FRAME_SCHEMA = {
           "type": "boolean",
           "default": false
         },
+        "collided_with": {
+          "description": "What it touches when `collision` (the game's `hptvsim.envs.protocol.Game.collided_with`: `seabed`, `surface`, `obstacle`, `site edge` or other agents' names, joined by `\", \"`), else None.",
+          "anyOf": [
+            {
+              "type": "string"
+            },
+            {
+              "type": "null"
+            }
+          ],
+          "default": null
+        },
         "out_of_site": {
           "description": "The agent's centre left the site.",
           "type": "boolean",
@@ -1078,6 +1104,14 @@ export const FRAME_SCHEMA = {
             }
           ],
           "default": null
+        },
+        "collisions": {
+          "description": "Each agent's first collision, in the order they happened.",
+          "type": "array",
+          "items": {
+            "$ref": "#/$defs/CollisionEvent"
+          },
+          "default": []
         }
       },
       "required": [
@@ -1174,6 +1208,57 @@ export const FRAME_SCHEMA = {
         "final_distance",
         "success_rate",
         "returns"
+      ],
+      "additionalProperties": false
+    },
+    "CollisionEvent": {
+      "type": "object",
+      "description": "An agent's first collision in an episode: who, with what, when and where.",
+      "properties": {
+        "agent": {
+          "description": "The agent that collided.",
+          "type": "string"
+        },
+        "collided_with": {
+          "description": "What it touched (as `AgentState.collided_with`).",
+          "type": "string"
+        },
+        "step": {
+          "description": "The step at whose end it touched [steps].",
+          "type": "integer"
+        },
+        "time": {
+          "description": "Simulated time then [s].",
+          "type": "number"
+        },
+        "x": {
+          "description": "North position of its centre [m].",
+          "type": "number"
+        },
+        "y": {
+          "description": "East position of its centre [m].",
+          "type": "number"
+        },
+        "z": {
+          "description": "Depth of its centre [m], positive down (3-D game; None in the planar game).",
+          "anyOf": [
+            {
+              "type": "number"
+            },
+            {
+              "type": "null"
+            }
+          ],
+          "default": null
+        }
+      },
+      "required": [
+        "agent",
+        "collided_with",
+        "step",
+        "time",
+        "x",
+        "y"
       ],
       "additionalProperties": false
     },
