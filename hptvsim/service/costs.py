@@ -41,10 +41,14 @@ MEM_BASE = 160 * MIB
 MEM_TRAINED = 256 * MIB
 """When a trained policy drives an agent: torch, SB3 and the models. Measured: +210 MiB of
 ``VmData`` for ``import torch``, ``stable_baselines3`` and the four shipped SAC models."""
-MEM_PER_BEAM_STEP = 150
-"""Per sonar range kept for the trajectory (vehicle x beam x step: Python floats in the frames'
-columns, then the columns and the Parquet table at the end). Measured: 90 B (16 vehicles x 1024
-beams, flat site, 50 and 150 steps: 163 and 310 MiB) and 133 B (8 x 1024, ``target`` terrain)."""
+MEM_PER_BEAM_STEP = 24
+"""Per sonar range kept for the trajectory (vehicle x beam x step: the trajectory's float64
+columns, the frames' events, the recording's buffers and the Parquet table at the end), with a
+third more than measured. Measured (2026-11-29, the worker's whole job, :func:`run_job` with a
+recording, 16 vehicles x 1024 beams, flat site, peak resident memory): 215, 297, 333, 386 and
+556 MiB after 50, 150, 300, 600 and 1200 steps: 11 to 18 B per range between 300 and 1200 steps
+(52 B between 50 and 150, while the first buffers fill; the fixed terms cover that). It was 150 B
+while the trajectory kept Python floats."""
 MEM_PER_AGENT_STEP = 1024
 """Per trajectory row (vehicle x step): 21 columns of Python floats (32 B each with the list
 slot) and their arrays at the end (counted; too small to see in the runs above)."""

@@ -33,7 +33,8 @@ def _report_episode(result: Any, record: Path | None, json_out: Path | None, *, 
     )
     for c in s.collisions:
         where = f"({c.x:.1f}, {c.y:.1f}" + (f", {c.z:.1f}" if c.z is not None else "") + ") m"
-        click.echo(f"collision: {c.agent} with {c.collided_with} at {where}, t = {c.time:.1f} s (step {c.step})")
+        when = f"t = {c.time:.1f} s (step {c.step})"
+        click.echo(f"collision: {c.agent} with {c.collided_with} at {where}, {when}")
     click.echo(json.dumps(s.to_dict()["metrics"], indent=2))
     kept = f" ({note})" if note else ""
     if record is not None:

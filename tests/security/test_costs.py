@@ -96,7 +96,7 @@ def costly(tmp_path_factory: pytest.TempPathFactory) -> Any:
     env = {
         "HPTVSIM_WORKERS": "1",
         "HPTVSIM_MAX_STEPS": "20000",
-        "HPTVSIM_EPISODE_MEMORY_MB": "8192",
+        "HPTVSIM_EPISODE_MEMORY_MB": "4096",
         "HPTVSIM_EPISODE_DISK_MB": "100",
         "HPTVSIM_EPISODE_CPU_S": "3600",
         "HPTVSIM_PREP_TIMEOUT_S": "120",
@@ -143,13 +143,13 @@ def test_finding1_report_period_is_refused_at_admission(api: httpx.Client) -> No
 
 def test_memory_estimate_refuses_a_big_valid_episode(api: httpx.Client) -> None:
     """16 vehicles x 1024 beams x 20000 steps: every size within its own limit, but the ranges the
-    trajectory keeps alone would take ~50 GB; refused naming the beams, the limit and the steps
-    that would fit, in both modes."""
+    trajectory keeps alone would take ~7.3 GiB (24 B each, ``MEM_PER_BEAM_STEP``; ~5.5 GiB
+    measured); refused naming the beams, the limit and the steps that would fit, in both modes."""
     t, policies = _chase(api, 15, beams=1024)
     for extra in ({"policies": policies}, {"mode": "interactive", "control": ["evader_0"]}):
         r = api.post("/episodes", json={"scenario": t, "max_steps": 20000, **extra})
         detail = _refused(
-            r, "scenario.sensors.sonar.beams", "memory", "8192 MiB", "HPTVSIM_EPISODE_MEMORY_MB", "max_steps"
+            r, "scenario.sensors.sonar.beams", "memory", "4096 MiB", "HPTVSIM_EPISODE_MEMORY_MB", "max_steps"
         )
         assert "steps would fit" in detail
 
