@@ -25,8 +25,9 @@ surge speed ``v`` [m/s], yaw rate ``omega`` [rad/s] and vertical speed ``w_z = z
   ``[phi_dot, theta_dot, psi_dot] = T_theta(phi, theta) [p, q, r]`` (Fossen 2021, ch. 2; paper
   Eq. 4), with feedforward of the moments the model knows: the restoring moments ``g_4, g_5``
   (Fossen 2021, Eq. 4.6) and the roll and pitch rows of ``C(nu) nu`` with ``C`` built from
-  ``M = M_RB + M_A`` by Theorem 3.2 (Fossen 2021), which hold the centripetal moments and the Munk
-  moment ``(X_udot - Z_wdot) u w`` (below)::
+  ``M = M_RB + M_A`` by Theorem 3.2 (Fossen 2021), which carry the centripetal moments and the
+  Munk moment ``(X_udot - Z_wdot) u w`` (below), evaluated at the measured ``nu`` over ground (the
+  controller does not know the current)::
 
       e_phi = -phi,  e_theta = theta_cmd - theta
       tau_K* = m_44 (3 omega_n^2 e_phi + 3 omega_n e_phi_dot + omega_n^3 xi_phi) + g_4 + [C(nu) nu]_4
@@ -426,8 +427,7 @@ SIXDOF_SETTLING_TIME_98: Final = MappingProxyType(
         # stays within 2 % of it, attitude held; checked by tests/dynamics/test_controller6.py.
         ("work_class", "surge"): 2.0,  # measured 1.40 s (step to 3.0 m/s, pitch held within 0.7 deg)
         ("work_class", "yaw"): 1.0,  # measured 0.80 s
-        ("work_class", "dive"): 3.0,  # measured 2.58 s (passive: 2.40 s; the pitch hold resists the
-        # heave-pitch added-mass coupling Z_qdot, which tilted the free vehicle into the dive)
+        ("work_class", "dive"): 3.0,  # measured 2.58 s (passive: 2.40 s)
         ("work_class", "rise"): 2.5,  # measured 2.00 s
         ("spherical", "surge"): 2.0,  # measured 1.78 s (passive: 5.62 s, its pendulum rocked the speed)
         ("spherical", "yaw"): 1.5,  # measured 1.32 s
@@ -490,6 +490,16 @@ def _attitude_channel(
 
     ``tau* = m_ii (3 omega_n^2 e + 3 omega_n e_dot + omega_n^3 xi) + ff``, ``tau = sat(tau*, limit)``,
     ``xi_dot = e + (tau - tau*) / (m_ii omega_n^3 T_aw)`` (module docstring).
+
+    Args:
+        e: Angle error [rad].
+        e_dot: Its rate [rad/s] (from the Euler-angle rates).
+        xi: Integrator state [rad s].
+        m_ii: Inertia of the axis, rigid body plus added [kg m^2].
+        omega_n: Natural frequency [rad/s].
+        ff: Feedforward moment [N m].
+        limit: Moment limit [N m].
+        T_aw: Anti-windup time constant [s].
 
     Returns:
         ``(tau, xi_dot)`` [N m, rad].
