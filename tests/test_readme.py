@@ -342,9 +342,10 @@ COMMANDS: dict[str, tuple[Run | Help, ...]] = {
         ),
     ),
     "hptvsim demo --scenario ridge_3d --out hptvsim-out": (
-        Run(  # the 3-D episode with its depth plot (captured at step 1089, about 4 s)
+        Run(  # the 3-D episode with its depth plot (captured at step 454, about 1 s; at the
+            # former 1.2 and 0.8 m/s, before issue 37's attitude hold, at step 1089)
             "hptvsim demo --scenario ridge_3d --out {tmp} --duration 5",
-            r"outcome: captured at 272\.25 s[\s\S]*episode plot: ",
+            r"outcome: captured at 113\.50 s[\s\S]*episode plot: ",
             ("{tmp}/trajectories.png", "{tmp}/episode.png"),
         ),
     ),

@@ -495,7 +495,7 @@ class BatchedVehicleSystem(VehicleSystem):
     def states(self) -> F64Array:
         """Full states ``(B, N, 8)``: x, y, psi (not wrapped), u, v, r, and the controller integrators.
 
-        6-DOF: ``(B, N, 15)``: eta, nu and three integrators.
+        6-DOF: ``(B, N, 17)``: eta, nu and five integrators.
         """
         out = np.empty((self.num_envs, self.num_vehicles, self._nx))
         for g in self._groups:

@@ -158,7 +158,7 @@ SIXDOF_LAYOUT: Final = Layout(
     fmu_names=SIXDOF_FMU_NAMES,
 )
 """The 6-DOF closed loop (:func:`hptvsim.dynamics.sixdof_closed_loop`): ``(B, N, 6)`` inputs,
-``(B, N, 17)`` outputs."""
+``(B, N, 19)`` outputs."""
 
 LAYOUTS: Final = MappingProxyType({3: PLANAR_LAYOUT, 6: SIXDOF_LAYOUT})
 

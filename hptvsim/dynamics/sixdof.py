@@ -38,10 +38,10 @@ of :func:`sixdof_model`; ``held = ()`` is the free 6-DOF vehicle.
 
 **Singularity at theta = +-90 deg.** ``T_theta`` contains ``1 / cos(theta)``. In use the vehicles
 stay far from it: both have ``BG > 0``, so the pitch restoring moment ``(z_g W - z_b B)
-sin(theta)`` pulls the nose back towards level; the 6-DOF controller
-(:mod:`hptvsim.dynamics.controller6`) commands surge, yaw rate and vertical speed and leaves roll
-and pitch to that moment (the work-class vehicle's Munk moment pitches it over above about 1.3 m/s,
-so the 3-D scenarios cap its speed at 1.2 m/s). As a guard, ``cos(theta)`` in ``T_theta`` is
+sin(theta)`` pulls the nose back towards level, and the 6-DOF controller
+(:mod:`hptvsim.dynamics.controller6`) holds roll and pitch with the thrusters (in its passive mode
+it leaves them to that moment, and the work-class vehicle's Munk moment pitches it over above
+about 1.3 m/s). As a guard, ``cos(theta)`` in ``T_theta`` is
 clamped away from zero, ``|cos(theta)| >= COS_THETA_MIN = 1e-3`` (``|theta|`` within 0.057 deg of
 90 deg), keeping its sign: ``J`` is finite for every pose (entries at most 1 / ``COS_THETA_MIN`` =
 1000 in magnitude) and exact everywhere else. Inside the clamp the Euler-angle rates are wrong, as

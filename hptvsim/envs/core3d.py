@@ -68,8 +68,9 @@ depth.
 
 **Vehicles**: built-in types only (``work_class``, ``spherical``); a group's ``parameters`` may
 override ``v_min``, ``v_max`` and ``omega_max`` (passed to the 6-DOF vehicle); other planar
-parameters have no 6-DOF meaning here and are refused. Mind the attitude envelope
-(:mod:`hptvsim.dynamics.controller6`): the work-class UUV pitches over above about 1.3 m/s.
+parameters have no 6-DOF meaning here and are refused. The 6-DOF controller holds roll and pitch
+(:mod:`hptvsim.dynamics.controller6`), so Table II's limits are flown; in its passive mode the
+work-class UUV would pitch over above about 1.3 m/s.
 
 Deterministic: the same seed gives the same episode bit for bit.
 """

@@ -53,11 +53,13 @@ class PurePursuit3D:
     ``dz`` [m] to the target (positive: deeper); full speed, less ``dive_slowdown`` of it in proportion to
     ``|a_w| / max_vertical`` (speed fraction ``1 - dive_slowdown |a_w| / max_vertical``).
 
-    Why not full vertical speed at full speed: the work-class UUV has no pitch control, and the
-    Munk moment trims it nose-up by about ``a u w_z / (k - a u^2)``
-    (:func:`~hptvsim.dynamics.controller6.munk_trim_pitch`): at 1.2 m/s, diving at 0.2 m/s pitches
-    it over. At half speed and 0.3 m/s (the defaults: ``max_vertical = 0.3`` of ``w_z_max = 1``)
-    its pitch stays within about 15 degrees. While the altitude is below ``min_altitude`` [m] the
+    Why not full vertical speed at full speed: these defaults date from the passive attitude, when
+    the Munk moment trimmed the work-class UUV nose-up by about ``a u w_z / (k - a u^2)``
+    (:func:`~hptvsim.dynamics.controller6.munk_trim_pitch`) and, at 1.2 m/s, diving at 0.2 m/s
+    pitched it over; at half speed and 0.3 m/s (``max_vertical = 0.3`` of ``w_z_max = 1``) its
+    pitch stayed within about 15 degrees. The 6-DOF controller now holds roll and pitch (issue
+    37), so the slowdown is no longer needed for the attitude; the defaults are kept, so the
+    policy's behaviour and its tests are as they were. While the altitude is below ``min_altitude`` [m] the
     vehicle does not dive (the seabed comes first), and it does not climb above ``min_depth`` [m].
 
     **Over, not around** (``climb_over``, on by default). Repulsion alone leaves a pursuer stuck

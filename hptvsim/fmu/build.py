@@ -98,6 +98,8 @@ class _Kind:
         integer_last: The last parameter is an Integer (the planar ``control_mode``).
         mass_hint: Which parameters to check when ``M`` is not positive definite.
         feedthrough: Inputs the applied-thrust outputs (``tau_*``) depend on directly.
+        extra_units: Units this kind declares besides :data:`UNIT_EXPONENTS` (name, SI base-unit
+            exponents), so that the other kind's model description stays as it was.
     """
 
     label: str
@@ -110,6 +112,7 @@ class _Kind:
     integer_last: bool
     mass_hint: str
     feedthrough: tuple[str, ...]
+    extra_units: tuple[tuple[str, tuple[tuple[str, int], ...]], ...] = ()
 
     @property
     def init_names(self) -> tuple[str, ...]:
@@ -168,6 +171,7 @@ _SIXDOF_KIND: Final = _Kind(
     integer_last=False,
     mass_hint="m, the inertia tensor, r_g and the added-mass derivatives",
     feedthrough=("v_cmd", "omega_cmd", "w_z_cmd"),
+    extra_units=(("1", ()),),  # attitude_hold, a 0/1 switch (a Real: every 6-DOF parameter is one)
 )
 _DEFAULT_STOP: Final = 60.0  # s, default experiment length in modelDescription.xml
 
@@ -448,6 +452,9 @@ def _model_description(
     units_xml = []
     for unit, exps in UNIT_EXPONENTS.items():
         base = " ".join(f'{k}="{v}"' for k, v in exps.items())
+        units_xml.append(f'    <Unit name="{escape(unit)}">\n      <BaseUnit {base}/>\n    </Unit>')
+    for unit, exp_items in kind.extra_units:
+        base = " ".join(f'{k}="{v}"' for k, v in exp_items)
         units_xml.append(f'    <Unit name="{escape(unit)}">\n      <BaseUnit {base}/>\n    </Unit>')
 
     return "\n".join(

@@ -33,7 +33,7 @@ def test_6dof_backends_agree_bit_for_bit() -> None:
     poses[..., 5] = rng.uniform(-3.0, 3.0, (2, 3))  # heading [rad]
     for s in systems:
         out = s.reset(poses=poses)
-        assert out.shape == (2, 3, 17) and s.commands.shape == (2, 3, 3) and s.currents.shape == (2, 3, 3)
+        assert out.shape == (2, 3, 19) and s.commands.shape == (2, 3, 3) and s.currents.shape == (2, 3, 3)
         np.testing.assert_array_equal(s.observations[..., 0:3], poses[..., 0:3])
     for _ in range(60):
         cmd = rng.uniform([0.0, -0.3, -0.3], [1.0, 0.3, 0.3], (2, 3, 3))

@@ -1,4 +1,5 @@
-"""6-DOF low-level controller: tracks [v, omega, w_z], saturates without windup, is the planar one."""
+"""6-DOF low-level controller: tracks [v, omega, w_z], holds roll and pitch, saturates without windup,
+is the planar one; its passive mode (attitude_hold = 0) leaves roll and pitch to the restoring moments."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ from hptvsim.dynamics import VEHICLE_TYPES, vehicle_model
 from hptvsim.dynamics._casadi import ca
 from hptvsim.dynamics.controller6 import (
     PLANAR_CONTROLLER_NAMES,
+    REXROV_MAX_THRUST,
     SIXDOF_CLOSED_LOOP_INPUT_NAMES,
     SIXDOF_CLOSED_LOOP_OUTPUT_NAMES,
     SIXDOF_CLOSED_LOOP_STATE_NAMES,
@@ -21,10 +23,12 @@ from hptvsim.dynamics.controller6 import (
     SIXDOF_SETTLING_TIME_98,
     SIXDOF_STEP_COMMANDS,
     SixDofControllerParameters,
+    attitude_actuator_limits,
     control_law_6dof,
     heave_actuator_limit,
     munk_critical_speed,
     munk_trim_pitch,
+    rexrov_vertical_thrusts,
     sixdof_closed_loop,
     sixdof_controller_from_planar,
 )
@@ -39,8 +43,8 @@ H = 0.02  # s, RK4 step of the closed loop
 Z0 = 50.0  # m, starting depth
 NX, NW = len(SIXDOF_CLOSED_LOOP_STATE_NAMES), len(SIXDOF_CLOSED_LOOP_INPUT_NAMES)
 OUT = {name: i for i, name in enumerate(SIXDOF_CLOSED_LOOP_OUTPUT_NAMES)}
-TAU = ("tau_X", "tau_Y", "tau_Z", "tau_N")
-LIMITS = ("tau_X_max", "tau_Y_max", "tau_Z_max", "tau_N_max")
+TAU = ("tau_X", "tau_Y", "tau_Z", "tau_K", "tau_M", "tau_N")
+LIMITS = ("tau_X_max", "tau_Y_max", "tau_Z_max", "tau_K_max", "tau_M_max", "tau_N_max")
 # axis: (index of the command in w, output that tracks it)
 AXES = {"surge": (0, "u"), "yaw": (1, "r"), "dive": (2, "z_dot"), "rise": (2, "z_dot"), "heave": (2, "z_dot")}
 
@@ -97,6 +101,11 @@ def _assert_thrust_within_limits(Y: np.ndarray, c: SixDofControllerParameters) -
 
 def _ramp(t: np.ndarray, t0: float, t1: float) -> np.ndarray:
     return np.clip((t - t0) / (t1 - t0), 0.0, 1.0)
+
+
+def _passive(vt: str) -> SixDofControllerParameters:
+    """The shipped controller in its passive mode: roll and pitch left to the restoring moments."""
+    return SIXDOF_CONTROLLER_TYPES[vt].replace(attitude_hold=0.0)
 
 
 # --- 1. the planar reduction is today's planar closed loop --------------------------------------------
@@ -161,9 +170,10 @@ def test_vertical_speed_command_is_clipped(vt: str) -> None:
 
 # --- 3. saturation without windup -------------------------------------------------------------------
 
-RECOVERY_TIME = {"work_class": 5.0, "spherical": 2.5}
-"""s, back within 2 % of a feasible command after 20 s saturated (measured: work-class 3.24 surge,
-2.42 yaw, 4.42 heave; sphere 2.04, 1.26, 1.36)."""
+RECOVERY_TIME = {"work_class": 6.0, "spherical": 2.5}
+"""s, back within 2 % of a feasible command after 20 s saturated, attitude held (measured:
+work-class 5.16 surge, 2.40 yaw, 4.66 heave; sphere 2.10, 1.26, 1.36; the work-class surge step is
+now to v_max = 3.0 m/s, which the passive vehicle could not fly: 3.24 s from 1.0 m/s before)."""
 
 
 def _infeasible(vt: str, axis: str) -> tuple[str, float, float]:
@@ -211,7 +221,7 @@ def test_saturated_axis_recovers_without_windup(vt: str, axis: str) -> None:
     assert recovery["none"] > 3.0 * recovery["anti-windup"], recovery
 
 
-# --- 4. roll and pitch: passive, small inside the envelope, decaying ---------------------------------
+# --- 4. roll and pitch in the passive mode: small inside the envelope, decaying ----------------------
 
 MANOEUVRE = {"work_class": (0.5, 0.3, 0.2), "spherical": (1.0, 0.5, 0.5)}
 """Dive and turn: v [m/s], omega [rad/s], w_z [m/s], ramped in over 5 s, held 20 s, ramped out over 5 s."""
@@ -226,7 +236,7 @@ def test_roll_and_pitch_stay_small_in_a_dive_and_turn_and_decay(vt: str) -> None
     s = _ramp(t, 0.0, 5.0) - _ramp(t, 25.0, 30.0)
     W = np.zeros((NW, n))
     W[0:3] = np.outer([v, omega, w_z], s)
-    X, Y = _simulate(vt, W)
+    X, Y = _simulate(vt, W, c=_passive(vt))
     k = int(20.0 / H)
     np.testing.assert_allclose(Y[k, [OUT["u"], OUT["r"], OUT["z_dot"]]], [v, omega, w_z], rtol=0.02)
     attitude = np.abs(X[:, 3:5])  # |phi|, |theta|
@@ -246,7 +256,7 @@ def test_work_class_forward_dive_trims_at_the_munk_pitch() -> None:
     for u, w_z in ((0.5, 0.2), (0.3, 0.3)):
         W = np.zeros((NW, n))
         W[0], W[2] = u * _ramp(t, 0.0, 5.0), w_z * _ramp(t, 0.0, 5.0)
-        X, _ = _simulate("work_class", W)
+        X, _ = _simulate("work_class", W, c=_passive("work_class"))
         assert X[-1, 4] == pytest.approx(munk_trim_pitch(p, u, w_z), rel=0.15)
         assert munk_trim_pitch(p, u, w_z) > 0.0
 
@@ -261,7 +271,7 @@ def test_work_class_loses_its_pitch_above_the_munk_critical_speed() -> None:
     for f in (0.85, 1.1):
         W = np.zeros((NW, n))
         W[0] = f * u_c
-        X, _ = _simulate("work_class", W)
+        X, _ = _simulate("work_class", W, c=_passive("work_class"))
         pitch[f] = np.abs(X[:, 4]).max()
     assert pitch[0.85] < math.radians(15.0)
     assert pitch[1.1] > math.radians(45.0)
@@ -290,7 +300,7 @@ def test_sphere_heels_in_a_steady_turn_as_newton_euler_about_its_cg_says(v: floa
     t = H * np.arange(n)
     W = np.zeros((NW, n))
     W[0:2] = np.outer([v, omega], _ramp(t, 0.0, 10.0))
-    X, Y = _simulate("spherical", W)
+    X, Y = _simulate("spherical", W, c=_passive("spherical"))
     last = slice(-int(10.0 / H), None)  # the last 10 s, about 5 roll periods: averages over the ripple
     phi, theta = X[last, 3].mean(), X[last, 4].mean()
     u, vs, w, pr, q, r = (Y[last, OUT[k]].mean() for k in ("u", "v", "w", "p", "q", "r"))
@@ -310,6 +320,115 @@ def test_sphere_heels_in_a_steady_turn_as_newton_euler_about_its_cg_says(v: floa
     assert phi > math.radians(2.0)
 
 
+# --- 4b. roll and pitch held: Table II's limits in a dive and turn ------------------------------------
+
+FAST_MANOEUVRE = {"work_class": (3.0, 0.3, 0.5), "spherical": (2.0, 0.3, 0.5)}
+"""v_max (Table II) with a turn and a dive: v [m/s], omega [rad/s], w_z [m/s], stepped from rest."""
+FAST_SURGE = {"work_class": 2.8, "spherical": 1.9}  # m/s, reached (issue 37: >= 2.8 m/s at 3.0 m/s)
+ATTITUDE_HELD = math.radians(15.0)  # rad, |phi| and |theta| throughout (issue 37)
+
+
+def _fast_run(vt: str, c: SixDofControllerParameters | None = None) -> tuple[np.ndarray, np.ndarray]:
+    n = int(60.0 / H)
+    W = np.zeros((NW, n))
+    W[0:3] = np.array(FAST_MANOEUVRE[vt])[:, None]
+    return _simulate(vt, W, c=c)
+
+
+@pytest.mark.parametrize("vt", TYPES)
+def test_attitude_held_at_table_ii_speed_in_a_dive_and_turn(vt: str) -> None:
+    """v_max with a dive and a turn from rest: the surge speed reached, roll and pitch within 15 deg
+    (measured: work-class 3.00 m/s, 0.25 deg, 1.01 deg; sphere 2.00 m/s, 0.13 deg, 2.05 deg), every
+    channel within its limit; RexROV's four vertical thrusters can give the heave, roll and pitch
+    demands together (TAM allocation, at most 2000 N each; measured 1945 N)."""
+    v, omega, w_z = FAST_MANOEUVRE[vt]
+    c = SIXDOF_CONTROLLER_TYPES[vt]
+    assert c.attitude_hold == 1.0 and c.v_max == VEHICLE_TYPES[vt].v_max  # the default, Table II
+    X, Y = _fast_run(vt)
+    assert Y[:, OUT["u"]].max() >= FAST_SURGE[vt]
+    np.testing.assert_allclose(Y[-1, [OUT["u"], OUT["r"], OUT["z_dot"]]], [v, omega, w_z], rtol=1e-3)
+    assert np.abs(X[:, 3:5]).max() < ATTITUDE_HELD
+    _assert_thrust_within_limits(Y, c)
+    assert np.abs(Y[:, OUT["tau_M"]]).max() > 0.1 * c.tau_M_max  # the pitch channel did work
+    if vt == "work_class":
+        zkm = Y[:, [OUT["tau_Z"], OUT["tau_K"], OUT["tau_M"]]]
+        thrusts = np.array([rexrov_vertical_thrusts(*row) for row in zkm])
+        assert np.abs(thrusts).max() <= REXROV_MAX_THRUST
+
+
+def test_passive_work_class_pitches_over_at_table_ii_speed() -> None:
+    """The same run in the passive mode: the Munk moment pitches RexROV over and it never reaches
+    2.8 m/s (issue 37 measured, with the FMU: 2.59 m/s, roll through 365 deg, pitch 87 deg; here,
+    stepped from rest: 2.48 m/s, roll through 729 deg, the Euler pitch past 90 deg)."""
+    X, Y = _fast_run("work_class", c=_passive("work_class"))
+    assert Y[:, OUT["u"]].max() < FAST_SURGE["work_class"]
+    assert np.abs(X[:, 4]).max() > math.radians(80.0)
+    assert np.ptp(X[:, 3]) > math.radians(180.0)  # rolled over too
+    assert np.all(Y[:, [OUT["tau_K"], OUT["tau_M"]]] == 0.0)  # no roll or pitch actuation
+    np.testing.assert_array_equal(X[:, 15:17], 0.0)  # the attitude integrators held
+
+
+@pytest.mark.parametrize(("vt", "v", "omega"), [("work_class", 3.0, 1.5), ("spherical", 2.0, 3.0)])
+def test_hard_turn_at_table_ii_limits_holds_attitude_and_the_planar_speed(
+    vt: str, v: float, omega: float
+) -> None:
+    """Both Table II limits at once, level: roll and pitch stay within 15 deg (the passive sphere
+    heels by atan(u r / g), 31 deg at 1.3 m/s and 3 rad/s) and the steady surge speed is the planar
+    model's, which the sway-yaw couplings limit (measured: 2.55 vs 2.54 m/s; 1.315 vs 1.315 m/s)."""
+    n = int(40.0 / H)
+    W = np.zeros((NW, n))
+    W[0], W[1] = v, omega
+    X, Y = _simulate(vt, W)
+    assert np.abs(X[:, 3:5]).max() < ATTITUDE_HELD
+    _assert_thrust_within_limits(Y, SIXDOF_CONTROLLER_TYPES[vt])
+    W3 = np.zeros((len(INPUT_NAMES), n))
+    W3[0], W3[1] = v, omega
+    planar = VEHICLE_TYPES[vt]
+    X3 = np.array(vehicle_model().step.mapaccum("planar", n)(np.zeros(8), W3, planar.to_vector(), H))
+    assert Y[-1, OUT["r"]] == pytest.approx(omega, rel=1e-3)
+    assert Y[-1, OUT["u"]] == pytest.approx(X3[3, -1], rel=0.01)
+    assert Y[-1, OUT["u"]] < 0.9 * v  # the turn, not the attitude, limits it
+
+
+@pytest.mark.parametrize(("vt", "theta_cmd"), [("work_class", 0.2), ("spherical", -0.3)])
+def test_commanded_pitch_is_held(vt: str, theta_cmd: float) -> None:
+    """A commanded pitch (tunable parameter theta_cmd) cruising at 1 m/s: held to 1e-6 rad, roll at 0."""
+    c = SIXDOF_CONTROLLER_TYPES[vt].replace(theta_cmd=theta_cmd)
+    n = int(30.0 / H)
+    W = np.zeros((NW, n))
+    W[0] = 1.0
+    X, Y = _simulate(vt, W, c=c)
+    assert X[-1, 4] == pytest.approx(theta_cmd, abs=1e-6)
+    assert abs(X[-1, 3]) < 1e-6
+    assert Y[-1, OUT["u"]] == pytest.approx(1.0, rel=1e-3)
+    _assert_thrust_within_limits(Y, c)
+
+
+@pytest.mark.parametrize("vt", TYPES)
+def test_saturated_pitch_channel_recovers_without_windup(vt: str) -> None:
+    """The pitch moment limit cut below what the command needs (theta_cmd = 0.4 rad against the
+    restoring moment, or RexROV's Munk moment at 3 m/s): the moment stays at the limit and the
+    integrator settles (back-calculation); back to level, the pitch recovers within 5 s."""
+    p, c = SIXDOF_VEHICLE_TYPES[vt], SIXDOF_CONTROLLER_TYPES[vt]
+    W_N, B_N = p.m * G_N, p.rho * G_N * p.volume  # N
+    needed = abs(p.z_g * W_N - p.z_b * B_N) * math.sin(0.4)  # N m, restoring moment at 0.4 rad
+    limited = c.replace(tau_M_max=0.5 * needed, theta_cmd=0.4)
+    n1, n2 = int(20.0 / H), int(10.0 / H)
+    W = np.zeros((NW, n1))
+    X1, Y1 = _simulate(vt, W, c=limited)
+    assert np.abs(Y1[:, OUT["tau_M"]]).max() <= limited.tau_M_max
+    assert abs(Y1[-1, OUT["tau_M"]]) > 0.99 * limited.tau_M_max  # saturated
+    assert X1[-1, 4] < 0.3  # could not reach the command
+    xi, k0 = X1[:, 16], n1 // 2
+    error_integral = float(np.sum(0.4 - X1[k0:, 4]) * H)  # rad s, what a plain integrator would add
+    assert abs(xi[-1] - xi[k0]) < 0.05 * error_integral  # settled, not integrating
+    # from the saturated state, back to level under the full limit
+    level = c.replace(theta_cmd=0.0).to_vector()
+    X2 = np.array(_trajectory((), n2)(X1[-1], np.zeros((NW, n2)), p.to_vector(), level, H)).T
+    t = H * np.arange(1, n2 + 1)
+    assert np.abs(X2[t >= 5.0, 4]).max() < math.radians(0.5)
+
+
 # --- 5. a positively buoyant vehicle holds its depth ----------------------------------------------------
 
 
@@ -319,7 +438,7 @@ def _mismatched_trajectory(n: int) -> Any:
 
     (x0, w, p, p_ctrl, c, h) -> NX x n: the plant runs on p, the feedforward and scalings on p_ctrl.
     """
-    eta, nu, xi = ca.SX.sym("eta", 6), ca.SX.sym("nu", 6), ca.SX.sym("xi", 3)
+    eta, nu, xi = ca.SX.sym("eta", 6), ca.SX.sym("nu", 6), ca.SX.sym("xi", NX - 12)
     w, pc, c = (
         ca.SX.sym("w", NW),
         ca.SX.sym("pc", len(SIXDOF_PARAMETER_NAMES)),
@@ -340,7 +459,7 @@ def _mismatched_trajectory(n: int) -> Any:
     )
 
     def rhs(xs: Any) -> Any:
-        tau, xi_dot = law(xs[0:6], xs[6:12], xs[12:15], wm, pcm, cm)
+        tau, xi_dot = law(xs[0:6], xs[6:12], xs[12:], wm, pcm, cm)
         e_dot, n_dot = dynamics(xs[0:6], xs[6:12], tau, wm[3:6], p)
         return ca.vertcat(e_dot, n_dot, xi_dot)
 
@@ -421,7 +540,29 @@ def test_heave_limits_are_sized_and_within_the_published_thrust() -> None:
     assert work.tau_Z_max < published_vertical
 
 
+def test_attitude_limits_come_from_the_thruster_layouts() -> None:
+    """RexROV: four vertical thrusters of 2000 N in the TAM rows' sign patterns; the sphere: two
+    opposed thrusters of a quarter of the heave limit each at R = 0.2 m (module docstring)."""
+    work, sphere = SIXDOF_CONTROLLER_TYPES["work_class"], SIXDOF_CONTROLLER_TYPES["spherical"]
+    assert (work.tau_K_max, work.tau_M_max) == attitude_actuator_limits("work_class")
+    assert work.tau_K_max == pytest.approx(4 * 0.4352320 * 2000.0, rel=1e-6)  # N m, 3481.9
+    assert work.tau_M_max == pytest.approx(4 * 0.9430935 * 2000.0, rel=1e-6)  # N m, 7544.7
+    assert sphere.tau_K_max == sphere.tau_M_max == pytest.approx(2 * sphere.tau_Z_max / 4 * 0.2)
+    # a pure roll or pitch moment at its limit puts every vertical thruster at 2000 N
+    for demand in ((0.0, work.tau_K_max, 0.0), (0.0, 0.0, work.tau_M_max)):
+        np.testing.assert_allclose(np.abs(rexrov_vertical_thrusts(*demand)), REXROV_MAX_THRUST, rtol=1e-6)
+    # heave: 0.964 of each thruster's thrust along z
+    assert sum(rexrov_vertical_thrusts(4 * 0.9637702 * 1000.0, 0.0, 0.0)) == pytest.approx(4000.0, rel=1e-6)
+    for c, omega_n in ((work, 3.0), (sphere, 6.0)):  # the yaw channel's natural frequency
+        assert c.omega_n_phi == c.omega_n_theta == omega_n == c.K_p_r / 2.0
+        assert c.attitude_hold == 1.0 and c.theta_cmd == 0.0
+
+
 def test_controller_parameters_are_validated() -> None:
+    with pytest.raises(ParameterError, match="attitude_hold"):
+        SIXDOF_CONTROLLER_TYPES["spherical"].replace(attitude_hold=0.5)
+    with pytest.raises(ParameterError, match="theta_cmd"):
+        SIXDOF_CONTROLLER_TYPES["spherical"].replace(theta_cmd=1.0)
     with pytest.raises(ParameterError, match="come from the planar set"):
         sixdof_controller_from_planar(VEHICLE_TYPES["spherical"], K_p_u=3.0)
     with pytest.raises(ParameterError, match="unknown 6-DOF controller parameter"):

@@ -39,28 +39,35 @@ MANOEUVRE: tuple[tuple[float, float, float, float, float, float, float], ...] = 
 )
 
 
-def _inputs() -> npt.NDArray[np.float64]:
-    """One row of the FMU's inputs per control step over :data:`MANOEUVRE`."""
+MODES = {"hold": 1.0, "passive": 0.0}
+"""The FMU's ``attitude_hold`` parameter: roll and pitch held (the default) or passive."""
+
+
+def _inputs(manoeuvre: tuple[tuple[float, ...], ...] = MANOEUVRE) -> npt.NDArray[np.float64]:
+    """One row of the FMU's inputs per control step over ``manoeuvre``."""
     rows = []
-    for duration, *w in MANOEUVRE:
+    for duration, *w in manoeuvre:
         rows += [w] * round(duration / STEP)
     return np.array(rows, dtype=np.float64)
 
 
-def _fmu_run(vt: str, x0: dict[str, float]) -> npt.NDArray[np.float64]:
+def _fmu_run(
+    vt: str, x0: dict[str, float], inputs: npt.NDArray[np.float64] | None = None
+) -> npt.NDArray[np.float64]:
+    """Outputs after each step; ``x0`` sets start values and parameters (``attitude_hold`` too)."""
     inst = FmuModel(fmu_path(vt, dof=6)).instantiate(f"six_{vt}")
     inst.initialize(x0)
     w = inst.bind_inputs(list(SIXDOF_CLOSED_LOOP_INPUT_NAMES))
     inst.bind_outputs(list(SIXDOF_CLOSED_LOOP_OUTPUT_NAMES))
     out = []
-    for row in _inputs():
+    for row in _inputs() if inputs is None else inputs:
         w[:] = row
         out.append(inst.step(STEP).copy())
     inst.free()
     return np.array(out)
 
 
-def _cvodes_run(vt: str, x0: dict[str, float]) -> npt.NDArray[np.float64]:
+def _cvodes_run(vt: str, x0: dict[str, float], attitude_hold: float = 1.0) -> npt.NDArray[np.float64]:
     """The same closed loop integrated by CVODES (BDF, tolerances 1e-12), inputs held per step."""
     cl = sixdof_closed_loop()
     x, w = ca.SX.sym("x", cl.nx), ca.SX.sym("w", cl.nw)
@@ -68,7 +75,8 @@ def _cvodes_run(vt: str, x0: dict[str, float]) -> npt.NDArray[np.float64]:
     dae = {"x": x, "p": ca.vertcat(w, p, c), "ode": cl.ode(x, w, p, c)}
     opts = {"abstol": 1e-12, "reltol": 1e-12, "max_num_steps": 100000}
     F = ca.integrator("F", "cvodes", dae, 0.0, STEP, opts)
-    params = np.concatenate([SIXDOF_VEHICLE_TYPES[vt].to_vector(), SIXDOF_CONTROLLER_TYPES[vt].to_vector()])
+    ctrl = SIXDOF_CONTROLLER_TYPES[vt].replace(attitude_hold=attitude_hold)
+    params = np.concatenate([SIXDOF_VEHICLE_TYPES[vt].to_vector(), ctrl.to_vector()])
     names = ("x", "y", "z", "phi", "theta", "psi", "u", "v", "w", "p", "q", "r")
     state = np.zeros(cl.nx)
     state[:12] = [x0.get(f"{n}_0", 0.0) for n in names]
@@ -90,11 +98,12 @@ def test_6dof_fmu_is_valid_and_current(vt: str) -> None:
     assert {f"binaries/linux64/{ident}.so", f"binaries/win64/{ident}.dll", "sources/hptv_model.c"} <= names
 
 
+@pytest.mark.parametrize("mode", MODES)
 @pytest.mark.parametrize("vt", TYPES)
-def test_6dof_fmu_matches_cvodes_over_a_dive_turn_and_current(vt: str) -> None:
-    x0 = {"x_0": 5.0, "y_0": -3.0, "z_0": 20.0, "psi_0": 0.4}
+def test_6dof_fmu_matches_cvodes_over_a_dive_turn_and_current(vt: str, mode: str) -> None:
+    x0 = {"x_0": 5.0, "y_0": -3.0, "z_0": 20.0, "psi_0": 0.4, "attitude_hold": MODES[mode]}
     ours = _fmu_run(vt, x0)
-    ref = _cvodes_run(vt, x0)
+    ref = _cvodes_run(vt, x0, MODES[mode])
     assert ours.shape == ref.shape == (len(_inputs()), len(SIXDOF_CLOSED_LOOP_OUTPUT_NAMES))
     assert np.isfinite(ours).all()
     z = ours[:, SIXDOF_CLOSED_LOOP_OUTPUT_NAMES.index("z")]
@@ -102,18 +111,24 @@ def test_6dof_fmu_matches_cvodes_over_a_dive_turn_and_current(vt: str) -> None:
     psi = ours[:, SIXDOF_CLOSED_LOOP_OUTPUT_NAMES.index("psi")]
     assert abs(psi[-1] - 0.4) > 0.5  # and turned
     # pose, velocities and z_dot to 1e-6 [m, rad, m/s, rad/s]; the applied thrust (up to some
-    # thousand N for the work-class vehicle) to 1e-6 of its largest value in the run
+    # thousand N for the work-class vehicle) to 1e-6 of its largest value in the run or of its
+    # actuator limit: the attitude channels amplify rate differences by m_55 3 omega_n (the
+    # sphere's pitch: 10 N m s/rad), so RK4's 5e-7 rad/s in q is 3e-6 N m (the sphere's
+    # tau_M_max is 5.5 N m; measured with h_max = 0.005 s: 1.8e-7 N m, RK4's 16x)
     motion = [i for i, n in enumerate(SIXDOF_CLOSED_LOOP_OUTPUT_NAMES) if not n.startswith("tau_")]
     thrust = [i for i, n in enumerate(SIXDOF_CLOSED_LOOP_OUTPUT_NAMES) if n.startswith("tau_")]
     np.testing.assert_allclose(ours[:, motion], ref[:, motion], rtol=0.0, atol=1e-6)
-    scale = np.maximum(1.0, np.abs(ref[:, thrust]).max(axis=0))  # N or N m
+    ctrl = SIXDOF_CONTROLLER_TYPES[vt]
+    limits = [getattr(ctrl, f"{SIXDOF_CLOSED_LOOP_OUTPUT_NAMES[i]}_max") for i in thrust]  # N or N m
+    scale = np.maximum(limits, np.abs(ref[:, thrust]).max(axis=0))  # N or N m
     assert (np.abs(ours[:, thrust] - ref[:, thrust]) <= 1e-6 * scale).all()
 
 
+@pytest.mark.parametrize("mode", MODES)
 @pytest.mark.parametrize("vt", TYPES)
-def test_6dof_batch_entry_points_equal_the_fmu_path(vt: str, tmp_path: Path) -> None:
+def test_6dof_batch_entry_points_equal_the_fmu_path(vt: str, mode: str, tmp_path: Path) -> None:
     """hptvsim_advance_batch / hptvsim_output_batch run the FMU's code: the same numbers, bit for bit."""
-    x0 = {"z_0": 20.0, "psi_0": 0.4}
+    x0 = {"z_0": 20.0, "psi_0": 0.4, "attitude_hold": MODES[mode]}
     ours = _fmu_run(vt, x0)
     with zipfile.ZipFile(fmu_path(vt, dof=6)) as zf:
         zf.extractall(tmp_path)
@@ -125,7 +140,8 @@ def test_6dof_batch_entry_points_equal_the_fmu_path(vt: str, tmp_path: Path) -> 
     vp = ctypes.c_void_p
     lib.hptvsim_advance_batch.argtypes = [ctypes.c_int, vp, vp, vp, ctypes.c_double, ctypes.c_double]
     lib.hptvsim_output_batch.argtypes = [ctypes.c_int, vp, vp, vp, vp]
-    params = np.concatenate([SIXDOF_VEHICLE_TYPES[vt].to_vector(), SIXDOF_CONTROLLER_TYPES[vt].to_vector()])
+    ctrl = SIXDOF_CONTROLLER_TYPES[vt].replace(attitude_hold=MODES[mode])
+    params = np.concatenate([SIXDOF_VEHICLE_TYPES[vt].to_vector(), ctrl.to_vector()])
     assert params.size == npar
     x = np.zeros((2, nx))
     x[:, 2], x[:, 5] = 20.0, 0.4
@@ -140,6 +156,23 @@ def test_6dof_batch_entry_points_equal_the_fmu_path(vt: str, tmp_path: Path) -> 
     np.testing.assert_array_equal(np.array(rows), ours)
 
 
+def test_work_class_fmu_flies_table_ii_speed_with_attitude_held() -> None:
+    """Issue 37's check with the FMU: v_cmd = 3.0 m/s with a dive (0.5 m/s) and a turn (0.3 rad/s)
+    for 60 s. Attitude held: at least 2.8 m/s, roll and pitch within 15 deg; passive (the FMU's
+    tunable ``attitude_hold = 0``): RexROV pitches over and does not reach 2.8 m/s."""
+    inputs = _inputs(((60.0, 3.0, 0.3, 0.5, 0.0, 0.0, 0.0),))
+    out: dict[str, npt.NDArray[np.float64]] = {}
+    names = SIXDOF_CLOSED_LOOP_OUTPUT_NAMES
+    u, phi, theta = (names.index(n) for n in ("u", "phi", "theta"))
+    for mode, hold in MODES.items():
+        out[mode] = _fmu_run("work_class", {"z_0": 20.0, "attitude_hold": hold}, inputs)
+    held, free = out["hold"], out["passive"]
+    assert held[:, u].max() >= 2.8
+    assert np.degrees(np.abs(held[:, [phi, theta]])).max() < 15.0
+    assert free[:, u].max() < 2.8
+    assert np.degrees(np.abs(free[:, theta])).max() > 80.0
+
+
 def test_6dof_fmu_refuses_bad_parameters() -> None:
     model = FmuModel(fmu_path("work_class", dof=6))
     inst = model.instantiate("bad_mass")
@@ -150,6 +183,10 @@ def test_6dof_fmu_refuses_bad_parameters() -> None:
     # an added mass far larger (and of the wrong sign) than the body: M is not positive definite
     with pytest.raises(FmuError, match=r"not positive definite .*Cholesky"):
         inst.initialize({"M_qdot": 1e6})
+    inst.free()
+    inst = model.instantiate("bad_mode")
+    with pytest.raises(FmuError, match=r"parameter 'attitude_hold' = 0.5 is invalid"):
+        inst.initialize({"attitude_hold": 0.5})
     inst.free()
 
 

@@ -67,7 +67,7 @@ def test_interactive_3d_steps_take_a_vertical_speed(server: Server, api: httpx.C
         )
         state = client.observe(ep["id"])
         space = state["spaces"]["action"]["evader_0"]
-        assert space["shape"] == [3] and space["high"][0] == pytest.approx(0.8)
+        assert space["shape"] == [3] and space["high"][0] == pytest.approx(2.0)  # v_max, Table II
         assert space["low"][2] == -space["high"][2] and space["high"][2] > 0.0
         assert len(state["observations"]["evader_0"]) == 12 * 5 + 16
         with pytest.raises(ServiceError) as err:

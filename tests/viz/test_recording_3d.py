@@ -101,9 +101,10 @@ def test_poses_carry_depth_and_the_full_attitude(dive: Recorded) -> None:
         got = rotation_zyx(pose["phi"], pose["theta"], pose["psi"])
         want = rotation_zyx(_values(states, "phi"), _values(states, "theta"), _values(states, "psi"))
         np.testing.assert_allclose(got, want, atol=2e-6)
-    # some vehicle rolled or pitched, so the check above is not about yaw alone
+    # some vehicle rolled or pitched, so the check above is not about yaw alone (roll and pitch are
+    # held since issue 37: measured 0.037 rad at most, 0.05 rad or more while they were passive)
     rolled = [abs(f.agent(n).phi or 0.0) + abs(f.agent(n).theta or 0.0) for f in frames for n in rec.poses]
-    assert max(rolled) > 0.05
+    assert max(rolled) > 0.02
 
 
 def test_hits_are_3d_points_at_the_ends_of_the_body_fixed_rays(dive: Recorded) -> None:
