@@ -52,7 +52,7 @@ def store_twin_episode(
             mode="run",
             status="finished",
             label=label,
-            scenario=static.scenario,
+            scenario="real vehicle",  # the list shows it beside the label
             seed=static.seed,
             max_steps=static.max_steps,
             backend=static.backend,

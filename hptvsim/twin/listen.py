@@ -20,6 +20,7 @@ from __future__ import annotations
 import contextlib
 import io
 import math
+import socket
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -27,7 +28,7 @@ from typing import Any, Final
 
 import numpy as np
 
-from hptvsim.episodes.frames import EpisodeStatic, Frame, SiteInfo
+from hptvsim.episodes.frames import EpisodeStatic, Frame
 from hptvsim.twin.log import VehicleLog, body_velocity
 from hptvsim.twin.mavlink import MAV_AUTOPILOT_INVALID, MAV_TYPE_GCS, Collector, TwinLogError
 
@@ -35,6 +36,7 @@ __all__ = ["LIVE_SITE", "Listener", "parse_address", "viser_sink"]
 
 LIVE_SITE: Final = 20.0  # m, side of the live view's site around the first position
 HEARTBEAT_PERIOD_S: Final = 1.0  # s, between the ground-station heartbeats sent back
+RECEIVE_BUFFER: Final = 4 * 1024 * 1024  # bytes asked for the socket (the kernel may give less)
 
 
 def parse_address(address: str) -> tuple[str, int]:
@@ -111,6 +113,10 @@ class Listener:
                 )
         except OSError as exc:
             raise TwinLogError(f"cannot listen on {self.address}: {exc.strerror or exc}") from None
+        sock = getattr(self._conn, "port", None)  # pymavlink's UDP socket
+        if sock is not None:
+            with contextlib.suppress(OSError):  # room for bursts while a frame is made
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RECEIVE_BUFFER)
 
     def close(self) -> None:
         """Release the port."""
@@ -173,7 +179,7 @@ class Listener:
 
     def _live_frame(self) -> None:
         """A frame of the latest values, at most one per ``dt`` of the vehicle's clock."""
-        from hptvsim.twin.replay import frame_at, static_of
+        from hptvsim.twin.replay import frame_at, twin_static, vehicle_name_of
 
         s = self.collector.samples
         if not s.attitude or not s.position or s.first_time is None:
@@ -187,13 +193,18 @@ class Listener:
         uvw = body_velocity(vel, np.asarray([phi]), np.asarray([theta]), np.asarray([psi]))[0]
         r = s.rates[-1][3] if s.rates else 0.0
         if self.state.static is None:
-            first = VehicleLog.from_samples(s, source=self.address, kind="udp", dt=self.dt)
-            base = static_of(first, label=f"twin: {self.address} (live)")
             half = LIVE_SITE / 2
-            site = SiteInfo(size=(LIVE_SITE, LIVE_SITE), origin=(x - half, y - half), operating_depth=z)
-            import dataclasses
-
-            self.state.static = dataclasses.replace(base, site=site, max_steps=10**9)
+            self.state.static = twin_static(
+                label=f"twin: {self.address} (live)",
+                description=f"A real vehicle's live telemetry from {self.address}.",
+                vehicle=vehicle_name_of(s.params),
+                dt=self.dt,
+                max_steps=10**9,
+                origin=(round(x - half, 3), round(y - half, 3)),
+                size=(LIVE_SITE, LIVE_SITE),
+                deepest=z + half,
+                operating_depth=z,
+            )
             if self.on_static is not None:
                 self.on_static(self.state.static)
         step = round(t / self.dt) if self.dt > 0 else self.state.frames

@@ -262,6 +262,8 @@ class VehicleLog:
         params: The log's parameters (``FRAME_CONFIG``, ``MOT_1_DIRECTION``, ...).
         counts: Messages of each type in the log.
         duration: Time from the log's first to its last sample [s].
+        clock_start: The log's first time on its own clock [s] (the vehicle's time since boot
+            for MAVLink; ``TimeUS`` for dataflash): grid time ``t`` is ``clock_start + t`` there.
         warnings: What reading it noticed (a truncated file), one line each.
     """
 
@@ -290,6 +292,7 @@ class VehicleLog:
     params: Mapping[str, float] = dataclasses.field(default_factory=dict)
     counts: Mapping[str, int] = dataclasses.field(default_factory=dict)
     duration: float = 0.0
+    clock_start: float = 0.0
     warnings: tuple[str, ...] = ()
 
     def __len__(self) -> int:
@@ -375,6 +378,7 @@ class VehicleLog:
             params=dict(samples.params),
             counts=dict(samples.counts),
             duration=float(duration),
+            clock_start=float(t0),
             warnings=tuple(samples.warnings),
         )
 

@@ -6,8 +6,10 @@ evaders only, and a logged vehicle pursues nothing; its colour is the first evad
 roll and pitch). One frame per grid time of the :class:`~hptvsim.twin.log.VehicleLog` from the
 first to the last at which its pose is known (step ``k`` at ``t_first + k dt``):
 
-* pose: ``x, y`` and ``z`` of the local position (``z``: the pressure depth where the log has
-  no local position), roll, pitch and yaw of the attitude;
+* pose: ``x, y`` of the local position; depth ``z`` from the water pressure (the depth sensor
+  measures it directly, where the EKF's local ``z`` of a vehicle at the surface wanders by tens
+  of centimetres; the local ``z`` only in a log without pressure); roll, pitch and yaw of the
+  attitude;
 * velocities: ``u, v, w`` (body) and the yaw rate ``r``;
 * what the schema needs and a log does not have: the action (a logged vehicle has no commanded
   ``[v, omega, w_z]``: zeros), reward, return, distance and smallest sonar range (zeros; the
@@ -26,7 +28,7 @@ from __future__ import annotations
 import contextlib
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final
@@ -61,6 +63,7 @@ __all__ = [
     "episode_of",
     "frame_at",
     "static_of",
+    "twin_static",
     "write_recording",
 ]
 
@@ -117,7 +120,12 @@ class TwinEpisode:
 
 def vehicle_name(log: VehicleLog) -> str:
     """What the log says the vehicle is (``ArduSub, frame vectored 6-DOF (BlueROV2 heavy)``)."""
-    frame = log.params.get("FRAME_CONFIG")
+    return vehicle_name_of(log.params)
+
+
+def vehicle_name_of(params: Mapping[str, float]) -> str:
+    """What a log's parameters say the vehicle is (ArduSub's ``FRAME_CONFIG``)."""
+    frame = params.get("FRAME_CONFIG")
     if frame is None:
         return "ArduPilot vehicle"
     return f"ArduSub, frame {_FRAME_NAMES.get(int(frame), f'FRAME_CONFIG {int(frame)}')}"
@@ -143,7 +151,7 @@ def _span(log: VehicleLog) -> tuple[int, int]:
     Raises:
         ValueError: The pose is never known.
     """
-    known = np.flatnonzero(np.isfinite(log.psi) & (np.isfinite(log.x) | np.isfinite(log.depth)))
+    known = np.flatnonzero(np.isfinite(log.psi) & np.isfinite(log.x))
     if known.size == 0:
         raise ValueError(f"{log.source}: the log never holds the vehicle's position and attitude together")
     return int(known[0]), int(known[-1]) + 1
@@ -151,7 +159,8 @@ def _span(log: VehicleLog) -> tuple[int, int]:
 
 def _columns(log: VehicleLog, lo: int, hi: int) -> dict[str, F64]:
     """The frames' values over grid rows ``lo:hi``, gaps filled (see the module docstring)."""
-    z = np.where(np.isfinite(log.z), log.z, log.depth)
+    depth = log.depth[lo:hi]
+    z = log.depth if np.isfinite(depth).any() else log.z  # the pressure depth, else the EKF's z
     raw = {
         "x": log.x,
         "y": log.y,
@@ -183,26 +192,65 @@ def static_of(log: VehicleLog, *, label: str | None = None, frames: int | None =
     y0, y1 = float(cols["y"].min()), float(cols["y"].max())
     origin = (round(x0 - SITE_MARGIN, 3), round(y0 - SITE_MARGIN, 3))
     size = (round(x1 - x0 + 2 * SITE_MARGIN, 3), round(y1 - y0 + 2 * SITE_MARGIN, 3))
-    extent = (origin[0], origin[0] + size[0], origin[1], origin[1] + size[1])
-    seabed = float(max(cols["z"].max(), 0.0)) + SEABED_BELOW  # m, placeholder
     events = "; ".join(f"{e.text} at {e.time:.1f} s" for e in log.events[:12])
     more = f" and {len(log.events) - 12} more" if len(log.events) > 12 else ""
     n = frames if frames is not None else hi - lo
-    return EpisodeStatic(
-        scenario=label or f"twin: {log.source}",
+    return twin_static(
+        label=label or f"twin: {log.source}",
         description=(
             f"A real vehicle's log replayed ({log.source}, {vehicle_name(log)}, {log.duration:.1f} s). "
             f"Events: {events or 'none'}{more}."
         ),
-        task="pursuit",
-        seed=0,
+        vehicle=vehicle_name(log),
         dt=log.dt,
         max_steps=max(n - 1, 1),
+        origin=origin,
+        size=size,
+        deepest=float(cols["z"].max()),
+        operating_depth=round(float(np.median(cols["z"])), 3),
+    )
+
+
+def twin_static(
+    *,
+    label: str,
+    description: str,
+    vehicle: str,
+    dt: float,
+    max_steps: int,
+    origin: tuple[float, float],
+    size: tuple[float, float],
+    deepest: float,
+    operating_depth: float,
+) -> EpisodeStatic:
+    """The static part of a real vehicle's episode.
+
+    Args:
+        label: The scenario's name.
+        description: Its description.
+        vehicle: What the vehicle is (:func:`vehicle_name`).
+        dt: The frames' time step [s].
+        max_steps: The step limit (the frames of a log; a large number for a live stream).
+        origin: The site's south-west corner ``(x, y)`` [m].
+        size: The site's extent north x east [m].
+        deepest: The deepest point of the track [m] (the placeholder seabed lies
+            :data:`SEABED_BELOW` below it).
+        operating_depth: The site's operating depth [m].
+    """
+    extent = (origin[0], origin[0] + size[0], origin[1], origin[1] + size[1])
+    seabed = max(deepest, 0.0) + SEABED_BELOW  # m, placeholder
+    return EpisodeStatic(
+        scenario=label,
+        description=description,
+        task="pursuit",
+        seed=0,
+        dt=dt,
+        max_steps=max_steps,
         backend=BACKEND,
         sensor_fidelity="none",
         capture_distance=0.0,
         safe_distance=0.0,
-        site=SiteInfo(size=size, origin=origin, operating_depth=round(float(np.median(cols["z"])), 3)),
+        site=SiteInfo(size=size, origin=origin, operating_depth=operating_depth),
         terrain=terrain_mesh(np.full((2, 2), seabed), extent, max_cells=2),
         obstacles=obstacle_summary(
             np.zeros((2, 2), dtype=bool), resolution=max(size) / 2, extent=extent, fence=False
@@ -211,7 +259,7 @@ def static_of(log: VehicleLog, *, label: str | None = None, frames: int | None =
             AgentInfo(
                 name=VEHICLE,
                 role=ROLE,
-                vehicle_type=vehicle_name(log),
+                vehicle_type=vehicle,
                 policy=BACKEND,
                 color=agent_color(ROLE, 0),
                 radius=RADIUS,

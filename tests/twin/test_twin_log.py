@@ -161,3 +161,15 @@ def test_calibration_csv(tlog_data: VehicleLog, tmp_path: Path) -> None:
     # a value the log lacks is an empty field, never a number made up
     assert body[0][col["x"]] == "" and body[1000][col["pwm_1"]] == "1500"
     assert not list(tmp_path.joinpath("sub").glob(".*tmp"))  # written whole: no temporary left
+
+
+def test_a_missing_log_fails_under_ci_and_skips_elsewhere(monkeypatch: pytest.MonkeyPatch) -> None:
+    from twin_fixtures import ardusub_dir, ardusub_log
+
+    assert ardusub_dir() == Path(__file__).resolve().parents[3] / "shared" / "data" / "ardusub"
+    monkeypatch.setenv("CI", "true")
+    with pytest.raises(pytest.fail.Exception, match=r"nosuch\.tlog is missing \(under CI"):
+        ardusub_log("nosuch.tlog")
+    monkeypatch.delenv("CI")
+    with pytest.raises(pytest.skip.Exception, match=r"nosuch\.tlog is missing"):
+        ardusub_log("nosuch.tlog")

@@ -1,4 +1,4 @@
-"""Fixtures of the twin tests: the shipped ArduSub logs, read from ``../shared/data/ardusub``.
+"""Fixtures of the twin tests (a pytest plugin of tests/conftest.py): the ArduSub logs (``../shared/data``).
 
 The logs are never copied into the repository. Where a log is missing the tests that need it
 skip, except under CI (``CI`` set), where ``../shared/data`` is always present: there they fail.
