@@ -18,7 +18,6 @@ the listener returns everything it received as a :class:`~hptvsim.twin.log.Vehic
 from __future__ import annotations
 
 import contextlib
-import io
 import math
 import socket
 import time
@@ -106,11 +105,10 @@ class Listener:
         """
         from pymavlink import mavutil
 
-        try:
-            with contextlib.redirect_stdout(io.StringIO()):
-                self._conn = mavutil.mavlink_connection(
-                    f"udpin:{self.host}:{self.port}", dialect="ardupilotmega", source_system=255
-                )
+        try:  # standard output left alone: it is the whole process's (a service runs this in a thread)
+            self._conn = mavutil.mavlink_connection(
+                f"udpin:{self.host}:{self.port}", dialect="ardupilotmega", source_system=255
+            )
         except OSError as exc:
             raise TwinLogError(f"cannot listen on {self.address}: {exc.strerror or exc}") from None
         sock = getattr(self._conn, "port", None)  # pymavlink's UDP socket
@@ -157,8 +155,7 @@ class Listener:
                     last_beat = now
                     with contextlib.suppress(Exception):  # the sender may be gone
                         conn.mav.heartbeat_send(MAV_TYPE_GCS, MAV_AUTOPILOT_INVALID, 0, 0, 0)
-                with contextlib.redirect_stdout(io.StringIO()):
-                    msg = conn.recv_match(blocking=True, timeout=0.2)
+                msg = conn.recv_match(blocking=True, timeout=0.2)
                 if msg is None:
                     continue
                 last_rx = time.monotonic()

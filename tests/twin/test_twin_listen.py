@@ -147,3 +147,24 @@ def test_a_silent_port_gives_one_clear_error() -> None:
     listener = Listener(f"udp:127.0.0.1:{_free_udp_port()}", idle_timeout_s=0.5)
     with pytest.raises(TwinLogError, match="no vehicle attitude or position arrived"):
         listener.run(max_wait_s=0.5)
+
+
+def test_live_frames_show_in_the_viser_view(tlog_data: VehicleLog) -> None:
+    """The frames :func:`viser_sink` hands on reach a real :class:`~hptvsim.viz.viser_view.LiveView`."""
+    from hptvsim.viz.viser_view import LiveView
+
+    episode = episode_of(tlog_data)
+    view = LiveView(port=0, autoplay=False, loop=False).start()
+    try:
+        on_static, on_frame = viser_sink(view, "twin test")
+        on_static(episode.static)
+        for f in episode.frames[:100]:
+            on_frame(f)
+        assert view.wait_for(lambda v: v.last_frame is not None and v.last_frame.step == 99, timeout=60)
+        assert view.following == "twin test" and view.error is None
+        assert (
+            view.last_frame is not None
+            and view.last_frame.agent(VEHICLE).x == episode.frames[99].agent(VEHICLE).x
+        )
+    finally:
+        view.stop()
