@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 from service_helpers import Server, start_server
-from test_viz_browser import INK_JS, PROBE_JS, SHOTS, _rgb, browser, pytestmark
+from test_viz_browser import INK_JS, PROBE_JS, SHOTS, _check_agent_pixels, _rgb, browser, pytestmark
 
 from hptvsim.cli import main
 from hptvsim.palette import agent_color
@@ -30,30 +30,36 @@ __all__ = ["browser", "pytestmark"]  # the browser fixture and Chromium's skip, 
 
 
 @pytest.fixture(scope="module")
-def stored(tlog: Path, tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Server, str]]:
-    """small.tlog stored in a fresh data folder, and ``hptvsim serve`` on it."""
+def stored(
+    tlog: Path, binlog: Path, tmp_path_factory: pytest.TempPathFactory
+) -> Iterator[tuple[Server, str, str]]:
+    """small.tlog and small.BIN stored in a fresh data folder, and ``hptvsim serve`` on it."""
     data = tmp_path_factory.mktemp("twin-service")
-    result = CliRunner().invoke(
-        main, ["twin", "replay", str(tlog), "--store", str(data)], catch_exceptions=False
-    )
-    assert result.exit_code == 0, result.output
-    m = re.search(r"stored episode ([0-9a-f]{16}) \(twin: small.tlog\)", result.output)
-    assert m, result.output
+    ids = []
+    for path in (tlog, binlog):
+        result = CliRunner().invoke(
+            main, ["twin", "replay", str(path), "--store", str(data)], catch_exceptions=False
+        )
+        assert result.exit_code == 0, result.output
+        m = re.search(rf"stored episode ([0-9a-f]{{16}}) \(twin: {re.escape(path.name)}\)", result.output)
+        assert m, result.output
+        ids.append(m.group(1))
     server = start_server(data)
     try:
-        yield server, m.group(1)
+        yield server, ids[0], ids[1]
     finally:
         server.stop()
 
 
 def test_the_service_lists_and_serves_the_stored_log(
-    stored: tuple[Server, str], tlog_data: VehicleLog
+    stored: tuple[Server, str, str], tlog_data: VehicleLog
 ) -> None:
-    server, episode_id = stored
+    server, episode_id, bin_id = stored
     with httpx.Client(base_url=server.url + "/api/v1", timeout=60) as api:
         listed = api.get("/episodes").json()
-        assert [e["id"] for e in listed["items"]] == [episode_id]
-        ep = listed["items"][0]
+        assert [e["id"] for e in listed["items"]] == [bin_id, episode_id]  # newest first
+        ep = listed["items"][1]
+        assert listed["items"][0]["label"] == "twin: small.BIN"
         assert ep["label"] == "twin: small.tlog" and ep["status"] == "finished"
         assert ep["has_trajectory"] and ep["has_recording"]
         static = api.get(f"/episodes/{episode_id}/static").json()
@@ -86,9 +92,9 @@ TRACK_JS = """
 
 
 def test_the_dashboard_draws_the_track_in_the_vehicles_colour(
-    stored: tuple[Server, str], browser: Any
+    stored: tuple[Server, str, str], browser: Any
 ) -> None:
-    server, episode_id = stored
+    server, episode_id, bin_id = stored
     page = browser.new_page(viewport={"width": 1400, "height": 1100})
     errors: list[str] = []
     page.on("pageerror", lambda e: errors.append(str(e)))
@@ -121,8 +127,26 @@ def test_the_dashboard_draws_the_track_in_the_vehicles_colour(
     on = np.asarray(got["on"])
     assert (on > 0).mean() >= 0.9, got  # the path in the vehicle's colour wherever its positions put it
     assert len(away) >= 20 and sum(v > 0 for v in got["off"]) <= 1, got  # and not elsewhere
-    assert (
-        got["scale"] > 50
-    )  # px per m: the site fits the track (a metre or two), not a scenario's kilometres
+    # px per m: the site fits the track (a metre or two), not a scenario's kilometres
+    assert got["scale"] > 50
+    # the .BIN's vehicle never leaves the origin: its marker there, in its colour
+    page.evaluate(f"() => {{ location.hash = 'episode={bin_id}'; }}")
+    page.wait_for_function(
+        "(id) => { const c = window.hptvsim.current; return !!(c && c.id === id && c.static && c.traj); }",
+        arg=bin_id,
+        timeout=60_000,
+    )
+    assert page.evaluate("() => window.hptvsim.current.static.scenario") == "twin: small.BIN"
+    probes = page.evaluate("_agentProbe(window.hptvsim.map)")
+    assert len(probes) == 1 and probes[0]["color"] == color
+    _check_agent_pixels(probes)
+    page.locator("#map-canvas").screenshot(path=str(SHOTS / "twin-small-bin-map.png"))
+    # and both compare, on one timeline
+    page.evaluate(f"() => {{ location.hash = 'compare={episode_id},{bin_id}'; }}")
+    page.wait_for_function(
+        "() => window.hptvsim.compare && window.hptvsim.compare.items.length === 2", timeout=60_000
+    )
+    assert page.evaluate("_inkOf('compare-map-0')") > 0.05 and page.evaluate("_inkOf('compare-map-1')") > 0.05
+    page.screenshot(path=str(SHOTS / "twin-compare.png"), full_page=True)
     assert not errors, errors
     page.close()
