@@ -190,11 +190,10 @@ def register(main: click.Group, *, store: StoreEpisode | None = None) -> click.G
         listener = Listener(
             address, dt=dt, idle_timeout_s=idle_timeout, on_static=on_static, on_frame=on_frame
         )
-        click.echo(f"listening on {address} (Ctrl-C or {idle_timeout:g} s of silence ends it)")
         try:
-            log = listener.run()
-        except KeyboardInterrupt:
-            raise click.Abort() from None
+            listener.open()
+            click.echo(f"listening on {address} (Ctrl-C or {idle_timeout:g} s of silence ends it)")
+            log = listener.run()  # Ctrl-C ends the listening; what arrived is kept
         except TwinLogError as exc:
             raise TwinError(str(exc)) from None
         finally:

@@ -124,7 +124,7 @@ class Listener:
             self._conn = None
 
     def run(self, *, stop: Callable[[], bool] | None = None, max_wait_s: float | None = None) -> VehicleLog:
-        """Follow the stream until it has been silent for ``idle_timeout_s`` (after its first message).
+        """Follow the stream until it has been silent for ``idle_timeout_s`` (once it began), or Ctrl-C.
 
         Args:
             stop: Polled a few times a second; True ends the listening.
@@ -155,7 +155,10 @@ class Listener:
                     last_beat = now
                     with contextlib.suppress(Exception):  # the sender may be gone
                         conn.mav.heartbeat_send(MAV_TYPE_GCS, MAV_AUTOPILOT_INVALID, 0, 0, 0)
-                msg = conn.recv_match(blocking=True, timeout=0.2)
+                try:
+                    msg = conn.recv_match(blocking=True, timeout=0.2)
+                except KeyboardInterrupt:  # Ctrl-C: the stream has ended for the user
+                    break
                 if msg is None:
                     continue
                 last_rx = time.monotonic()

@@ -247,7 +247,11 @@ def _position(conn: Any) -> int:
 
 @contextlib.contextmanager
 def _quiet_stdout() -> Iterator[None]:
-    """Standard output (Python's and the C library's) silenced: pymavlink prints what it skips there."""
+    """Standard output (Python's and the C library's) silenced: pymavlink prints what it skips there.
+
+    File descriptor 1 is the whole process's: this is for a command reading a file, not for a
+    server's threads (the service never reads a log file; its live listener reads no file).
+    """
     sys.stdout.flush()
     saved = os.dup(1)
     try:

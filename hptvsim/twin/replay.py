@@ -26,6 +26,7 @@ track. Arming, disarming and mode changes are logged in the recording as text at
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -364,7 +365,7 @@ def episode_of(
     return TwinEpisode(log=log, result=result, frames=tuple(frames), events=events)
 
 
-def log_events(rec: Any, events: Sequence[tuple[int, LogEvent]], dt: float, t0: float) -> None:
+def log_events(rec: Any, events: Sequence[tuple[int, LogEvent]]) -> None:
     """Log events as rerun text at ``events`` on the ``step`` and ``sim_time`` timelines."""
     import rerun as rr
 
@@ -393,7 +394,7 @@ def write_recording(episode: TwinEpisode, path: str | Path) -> EpisodeResult:
     target = Path(path)
     target.parent.mkdir(parents=True, exist_ok=True)
     res = episode.result
-    summary = EpisodeSummary(**{**_fields(res.summary), "recording": str(target)})
+    summary = dataclasses.replace(res.summary, recording=str(target))
     traj = res.trajectories.agent(VEHICLE)
     track = np.column_stack([np.asarray(traj.x), np.asarray(traj.y), np.asarray(traj.z)])
     with atomic_path(target, suffix=".rrd") as tmp:
@@ -402,7 +403,7 @@ def write_recording(episode: TwinEpisode, path: str | Path) -> EpisodeResult:
         try:
             for f in episode.frames:
                 writer.add(f)
-            log_events(writer.rec, episode.events, res.static.dt, float(res.trajectories.time[0]))
+            log_events(writer.rec, episode.events)
             writer.close(summary, paths={VEHICLE: track})
             done = True
         finally:
@@ -412,9 +413,3 @@ def write_recording(episode: TwinEpisode, path: str | Path) -> EpisodeResult:
     return EpisodeResult(
         static=res.static, summary=summary, trajectories=res.trajectories, final_frame=res.final_frame
     )
-
-
-def _fields(obj: Any) -> dict[str, Any]:
-    import dataclasses
-
-    return {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj) if f.init}

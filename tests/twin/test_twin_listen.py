@@ -9,6 +9,7 @@ stream has stopped, gives the log it received: the same as reading the file.
 
 from __future__ import annotations
 
+import re
 import socket
 import threading
 import time
@@ -168,3 +169,43 @@ def test_live_frames_show_in_the_viser_view(tlog_data: VehicleLog) -> None:
         )
     finally:
         view.stop()
+
+
+def test_the_listen_command_records_the_stream(tlog: Path, tmp_path: Path) -> None:
+    """``hptvsim twin listen udp:127.0.0.1:PORT --record --csv`` in a process of its own, fed over UDP."""
+    import subprocess
+    import sys
+
+    from test_twin_replay import rerun_cli
+
+    port = _free_udp_port()
+    out, csv = tmp_path / "live.rrd", tmp_path / "live.csv"
+    args = ["twin", "listen", f"udp:127.0.0.1:{port}", "--record", str(out), "--csv", str(csv)]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "hptvsim.cli", *args, "--idle-timeout", "2"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    try:
+        assert proc.stdout is not None
+        first = proc.stdout.readline()  # printed once the port is bound
+        assert first.startswith(f"listening on udp:127.0.0.1:{port}"), first
+        sent: list[int] = []
+        _send(tlog, port, sent, speed=40.0)
+        rest, _ = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0, rest
+    m = re.search(r"(\d+) messages, (\d+) live frames", rest)
+    assert m and int(m.group(1)) >= 0.99 * sent[0] and int(m.group(2)) > 2000, rest
+    assert f"recording: {out.resolve()}" in rest and f"calibration CSV: {csv.resolve()}" in rest
+    verify = subprocess.run(
+        [rerun_cli(), "rrd", "verify", str(out)], capture_output=True, text=True, timeout=120
+    )
+    assert verify.returncode == 0, verify.stderr
+    rec = read_recording(out)
+    assert rec.static is not None and rec.static.scenario == f"twin: udp:127.0.0.1:{port}"
+    assert len(rec.poses[VEHICLE]["x"]) > 2600
+    assert csv.read_text().splitlines()[0].startswith("time,x,y,z,phi,theta,psi,u,v,w,p,q,r,pwm_1")
