@@ -7,7 +7,8 @@ vehicle keep streaming). Every message goes to a :class:`~hptvsim.twin.mavlink.C
 same one a file is read with, so the stream's times are the vehicle's clock as in the file.
 
 While the stream runs, each ``ATTITUDE`` at least ``dt`` after the last frame makes a frame of
-the latest values (attitude, local position and velocity held since their last message) and
+the latest values (attitude, local position and velocity held since their last message, the
+depth from the latest water pressure) and
 hands it to ``on_frame`` (the viser live view, :func:`viser_sink`). The live frames' static
 part cannot know the track in advance: its site is :data:`LIVE_SITE` [m] square around the
 first position. When the stream has been silent for ``idle_timeout_s`` (or ``stop`` says so),
@@ -28,12 +29,14 @@ from typing import Any, Final
 import numpy as np
 
 from hptvsim.episodes.frames import EpisodeStatic, Frame
-from hptvsim.twin.log import VehicleLog, body_velocity
+from hptvsim.twin.log import GRAVITY, WATER_DENSITY, VehicleLog, body_velocity
 from hptvsim.twin.mavlink import MAV_AUTOPILOT_INVALID, MAV_TYPE_GCS, Collector, TwinLogError
 
 __all__ = ["LIVE_SITE", "Listener", "parse_address", "viser_sink"]
 
 LIVE_SITE: Final = 20.0  # m, side of the live view's site around the first position
+LIVE_STEPS: Final = 864_000
+"""The live frames' step limit: a day of frames of 0.1 s (a stream has no known end)."""
 HEARTBEAT_PERIOD_S: Final = 1.0  # s, between the ground-station heartbeats sent back
 RECEIVE_BUFFER: Final = 4 * 1024 * 1024  # bytes asked for the socket (the kernel may give less)
 
@@ -189,6 +192,8 @@ class Listener:
         if self._last_frame_t is not None and t < self._last_frame_t + self.dt - 1e-9:
             return
         _, x, y, z = s.position[-1]
+        if s.pressure:  # depth from the water pressure, as the replay of a file takes it
+            z = (s.pressure[-1][1] - s.pressure[0][1]) / (WATER_DENSITY * GRAVITY)
         vel = np.asarray([s.velocity[-1][1:]]) if s.velocity else np.zeros((1, 3))
         uvw = body_velocity(vel, np.asarray([phi]), np.asarray([theta]), np.asarray([psi]))[0]
         r = s.rates[-1][3] if s.rates else 0.0
@@ -199,7 +204,7 @@ class Listener:
                 description=f"A real vehicle's live telemetry from {self.address}.",
                 vehicle=vehicle_name_of(s.params),
                 dt=self.dt,
-                max_steps=10**9,
+                max_steps=LIVE_STEPS,
                 origin=(round(x - half, 3), round(y - half, 3)),
                 size=(LIVE_SITE, LIVE_SITE),
                 deepest=z + half,

@@ -10,6 +10,7 @@ not where they do not). The screenshot goes to ``$HPTVSIM_SCREENSHOT_DIR`` (defa
 from __future__ import annotations
 
 import re
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -150,3 +151,47 @@ def test_the_dashboard_draws_the_track_in_the_vehicles_colour(
     page.screenshot(path=str(SHOTS / "twin-compare.png"), full_page=True)
     assert not errors, errors
     page.close()
+
+
+@pytest.mark.slow
+def test_the_dashboard_shows_a_live_vehicle(tlog: Path, tmp_path: Path, browser: Any) -> None:
+    """A service with ``HPTVSIM_TWIN_LISTEN``: the dashboard follows the running twin episode."""
+    import threading
+
+    from test_twin_listen import _free_udp_port, _send
+
+    port = _free_udp_port()
+    server = start_server(
+        tmp_path / "svc", {"HPTVSIM_TWIN_LISTEN": f"udp:127.0.0.1:{port}", "HPTVSIM_TWIN_IDLE_S": "2"}
+    )
+    page = browser.new_page(viewport={"width": 1400, "height": 1100})
+    try:
+        errors: list[str] = []
+        page.on("pageerror", lambda e: errors.append(str(e)))
+        page.add_init_script(INK_JS + PROBE_JS)
+        sent: list[int] = []
+        sender = threading.Thread(target=_send, args=(tlog, port, sent, 10.0), daemon=True)
+        sender.start()
+        deadline = time.monotonic() + 30
+        items: list[dict[str, Any]] = []
+        while time.monotonic() < deadline and not items:
+            items = httpx.get(f"{server.url}/api/v1/episodes").json()["items"]
+            time.sleep(0.2)
+        assert items and items[0]["status"] == "running", items
+        page.goto(f"{server.url}/#episode={items[0]['id']}")
+        page.wait_for_selector("body[data-ready=true]", timeout=60_000)
+        page.wait_for_function("() => window.hptvsim.framesSeen >= 20", timeout=60_000)
+        probes = page.evaluate("_agentProbe(window.hptvsim.map)")
+        assert len(probes) == 1 and probes[0]["color"] == agent_color(ROLE, 0)
+        _check_agent_pixels(probes)  # the vehicle where its latest frame puts it, in its colour
+        SHOTS.mkdir(parents=True, exist_ok=True)
+        page.screenshot(path=str(SHOTS / "twin-live-dashboard.png"), full_page=True)
+        sender.join(timeout=120)
+        page.wait_for_function(
+            "() => window.hptvsim.current && window.hptvsim.current.traj && window.hptvsim.map.replay",
+            timeout=90_000,
+        )  # once stored, the finished episode replays
+        assert not errors, errors
+    finally:
+        page.close()
+        server.stop()

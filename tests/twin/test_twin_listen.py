@@ -120,6 +120,7 @@ def test_a_live_stream_over_loopback_gives_the_logs_twin(
         # positions arrive at 3 Hz and are held: within 0.33 s of motion at < 0.45 m/s
         assert abs(a.x - tlog_data.x[k]) < 0.2 and abs(a.y - tlog_data.y[k]) < 0.2, (f.time, a, k)
         assert abs(np.angle(np.exp(1j * (a.psi - tlog_data.psi[k])))) < 0.1
+        assert a.z is not None and abs(a.z - tlog_data.depth[k]) < 0.02  # depth from the pressure
         checked += 1
     assert checked > 150
     # what the stream gave, once it stopped: the file's log (same clock, same grid, same values)
