@@ -173,3 +173,15 @@ def test_a_missing_log_fails_under_ci_and_skips_elsewhere(monkeypatch: pytest.Mo
     monkeypatch.delenv("CI")
     with pytest.raises(pytest.skip.Exception, match=r"nosuch\.tlog is missing"):
         ardusub_log("nosuch.tlog")
+
+
+def test_reading_reports_its_progress(tlog: Path) -> None:
+    """What the command's progress bar is fed: bytes read, growing, ending at the file's size."""
+    from hptvsim.twin.mavlink import read_log
+
+    calls: list[tuple[int, int]] = []
+    read_log(tlog, progress=lambda done, total: calls.append((done, total)))
+    size = tlog.stat().st_size
+    assert len(calls) >= 5 and all(total == size for _, total in calls)
+    done = [d for d, _ in calls]
+    assert done == sorted(done) and done[-1] == size and 0 < done[0] < size
