@@ -17,6 +17,7 @@ from __future__ import annotations
 import os
 import sys
 from pathlib import Path
+from typing import Any
 
 import click
 
@@ -27,6 +28,7 @@ from hptvsim.cosim import cli as cosim_cli
 from hptvsim.experiments import cli as experiments_cli
 from hptvsim.sensors import cli as sensors_cli
 from hptvsim.service import cli as service_cli
+from hptvsim.twin import cli as twin_cli
 from hptvsim.viz import cli as viz_cli
 from hptvsim.world import cli as world_cli
 
@@ -201,12 +203,19 @@ def demo(out_dir: Path, duration: float, no_episode: bool, scenario: str) -> Non
         click.echo(f"episode plot: {plot_episode(out_dir, scenario=scenario).resolve()}")
 
 
+def _store_twin(*args: Any, **kwargs: Any) -> str:
+    from hptvsim.service.twin import store_twin_episode
+
+    return store_twin_episode(*args, **kwargs)
+
+
 def _register() -> None:
     cosim_cli.register(main)
     world_cli.register(main)
     experiments_cli.register(main)
     sensors_cli.register(main)
     viz_cli.register(main)
+    twin_cli.register(main, store=_store_twin)  # --store: the service layer's, passed down
     bench = bench_cli.register(main)
     service_cli.register(main, bench)  # the layer above the benchmarks adds its own
 

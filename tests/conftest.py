@@ -18,11 +18,12 @@ for _sub in (
     "offline",
     "security",
     "service",
+    "twin",
     "viz",
 ):  # as pytest's own rootdir handling would: the helpers import by name
     sys.path.insert(0, str(Path(__file__).parent / _sub))
 
-pytest_plugins = ["offline_fixtures", "pg_fixtures", "service_fixtures", "viz_fixtures"]
+pytest_plugins = ["offline_fixtures", "pg_fixtures", "service_fixtures", "twin_fixtures", "viz_fixtures"]
 
 os.environ.setdefault("MPLBACKEND", "Agg")
 

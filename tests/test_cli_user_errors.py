@@ -280,6 +280,8 @@ CASES: dict[str, tuple[list[str], tuple[str, ...]]] = {
     "dt-evaluate": (["dt", "evaluate", "garbage.pt"], ("garbage.pt", "not a readable DT policy")),
     "dt-figures": (["dt", "figures", "empty"], ("empty", "dt.pt")),
     "dt-pipeline": (["dt", "pipeline", "--scenario", "nosuch", "--out", "dtp"], ("nosuch", "target")),
+    "twin-replay": (["twin", "replay", "nosuch.tlog"], ("nosuch.tlog", "no such file", ".tlog", ".BIN")),
+    "twin-listen": (["twin", "listen", "tcp:1.2.3.4:5"], ("tcp:1.2.3.4:5", "udp:HOST:PORT")),
     "serve": (["serve", "--port", "99999", "--data-dir", "svc"], ("99999", "0..65535")),
     "serve-view": (["serve", "view", "--port", "99999"], ("99999", "0<=x<=65535")),
     "bench-dynamics": (["bench", "dynamics", "--type", "nosuch"], ("nosuch", "work_class")),

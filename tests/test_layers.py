@@ -140,6 +140,12 @@ LAYERS: Final[tuple[Layer, ...]] = (
         "records what the engine gives",
     ),
     Layer(
+        "twin",
+        ("hptvsim.twin",),
+        "a twin of a real vehicle: MAVLink logs (`.tlog`, `.BIN`) and live telemetry as episodes of "
+        "the frame schema, their recordings and the calibration CSV",
+    ),
+    Layer(
         "demo",
         ("hptvsim.demo",),
         "`hptvsim demo`: both vehicles through their FMUs, then one pursuit episode; plots",

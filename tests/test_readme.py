@@ -356,6 +356,34 @@ COMMANDS: dict[str, tuple[Run | Help, ...]] = {
             ("{tmp}/episode.json",),
         ),
     ),
+    "hptvsim twin replay LOG.tlog --record OUT.rrd": (
+        Run(
+            "hptvsim twin replay {repo}/../shared/data/ardusub/small.tlog --record {tmp}/small.rrd",
+            r"small\.tlog: 263\.\d s, \d+ frames[\s\S]*recording: ",
+            ("{tmp}/small.rrd",),
+        ),
+    ),
+    "hptvsim twin replay LOG.tlog --csv OUT.csv": (
+        Run(
+            "hptvsim twin replay {repo}/../shared/data/ardusub/small.BIN --csv {tmp}/small.csv",
+            r"calibration CSV: ",
+            ("{tmp}/small.csv",),
+        ),
+    ),
+    "hptvsim twin replay LOG.tlog --store DATA_DIR": (
+        Run(
+            "hptvsim twin replay {repo}/../shared/data/ardusub/small.tlog --store {tmp}/svc",
+            r"stored episode [0-9a-f]{16} \(twin: small\.tlog\)",
+            ("{tmp}/svc/hptvsim.db",),
+        ),
+    ),
+    "hptvsim twin listen udp:127.0.0.1:14550 --viser": (
+        Help(
+            "follows a live stream until it stops (tests/twin/test_twin_listen.py plays one over UDP)",
+            "hptvsim twin listen --help",
+            r"--idle-timeout",
+        ),
+    ),
     "hptvsim view": (Help("a live view served until stopped", "hptvsim view --help", r"--port"),),
     "hptvsim fmu build | check": (
         Run(

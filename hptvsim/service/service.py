@@ -139,6 +139,7 @@ class Service:
         self._health_cache: tuple[float, list[str], int] | None = None  # when, problems, disk [B]
         self._health_since: float | None = None  # when the check in flight began
         self._health_logged: list[str] = []
+        self.twin: Any = None  # the live vehicle's listener (HPTVSIM_TWIN_LISTEN), if set
 
     # -- lifecycle -----------------------------------------------------------------------------------
 
@@ -178,11 +179,19 @@ class Service:
         self.prep.start(self.loop)
         self._reaper = asyncio.create_task(self._reap_idle())
         self._maintenance = asyncio.create_task(self._maintain())
+        if self.settings.twin_listen is not None:  # the operator's live vehicle (hptvsim.service.twin)
+            from hptvsim.service.twin import TwinListenTask
+
+            self.twin = TwinListenTask(self)
+            await asyncio.to_thread(self.twin.start)
+            log.info("following a live vehicle's MAVLink stream on %s", self.settings.twin_listen)
         # load the shipped scenarios in the background, so the first scenario list is quick
         self._warm = self.loop.run_in_executor(None, _warm_scenarios)
 
     async def stop(self) -> None:
         """Stop everything; active episodes become ``interrupted`` (their files are kept)."""
+        if self.twin is not None:  # a stream in progress is stored as it is
+            await asyncio.to_thread(self.twin.stop)
         self.prep.close()  # preparation in flight is of no use any more: kill it, do not wait
         if self._maintenance is not None:
             self._maintenance.cancel()

@@ -75,6 +75,9 @@ variable                       meaning (default)
 ``HPTVSIM_EVENT_BYTES_PER_S``  frames sent to all event subscribers together, at most, in bytes
                                per second (``50000000``)
 ``HPTVSIM_WEB_DIR``            dashboard files (the checkout's ``web/``)
+``HPTVSIM_TWIN_LISTEN``        follow a live MAVLink stream on ``udp:HOST:PORT`` as a running
+                               ``twin`` episode (``1``: ``udp:127.0.0.1:14550``; none)
+``HPTVSIM_TWIN_IDLE_S``        a twin stream silent this long has ended and is stored (``5``)
 =============================  ===========================================================
 """
 
@@ -192,6 +195,9 @@ class Settings:
         subscriber_lag_limit: Events one subscriber may skip in a row before it is dropped.
         send_timeout_s: Longest wait for one send to an event subscriber [s].
         event_bytes_per_s: Frames sent to all event subscribers together, at most [bytes/s].
+        twin_listen: ``udp:HOST:PORT`` of a live MAVLink stream the service follows as a running
+            ``twin`` episode (:mod:`hptvsim.service.twin`), or None.
+        twin_idle_s: A twin stream silent this long has ended and is stored [s].
     """
 
     host: str = "127.0.0.1"
@@ -237,6 +243,8 @@ class Settings:
     subscriber_lag_limit: int = 128
     send_timeout_s: float = 10.0
     event_bytes_per_s: float = 50e6
+    twin_listen: str | None = None
+    twin_idle_s: float = 5.0
 
     def __post_init__(self) -> None:
         for _, name, kind in LIMITS:
@@ -259,11 +267,37 @@ class Settings:
                 "cors_origins = '*' without an API key would let any web page run and delete episodes; "
                 "list the origins, or set an API key"
             )
+        if not (math.isfinite(self.twin_idle_s) and self.twin_idle_s > 0):
+            raise SettingsError(f"twin_idle_s = {self.twin_idle_s!r} is invalid; valid: a finite number > 0")
+        if self.twin_listen is not None:
+            self._check_twin_listen()
         if not self.loopback and self.api_key is None and not self.insecure_open:
             raise SettingsError(
                 f"host = {self.host!r} is reachable from the network, and without an API key anyone "
                 "there could run episodes; set HPTVSIM_API_KEY (or HPTVSIM_INSECURE_OPEN=1 on a "
                 "network of your own)"
+            )
+
+    def _check_twin_listen(self) -> None:
+        """``twin_listen`` is ``udp:HOST:PORT``; off this machine only with an API key (or on purpose)."""
+        import ipaddress
+
+        from hptvsim.twin.listen import parse_address
+
+        assert self.twin_listen is not None
+        try:
+            host, _ = parse_address(self.twin_listen)
+        except ValueError as exc:
+            raise SettingsError(f"twin_listen: {exc}") from None
+        try:
+            local = host == "localhost" or ipaddress.ip_address(host).is_loopback
+        except ValueError:
+            local = False
+        if not local and self.api_key is None and not self.insecure_open:
+            raise SettingsError(
+                f"twin_listen = {self.twin_listen!r} takes telemetry from the network, where anyone could "
+                "send a vehicle of their own; listen on 127.0.0.1, or set HPTVSIM_API_KEY (or "
+                "HPTVSIM_INSECURE_OPEN=1 on a network of your own)"
             )
 
     @property
@@ -375,6 +409,16 @@ class Settings:
             kw["web_dir"] = Path(e["HPTVSIM_WEB_DIR"])
         if e.get("HPTVSIM_ALLOWED_HOSTS"):
             kw["allowed_hosts"] = tuple(h.strip() for h in e["HPTVSIM_ALLOWED_HOSTS"].split(",") if h.strip())
+        if e.get("HPTVSIM_TWIN_LISTEN"):
+            value = e["HPTVSIM_TWIN_LISTEN"].strip()
+            kw["twin_listen"] = (
+                "udp:127.0.0.1:14550" if value.lower() in ("1", "true", "yes", "on") else value
+            )
+        number("HPTVSIM_TWIN_IDLE_S", "twin_idle_s")
+        if "twin_idle_s" in kw and not kw["twin_idle_s"] > 0:  # type: ignore[operator]  # a number
+            raise SettingsError(
+                f"HPTVSIM_TWIN_IDLE_S = {e['HPTVSIM_TWIN_IDLE_S']!r} is invalid; valid: a number > 0"
+            )
         try:
             return cls(**kw)  # type: ignore[arg-type]  # values were converted above
         except SettingsError as exc:
