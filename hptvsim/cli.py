@@ -27,6 +27,7 @@ from hptvsim.cosim import cli as cosim_cli
 from hptvsim.experiments import cli as experiments_cli
 from hptvsim.sensors import cli as sensors_cli
 from hptvsim.service import cli as service_cli
+from hptvsim.twin import fit_cli as twin_fit_cli
 from hptvsim.viz import cli as viz_cli
 from hptvsim.world import cli as world_cli
 
@@ -207,6 +208,7 @@ def _register() -> None:
     experiments_cli.register(main)
     sensors_cli.register(main)
     viz_cli.register(main)
+    twin_fit_cli.register(main)  # hptvsim vehicle fit
     bench = bench_cli.register(main)
     service_cli.register(main, bench)  # the layer above the benchmarks adds its own
 
