@@ -25,7 +25,12 @@ with a component above ``null_component`` in such a direction is *not identifiab
 covariance is the Gauss-Newton (Fisher) approximation ``s^2 Z (J_r^T J_r)^+ Z^T`` with ``s^2``
 the residual variance per degree of freedom; 95 % intervals are ``estimate +- 1.96 std``. A
 parameter whose interval's half-width exceeds ``max_rel_halfwidth`` times its estimate, or is
-wider than its bounds, is not identifiable either. A fit with any non-identifiable parameter is
+wider than its bounds, is not identifiable either. Two checks guard against intervals that the
+linear approximation makes too narrow (a parameter "determined" only by a transient fitted to
+noise, e.g. at the start of a run): the profile likelihood (the parameter fixed at each end of its
+interval and the rest re-fitted: chi^2 must rise by ``profile_min_rise``; linear theory: 3.84),
+and the split-half check (each half of the log fitted alone: both must determine the parameter,
+and agree within ``split_max_z`` standard deviations). A fit with any non-identifiable parameter is
 reported as such; those parameters keep their starting values in the vehicle file written (the
 data do not support the estimate), and the prediction error after the fit is that of the file.
 
@@ -40,7 +45,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Final
 
 import numpy as np
@@ -97,6 +102,10 @@ class FitOptions:
             parameter; see the module docstring).
         profile_min_rise: A parameter whose chi^2 rises by less than this at an end of its 95 %
             interval (linear theory: 3.84) is not identifiable.
+        split_check: Fit each half of the log alone too (two more fits): a parameter must be
+            identifiable in both and the two estimates must agree.
+        split_max_z: Largest distance between the halves' estimates, in standard deviations of
+            their difference.
         sigma: Starting noise guess per measured state (default: :func:`default_sigma`).
         horizons: Prediction horizons [steps].
     """
@@ -110,6 +119,8 @@ class FitOptions:
     max_rel_halfwidth: float = 0.5
     profile_check: bool = True
     profile_min_rise: float = 1.0
+    split_check: bool = True
+    split_max_z: float = 3.0
     sigma: Mapping[str, float] = field(default_factory=dict)
     horizons: tuple[int, ...] = HORIZONS
 
@@ -318,7 +329,11 @@ def fit_log(
 
     # --- symbolic problem -------------------------------------------------------------------
     z = ca.MX.sym("z", nf)
-    S = ca.MX.sym("S", nx, nseg)
+    # estimated start states: all of them, but in raw-force mode the controller's integrators,
+    # which hold there, are zero and left out
+    ns = nm if plant.kind == "tau" else nx
+    S = ca.MX.sym("S", ns, nseg)
+    S_full = ca.vertcat(S, ca.MX.zeros(nx - ns, nseg)) if ns < nx else S
     entries = [ca.MX(float(v)) for v in base]
     for k, i in enumerate(idx):
         entries[i] = z[k] * float(scale[k])
@@ -332,7 +347,7 @@ def fit_log(
     all_fun = seg_fun.map("segments", "serial", nseg, [2], [])
     U_all = U[seg.rows[:, :L].reshape(-1)].T  # nu x (nseg L)
     H_all = seg.steps.reshape(1, -1)
-    X_all = all_fun(S, ca.DM(U_all), p, ca.DM(H_all))  # nx x (nseg (L + 1))
+    X_all = all_fun(S_full, ca.DM(U_all), p, ca.DM(H_all))  # nx x (nseg (L + 1))
 
     rows_flat = seg.rows.reshape(-1)
     Y_seg = Y[rows_flat].T  # nm x (nseg (L + 1))
@@ -345,7 +360,7 @@ def fit_log(
     W = ca.MX.sym("W", nm)  # 1 / sigma per measured state
     E = X_all[0:nm, :] - ca.DM(Y0)
     R = ca.vec(ca.DM(mask.astype(float)) * (ca.repmat(W, 1, E.shape[1]) * E))
-    cont = [X_all[:, int(ends[j])] - S[:, j + 1] for j in range(nseg) if seg.continues[j]]
+    cont = [X_all[0:ns, int(ends[j])] - S[:, j + 1] for j in range(nseg) if seg.continues[j]]
     g_cont = ca.vertcat(*cont) if cont else ca.MX(0, 1)
     M = plant.mass_matrix(p)
     M0 = np.array(plant.mass_matrix(ca.DM(base)))
@@ -375,14 +390,9 @@ def fit_log(
     lbg = np.concatenate([np.zeros(n_c), np.full(ndof, _MINOR_FLOOR)])
     ubg = np.concatenate([np.zeros(n_c), np.full(ndof, np.inf)])
     X_guess = _interp_states(plant, Y, time)
-    v0 = np.concatenate([base[idx] / scale, X_guess[seg.rows[:, 0]].T.reshape(-1, order="F")])
-    lbv = np.concatenate([lbz, np.full(nx * nseg, -np.inf)])
-    ubv = np.concatenate([ubz, np.full(nx * nseg, np.inf)])
-    if plant.kind == "tau":  # the controller's integrators hold in raw mode: fixed, not estimated
-        for j in range(nseg):
-            fixed = slice(nf + j * nx + nm, nf + (j + 1) * nx)
-            lbv[fixed] = ubv[fixed] = v0[fixed] = 0.0
-    free_v = lbv < ubv  # the variables estimated (fixed ones are left out of the covariance)
+    v0 = np.concatenate([base[idx] / scale, X_guess[seg.rows[:, 0], 0:ns].reshape(-1)])
+    lbv = np.concatenate([lbz, np.full(ns * nseg, -np.inf)])
+    ubv = np.concatenate([ubz, np.full(ns * nseg, np.inf)])
 
     iterations = 0
     status = ""
@@ -408,8 +418,7 @@ def fit_log(
     r_opt, J_opt, A_opt = (np.array(a) for a in jac(v_opt, 1.0 / sigma))
     r_opt = r_opt.ravel()
     n_obs = int(mask.sum())
-    J_opt, A_opt = J_opt[:, free_v], A_opt[:, free_v]
-    Z = _null_space(A_opt) if n_c else np.eye(int(free_v.sum()))
+    Z = _null_space(A_opt) if n_c else np.eye(v_opt.size)
     Jr = J_opt @ Z
     _, s, Vt = np.linalg.svd(Jr, full_matrices=False)
     rel = s / s[0] if s.size and s[0] > 0 else np.zeros_like(s)
@@ -422,6 +431,7 @@ def fit_log(
     null_dirs = Z[:nf] @ Vt[~keep].T  # nf x n_null: the parameters' part of undetermined directions
 
     f_opt = 0.5 * float(r_opt @ r_opt)
+    halves = _split_fits(table, plant, free, from_pwm, opt, runs) if opt.split_check else None
 
     def _profile_rise(z_end: float) -> float:
         lb, ub = lbv.copy(), ubv.copy()
@@ -458,6 +468,17 @@ def fit_log(
                     f"flat profile likelihood: fixed at an end of its 95 % interval, chi^2 rises by "
                     f"only {min(rise):.2g} (the linear theory behind the interval: {_Z95**2:.2f})"
                 )
+        if not reasons and halves is not None:
+            a, b = halves[0].estimates[k], halves[1].estimates[k]
+            if not (a.identifiable and b.identifiable):
+                reasons.append("not identifiable from one half of the log alone")
+            else:
+                z_ab = abs(a.estimate - b.estimate) / math.hypot(a.std, b.std)
+                if z_ab > opt.split_max_z:
+                    reasons.append(
+                        f"the log's two halves disagree: {a.estimate:.4g} +- {a.std:.2g} and "
+                        f"{b.estimate:.4g} +- {b.std:.2g} ({z_ab:.1f} standard deviations apart)"
+                    )
         ok = not reasons
         p_written[i] = est if ok else base[i]
         estimates.append(
@@ -477,7 +498,9 @@ def fit_log(
         )
 
     # --- states and prediction errors -------------------------------------------------------
-    X_opt = np.array(all_fun(v_opt[nf:].reshape(nseg, nx).T, ca.DM(U_all), ca.DM(p_fit), ca.DM(H_all)))
+    S_opt = np.zeros((nx, nseg))
+    S_opt[0:ns] = v_opt[nf:].reshape(nseg, ns).T
+    X_opt = np.array(all_fun(S_opt, ca.DM(U_all), ca.DM(p_fit), ca.DM(H_all)))
     states = np.full((time.size, nx), np.nan)
     vr = seg.valid.reshape(-1)
     states[rows_flat[vr]] = X_opt.T[vr]
@@ -504,6 +527,29 @@ def fit_log(
         rmse_before=rmse_before,
         rmse_after=rmse_after,
     )
+
+
+def _split_fits(
+    table: LogTable, plant: Plant, free: Sequence[str], from_pwm: bool, opt: FitOptions, runs: Runs
+) -> tuple[FitResult, FitResult] | None:
+    """Fit the first and the second half of the log's used samples alone (``None``: too short)."""
+    used = np.concatenate([np.arange(a, b + 1) for a, b in runs.spans])
+    if used.size < 4 * max(1, opt.segment_steps):
+        return None
+    mid = used[used.size // 2]
+    inner = replace(opt, split_check=False, profile_check=False)
+    out = []
+    for rows in (used[used < mid], used[used >= mid]):
+        mask = np.zeros(table.time.size, dtype=bool)
+        mask[rows] = True
+        if table.has("armed"):
+            mask &= table.column("armed") >= 0.5
+        part = table.slice(mask)
+        try:
+            out.append(fit_log(part, plant, free, from_pwm=from_pwm, options=inner))
+        except LogError:
+            return None
+    return out[0], out[1]
 
 
 def _null_space(A: np.ndarray) -> np.ndarray:
