@@ -377,6 +377,7 @@ def fit_log(
             "ipopt": {"print_level": 0, "max_iter": opt.max_iter, "tol": 1e-10, "acceptable_tol": 1e-7},
             "print_time": False,
             "expand": True,
+            "show_eval_warnings": False,  # a trial step that makes the simulation diverge is normal
         },
     )
     lbz, ubz = np.full(nf, -np.inf), np.full(nf, np.inf)

@@ -121,8 +121,23 @@ def _fit(
     click.echo(f"wrote {out} and {paths['markdown']}")
 
 
+def _predict(log: Path, vehicle: str, resync_s: float | None, out_dir: Path) -> None:
+    from hptvsim.twin.beside import run_beside, write_beside_report
+    from hptvsim.twin.table import LogError, read_log_csv
+
+    vt, source = resolve_vehicle(vehicle)
+    try:
+        result = run_beside(read_log_csv(log), vt, resync_s=resync_s)
+    except LogError as exc:
+        raise click.ClickException(str(exc)) from None
+    paths = write_beside_report(result, out_dir, log_source=str(log), vehicle_source=source)
+    for k, row in sorted(result.rmse.items()):
+        click.echo(f"  {k:>3}-step RMSE: " + ", ".join(f"{n} {v:.3g}" for n, v in row.items()))
+    click.echo(f"wrote {paths['markdown']}")
+
+
 def register(main: click.Group) -> None:
-    """Add ``hptvsim vehicle fit`` (the ``vehicle`` group is created when it is not there)."""
+    """Add ``hptvsim vehicle fit`` and ``hptvsim twin predict`` (groups created when not there)."""
     group = main.commands.get("vehicle")
     if not isinstance(group, click.Group):
 
@@ -168,3 +183,34 @@ def register(main: click.Group) -> None:
     ) -> None:
         """Fit a vehicle's parameters to a log CSV (time, measured states, forces/commands/PWM)."""
         _fit(log, vehicle, free, out, report_dir, int(dof) if dof else None, segment_steps, not no_profile)
+
+    twin = main.commands.get("twin")
+    if not isinstance(twin, click.Group):
+
+        @main.group("twin")
+        def twin_group() -> None:
+            """The twin of a real vehicle: its logs, and the model beside them."""
+
+        twin = twin_group
+
+    @twin.command("predict")
+    @click.argument("log", type=click.Path(dir_okay=False, exists=True, path_type=Path))
+    @click.option("--vehicle", required=True, help="A built-in type or a vehicle file (TOML).")
+    @click.option(
+        "--resync-s",
+        type=click.FloatRange(min=0.0, min_open=True),
+        default=10.0,
+        show_default=True,
+        help="Re-synchronise the twin to the measured state every this many seconds.",
+    )
+    @click.option(
+        "--out",
+        "out_dir",
+        type=click.Path(file_okay=False, path_type=Path),
+        default=Path("twin_report"),
+        show_default=True,
+        help="Folder for the report and figures.",
+    )
+    def twin_predict(log: Path, vehicle: str, resync_s: float, out_dir: Path) -> None:
+        """Run a vehicle's FMU beside a log CSV: k-step prediction errors (1, 10, 100 steps), figures."""
+        _predict(log, vehicle, resync_s, out_dir)

@@ -153,13 +153,23 @@ def _figure(result: FitResult, path: Path) -> None:
             ax.plot(t, pr, style, color=color, linewidth=1.1, label=f"{k}-step prediction, {label}")
         ax.set_ylabel(f"{name} [{_UNITS[name]}]")
         ax.grid(alpha=0.3)
+    t0 = float(result.time[result.runs.spans[0][0]] - result.time[0])
+    t1 = float(result.time[result.runs.spans[-1][1]] - result.time[0])
+    margin = 0.05 * (t1 - t0) + 1.0  # s
+    for ax in axes.ravel()[: len(names)]:
+        ax.set_xlim(max(float(t[0]), t0 - margin), min(float(t[-1]), t1 + margin))  # the armed runs
+        for a, b in result.runs.spans:
+            ax.axvspan(float(t[a]), float(t[b]), color="#f2e6a0", alpha=0.35, linewidth=0)
     for ax in axes.ravel()[len(names) :]:
         ax.set_visible(False)
     for ax in axes[-1]:
         ax.set_xlabel("time [s]")
     axes[0, 0].legend(loc="upper right", fontsize=8)
     verdict = "all free parameters identified" if result.identifiable else "NOT IDENTIFIABLE"
-    fig.suptitle(f"Measured and {k}-step-ahead predicted states, before and after the fit ({verdict})")
+    fig.suptitle(
+        f"Measured and {k}-step-ahead predicted states, before and after the fit ({verdict}; "
+        "shaded: the armed runs used)"
+    )
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)

@@ -55,3 +55,28 @@ def test_twin_errors_grow_with_the_horizon_when_parameters_differ(tmp_path: Path
     paths = write_beside_report(res, tmp_path, log_source="sim", vehicle_source="spherical")
     assert paths["states"].stat().st_size > 20_000 and paths["errors"].stat().st_size > 10_000
     assert "| 100 steps |" in paths["markdown"].read_text()
+
+
+def test_twin_predict_command(tmp_path: Path) -> None:
+    import csv
+
+    from click.testing import CliRunner
+
+    from hptvsim.cli import main
+
+    log = _log({}, noise=False, seconds=12.0)
+    path = tmp_path / "log.csv"
+    names = list(log.columns)
+    with open(path, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["time", *names])
+        for i in range(log.time.size):
+            w.writerow([repr(float(log.time[i])), *(repr(float(log.columns[n][i])) for n in names)])
+    out = tmp_path / "rep"
+    r = CliRunner().invoke(
+        main, ["twin", "predict", str(path), "--vehicle", "spherical", "--resync-s", "5", "--out", str(out)]
+    )
+    assert r.exit_code == 0, r.output
+    assert "100-step RMSE" in r.output and (out / "twin_report.json").is_file()
+    r = CliRunner().invoke(main, ["twin", "predict", str(path), "--vehicle", "nope", "--out", str(out)])
+    assert r.exit_code == 2 and "neither a vehicle type" in r.output
