@@ -100,6 +100,7 @@ def write_vehicle_file(
             continue
         value = float(getattr(params, spec.name))
         lines.append(f"{spec.name} = {value!r}  # {spec.unit}")
+    out.parent.mkdir(parents=True, exist_ok=True)
     write_atomic(out, "\n".join(lines) + "\n")
     from hptvsim.cosim.vehicles import load_vehicle_file
 

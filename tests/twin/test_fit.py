@@ -131,7 +131,7 @@ def test_vehicle_fit_command_writes_a_vehicle_file_a_scenario_uses(tmp_path: Pat
     log, _ = _excited_log(seconds=20.0, seed=3, truth={k: TRUTH[k] for k in free})
     path = tmp_path / "log.csv"
     _write_csv(path, log)
-    out = tmp_path / "my_rov.toml"
+    out = tmp_path / "new_folder" / "my_rov.toml"
     result = CliRunner().invoke(
         main,
         [
@@ -156,13 +156,13 @@ def test_vehicle_fit_command_writes_a_vehicle_file_a_scenario_uses(tmp_path: Pat
     # everything not fitted is the starting vehicle's, controller and limits included
     for name in ("m", "I_z", "Y_vdot", "v_max", "K_p_u", "tau_X_max", "control_mode"):
         assert getattr(vt.parameters, name) == getattr(shipped, name), name
-    report = json.loads((tmp_path / "my_rov_report" / "fit_report.json").read_text())
+    report = json.loads((tmp_path / "new_folder" / "my_rov_report" / "fit_report.json").read_text())
     assert report["identifiable"] is True and report["dof"] == 3
     assert {p["name"] for p in report["parameters"]} == {"X_uu", "N_rr", "X_udot"}
     assert set(report["rmse_before"]) == {"1", "10", "100"}
-    md = (tmp_path / "my_rov_report" / "fit_report.md").read_text()
+    md = (tmp_path / "new_folder" / "my_rov_report" / "fit_report.md").read_text()
     assert "every free parameter is identified" in md and "95 % interval" in md
-    assert (tmp_path / "my_rov_report" / "fit_predictions.png").stat().st_size > 10_000
+    assert (tmp_path / "new_folder" / "my_rov_report" / "fit_predictions.png").stat().st_size > 10_000
     # a scenario takes it in place of a vehicle type
     from hptvsim.world.scenario import load_scenario, scenario_dir
 
