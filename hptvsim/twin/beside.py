@@ -276,12 +276,21 @@ def _figures(result: TwinResult, out_dir: Path) -> dict[str, Path]:
         ax.set_ylabel(f"{name} [{_UNITS[name]}]")
         ax.grid(alpha=0.3)
         ax.legend(loc="upper right", fontsize=8)
+    t0 = float(t[result.runs.spans[0][0]])
+    t1 = float(t[result.runs.spans[-1][1]])
+    margin = 0.05 * (t1 - t0) + 1.0  # s
+    for ax in axes.ravel():
+        ax.set_xlim(max(float(t[0]), t0 - margin), min(float(t[-1]), t1 + margin))  # the armed runs
+        for a, b in result.runs.spans:
+            ax.axvspan(float(t[a]), float(t[b]), color="#f2e6a0", alpha=0.35, linewidth=0)
     for ax in axes[-1]:
         ax.set_xlabel("time [s]")
     sync = (
         "only at the start of each armed run" if result.resync_s is None else f"every {result.resync_s:g} s"
     )
-    fig.suptitle(f"The twin beside the vehicle ({result.inputs} inputs; re-synchronised {sync})")
+    fig.suptitle(
+        f"The twin beside the vehicle ({result.inputs} inputs; re-synchronised {sync}; shaded: armed)"
+    )
     fig.tight_layout()
     fig.savefig(paths["states"], dpi=110)
     plt.close(fig)

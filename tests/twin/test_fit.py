@@ -189,7 +189,6 @@ def test_vehicle_fit_command_errors_are_one_line(tmp_path: Path) -> None:
     assert not out.exists()
 
 
-@pytest.mark.slow
 def test_fitted_vehicle_file_builds_an_fmu(tmp_path: Path) -> None:
     from hptvsim.fmu.build import build_fmu
 
@@ -203,3 +202,21 @@ def test_fitted_vehicle_file_builds_an_fmu(tmp_path: Path) -> None:
     )
     fmu = build_fmu(vt, tmp_path, dof=3)
     assert fmu.name == "RovFit.fmu" and fmu.stat().st_size > 0
+
+
+def test_fit_uses_the_measured_states_that_are_there() -> None:
+    """No sway speed logged, position only every fifth sample: the fit uses what is there."""
+    truth = {k: TRUTH[k] for k in ("X_uu", "N_rr")}
+    log, _ = _excited_log(seconds=20.0, seed=8, truth=truth)
+    cols = {k: v.copy() for k, v in log.columns.items() if k != "v"}
+    for name in ("x", "y"):
+        cols[name][np.arange(log.time.size) % 5 != 0] = np.nan
+    sparse = LogTable(time=log.time, columns=cols, source="sparse")
+    plant = make_plant("tau", planar=bluerov2())
+    res = fit_log(sparse, plant, list(truth), options=FitOptions(profile_check=False))
+    assert res.identifiable
+    assert "v" not in res.sigma and set(res.sigma) == {"x", "y", "psi", "u", "r"}
+    assert res.n_observations == 3 * 200 + 2 * 40  # psi, u, r at 200 samples; x, y at 40
+    for e in res.estimates:
+        assert e.estimate == pytest.approx(truth[e.name], rel=REL_TOL) and e.low <= truth[e.name] <= e.high
+    assert "v" not in res.rmse_after[10]
