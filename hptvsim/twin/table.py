@@ -113,6 +113,10 @@ def read_log_csv(path: str | Path) -> LogTable:
             rows = list(csv.reader(fh))
     except OSError as exc:
         raise LogError(f"{p}: cannot be read: {exc.strerror or exc}") from None
+    except (UnicodeDecodeError, csv.Error) as exc:
+        raise LogError(
+            f"{p}: not a CSV text file ({exc}); expected a header row starting with 'time'"
+        ) from None
     if not rows:
         raise LogError(f"{p}: empty file; expected a header row starting with 'time'")
     header = [h.strip() for h in rows[0]]
