@@ -222,3 +222,24 @@ def test_fit_uses_the_measured_states_that_are_there() -> None:
     for e in res.estimates:
         assert e.estimate == pytest.approx(truth[e.name], rel=REL_TOL) and e.low <= truth[e.name] <= e.high
     assert "v" not in res.rmse_after[10]
+
+
+def test_fit_over_two_armed_runs() -> None:
+    """A disarmed second in the middle: two runs, each with its own start state, no continuity across."""
+    truth = {k: TRUTH[k] for k in ("X_uu", "N_rr")}
+    log, _ = _excited_log(seconds=20.0, seed=12, truth=truth)
+    armed = np.ones(log.time.size)
+    armed[95:105] = 0.0
+    cols = {**log.columns, "armed": armed}
+    for name in ("x", "y", "psi"):  # a log re-zeroes its position after the gap: only a new start fits
+        cols[name] = cols[name].copy()
+        cols[name][105:] += 5.0
+    table = LogTable(time=log.time, columns=cols, source="two-runs")
+    res = fit_log(
+        table, make_plant("tau", planar=bluerov2()), list(truth), options=FitOptions(profile_check=False)
+    )
+    assert res.runs.spans == ((0, 94), (105, 199))
+    assert res.identifiable
+    for e in res.estimates:
+        assert e.estimate == pytest.approx(truth[e.name], rel=REL_TOL) and e.low <= truth[e.name] <= e.high
+    assert np.isnan(res.states[100]).all()
