@@ -6,7 +6,9 @@ step: body forces ``tau_X, tau_Y, tau_N`` (the FMU in raw mode, ``control_mode =
 limits lifted), thruster PWM through :mod:`hptvsim.twin.thrusters`, or commands ``v_cmd,
 omega_cmd`` through the FMU's own controller. It starts from the measured state at the start of
 each armed run and is re-synchronised to the measured state every ``resync_s`` seconds (FMU reset
-and initialised at the measured pose and velocities; the controller's integrators restart at zero).
+and initialised at the measured pose and velocities; the controller's integrators restart at zero:
+the FMU has no start values for them, so with commands the first steps after a re-synchronisation
+carry the integrators' error, which the k-step errors include).
 
 The k-step prediction error (k = 1, 10, 100 steps of the log's grid), the way BlueROV2
 identification work reports it: from start samples spread over the runs, the FMU is initialised
