@@ -29,6 +29,7 @@ from hptvsim.experiments import cli as experiments_cli
 from hptvsim.sensors import cli as sensors_cli
 from hptvsim.service import cli as service_cli
 from hptvsim.twin import cli as twin_cli
+from hptvsim.twin import fit_cli as twin_fit_cli
 from hptvsim.viz import cli as viz_cli
 from hptvsim.world import cli as world_cli
 
@@ -216,6 +217,7 @@ def _register() -> None:
     sensors_cli.register(main)
     viz_cli.register(main)
     twin_cli.register(main, store=_store_twin)  # --store: the service layer's, passed down
+    twin_fit_cli.register(main)  # hptvsim vehicle fit, hptvsim twin predict
     bench = bench_cli.register(main)
     service_cli.register(main, bench)  # the layer above the benchmarks adds its own
 

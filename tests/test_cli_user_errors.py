@@ -222,6 +222,15 @@ CASES: dict[str, tuple[list[str], tuple[str, ...]]] = {
         ("bad.toml", "not valid TOML"),
     ),
     "fmu-check": (["fmu", "check", "--dir", "empty"], ("empty", "WorkClassUUV.fmu")),
+    "vehicle-fit-log": (
+        ["vehicle", "fit", "garbage.bin", "--vehicle", "work_class", "--free", "X_u", "--out", "o.toml"],
+        ("garbage.bin", "'time'"),
+    ),
+    "vehicle-fit-vehicle": (
+        ["vehicle", "fit", "bad.toml", "--vehicle", "nosuch", "--free", "X_u", "--out", "o.toml"],
+        ("nosuch", "work_class"),
+    ),
+    "twin-predict": (["twin", "predict", "garbage.bin", "--vehicle", "spherical"], ("garbage.bin", "'time'")),
     "cosim-run-broken": (["cosim", "run", "bad.toml"], ("bad.toml", "line 1")),
     "cosim-run-missing": (["cosim", "run", "missing.toml"], ("missing.toml", "does not exist")),
     "cosim-export-ssp": (["cosim", "export-ssp", "bad.toml", "--out", "x.ssp"], ("bad.toml", "line 1")),

@@ -143,7 +143,8 @@ LAYERS: Final[tuple[Layer, ...]] = (
         "twin",
         ("hptvsim.twin",),
         "a twin of a real vehicle: MAVLink logs (`.tlog`, `.BIN`) and live telemetry as episodes of "
-        "the frame schema, their recordings and the calibration CSV",
+        "the frame schema, their recordings and the calibration CSV; the model run beside the vehicle "
+        "and calibrated from its logs (grey-box fit with IPOPT), the BlueROV2's thrusters",
     ),
     Layer(
         "demo",

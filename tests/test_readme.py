@@ -400,6 +400,23 @@ COMMANDS: dict[str, tuple[Run | Help, ...]] = {
             ("{tmp}/BlueROV2Heavy.fmu",),
         ),
     ),
+    (
+        "hptvsim vehicle fit my_dive.csv --vehicle scenarios/vehicles/bluerov2_heavy.toml"
+        " --free X_udot,N_rdot,X_u,X_uu,Y_vv,N_rr --out my_rov.toml"
+    ): (
+        Help(
+            "needs the reader's own dive log; the fit runs on simulated logs in tests/twin/test_fit.py",
+            "hptvsim vehicle fit --help",
+            r"Usage: hptvsim vehicle fit \[OPTIONS\] LOG[\s\S]*--free",
+        ),
+    ),
+    "hptvsim twin predict my_dive.csv --vehicle my_rov.toml --resync-s 10 --out my_rov_twin": (
+        Help(
+            "needs the reader's own dive log and fitted vehicle; tests/twin/test_beside.py runs it",
+            "hptvsim twin predict --help",
+            r"Usage: hptvsim twin predict \[OPTIONS\] LOG[\s\S]*--resync-s",
+        ),
+    ),
     "hptvsim cosim run GRAPH.toml": (
         Run(  # the README's example graph, on the next line of the block
             "hptvsim cosim run {repo}/configs/cosim/follow-the-turn.toml --stop-time 5 --set turn=0.3"
