@@ -1,5 +1,7 @@
-"""A twin of a real vehicle: its logs and live telemetry in the frame schema, the model run beside
-it, and the model calibrated from its logs (issue 39).
+"""A twin of a real vehicle: telemetry in, the model beside it, calibration from logs (issue 39).
+
+Its logs and live telemetry in the frame schema, the model run beside it, and the model
+calibrated from its logs.
 
 * :mod:`hptvsim.twin.log`: :class:`~hptvsim.twin.log.VehicleLog`, a log on one time base, and
   the calibration CSV;
