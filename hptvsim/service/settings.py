@@ -78,6 +78,9 @@ variable                       meaning (default)
 ``HPTVSIM_TWIN_LISTEN``        follow a live MAVLink stream on ``udp:HOST:PORT`` as a running
                                ``twin`` episode (``1``: ``udp:127.0.0.1:14550``; none)
 ``HPTVSIM_TWIN_IDLE_S``        a twin stream silent this long has ended and is stored (``5``)
+``HPTVSIM_TWIN_MAX_MESSAGES``  MAVLink messages one twin episode keeps; a stream that sends more
+                               is stored there and goes on as a new episode (``1000000``, about
+                               11 h of an ArduSub stream at ~25 messages/s, ~200 MB in memory)
 =============================  ===========================================================
 """
 
@@ -126,6 +129,7 @@ LIMITS: tuple[tuple[str, str, type[int] | type[float]], ...] = (
     ("HPTVSIM_SUBSCRIBER_LAG_LIMIT", "subscriber_lag_limit", int),
     ("HPTVSIM_SEND_TIMEOUT_S", "send_timeout_s", float),
     ("HPTVSIM_EVENT_BYTES_PER_S", "event_bytes_per_s", float),
+    ("HPTVSIM_TWIN_MAX_MESSAGES", "twin_max_messages", int),
 )
 """Every setting that bounds a resource: its variable, its field and its type. Each is a finite
 number > 0 (checked however the settings are made: ``inf`` would switch a limit off, and ``nan``
@@ -198,6 +202,8 @@ class Settings:
         twin_listen: ``udp:HOST:PORT`` of a live MAVLink stream the service follows as a running
             ``twin`` episode (:mod:`hptvsim.service.twin`), or None.
         twin_idle_s: A twin stream silent this long has ended and is stored [s].
+        twin_max_messages: MAVLink messages one twin episode keeps (then it is stored and the
+            stream goes on as a new one): what any sender to the port can make the API hold.
     """
 
     host: str = "127.0.0.1"
@@ -245,6 +251,7 @@ class Settings:
     event_bytes_per_s: float = 50e6
     twin_listen: str | None = None
     twin_idle_s: float = 5.0
+    twin_max_messages: int = 1_000_000
 
     def __post_init__(self) -> None:
         for _, name, kind in LIMITS:

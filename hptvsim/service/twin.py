@@ -108,9 +108,10 @@ class TwinListenTask:
     ``running`` episode (label ``twin: udp:HOST:PORT``) and publishes its ``static`` part and
     then its frames (at most ``event_hz`` a second) through the service's hub, so the dashboard
     and the viser view show it like any running episode. When the stream has been silent for
-    ``twin_idle_s`` (or the service stops) the episode's files are written (as ``--store``
-    writes them: the whole stream on its time grid) and it becomes ``finished``; then the
-    listener waits for the next stream.
+    ``twin_idle_s`` (or the service stops, or it sent ``twin_max_messages``: the memory it can
+    take is bounded) the episode's files are written (as ``--store`` writes them: the whole
+    stream on its time grid) and it becomes ``finished``; then the listener waits for the next
+    stream (or goes on with the same one as a new episode).
 
     Args:
         svc: The service (:class:`hptvsim.service.service.Service`: its settings, store, hub).
@@ -122,6 +123,7 @@ class TwinListenTask:
         assert settings.twin_listen is not None
         self.address: str = settings.twin_listen
         self.idle_s: float = settings.twin_idle_s
+        self.max_messages: int = settings.twin_max_messages
         self.period = 1.0 / settings.event_hz  # s between frame events
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -151,7 +153,11 @@ class TwinListenTask:
 
     def _new_listener(self) -> Listener:
         return Listener(
-            self.address, idle_timeout_s=self.idle_s, on_static=self._on_static, on_frame=self._on_frame
+            self.address,
+            idle_timeout_s=self.idle_s,
+            on_static=self._on_static,
+            on_frame=self._on_frame,
+            max_messages=self.max_messages,
         )
 
     def _current(self) -> str | None:

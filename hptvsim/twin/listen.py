@@ -78,6 +78,8 @@ class Listener:
         idle_timeout_s: The stream counts as ended after this long without a message [s].
         on_static: Called once with the live frames' static part.
         on_frame: Called with every live frame.
+        max_messages: The stream counts as ended after this many MAVLink messages (None: no
+            limit): what a sender can make the listener hold in memory is bounded.
     """
 
     def __init__(
@@ -88,8 +90,10 @@ class Listener:
         idle_timeout_s: float = 5.0,
         on_static: Callable[[EpisodeStatic], None] | None = None,
         on_frame: Callable[[Frame], None] | None = None,
+        max_messages: int | None = None,
     ) -> None:
         self.address = address
+        self.max_messages = max_messages
         self.host, self.port = parse_address(address)
         self.dt = dt
         self.idle_timeout_s = idle_timeout_s
@@ -154,6 +158,8 @@ class Listener:
                     break
                 if last_rx is not None and now - last_rx > self.idle_timeout_s:
                     break
+                if self.max_messages is not None and self.state.messages >= self.max_messages:
+                    break  # held long enough: the caller stores it and listens again
                 if last_rx is not None and now - last_beat >= HEARTBEAT_PERIOD_S:
                     last_beat = now
                     with contextlib.suppress(Exception):  # the sender may be gone

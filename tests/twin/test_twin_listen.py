@@ -143,6 +143,26 @@ def test_a_live_stream_over_loopback_gives_the_logs_twin(
     assert np.allclose(poses["y"][:n], np.asarray(offline.y)[:n], atol=0.02)
 
 
+def test_a_stream_ends_after_the_most_messages_one_episode_keeps(tlog: Path) -> None:
+    """What a sender can make the listener hold is bounded (the service's
+    ``HPTVSIM_TWIN_MAX_MESSAGES``): past ``max_messages`` the stream is returned as it is, long
+    before it falls silent, and a new listener takes the rest."""
+    port = _free_udp_port()
+    listener = Listener(f"udp:127.0.0.1:{port}", idle_timeout_s=30.0, max_messages=2000)
+    listener.open()
+    sent: list[int] = []
+    sender = threading.Thread(target=_send, args=(tlog, port, sent), daemon=True)
+    sender.start()
+    first = listener.run(max_wait_s=60)
+    assert listener.state.messages == 2000 and sender.is_alive()  # the stream goes on
+    assert len(first) > 0
+    rest = Listener(f"udp:127.0.0.1:{port}", idle_timeout_s=2.0)
+    rest.open()
+    rest.run(max_wait_s=30)
+    sender.join(timeout=60)
+    assert sent and rest.state.messages > 0 and 2000 + rest.state.messages <= sent[0]
+
+
 def test_a_silent_port_gives_one_clear_error() -> None:
     from hptvsim.twin.mavlink import TwinLogError
 
