@@ -414,10 +414,10 @@ class Game3DCore(GameBase[Obs3DLayout]):
 
     def _sense(self, dt: float) -> None:
         for sonar, idx in zip(self.sonars, self.sonar_members, strict=True):
-            measured = sonar.measure(self.poses, dt)
             if idx.size == self.num_agents:
-                self.ranges[...] = measured
+                sonar.measure(self.poses, dt, out=self.ranges)
             else:
+                measured = sonar.measure(self.poses, dt)
                 self.ranges[:, idx, :] = measured[:, idx, :]
 
     def _targets(self) -> tuple[F64, F64]:
