@@ -339,6 +339,7 @@ class Game3DCore(GameBase[Obs3DLayout]):
         self._scaled_ranges = np.zeros((b, n, self.layout.beams))  # 1, ranges / max_range clipped
         self._obs_bounds = self.layout.bounds()
         self._pair_distance = np.zeros((b, n, n))  # m, between the vehicles' centres
+        self._min_range = np.zeros((b, n))  # m, each vehicle's shortest sonar range
         self._time = np.zeros(b)  # s
         current = self.world.current
         # a depth profile makes the current depend on where a vehicle is, as a field that varies
@@ -463,6 +464,7 @@ class Game3DCore(GameBase[Obs3DLayout]):
         inv = 1.0 / lay.max_range
         # the sonar's columns: clip(ranges / max_range, 0, 1) as maximum then minimum (the same
         # numbers as np.clip, NaN included, without its overhead), into a buffer kept between steps
+        self._min_range = self.ranges.min(axis=-1)  # m, kept for the step's reward (Eq. 17)
         scaled = self._scaled_ranges
         np.multiply(self.ranges, inv, out=scaled)
         np.maximum(scaled, 0.0, out=scaled)
@@ -477,7 +479,7 @@ class Game3DCore(GameBase[Obs3DLayout]):
         bearing = np.arctan2(delta[..., 1], delta[..., 0]) - psi  # NED: atan2(east, north)
         x0, x1, y0, y1 = self.extent
         values = [
-            self.ranges.min(axis=-1) * inv,
+            self._min_range * inv,
             pos[..., 2] / ds,
             self.altitude / ds,
             self.velocity[..., 0] / lim[:, 1],
@@ -651,7 +653,7 @@ class Game3DCore(GameBase[Obs3DLayout]):
         w = self.task.reward
         terms = reward_terms(
             self.task,
-            min_range=self.ranges.min(axis=-1),
+            min_range=self._min_range,  # the ranges have not changed since _evaluate
             distance=self.distance,
             previous_distance=self.prev_distance,
             pursuer=self.pursuer,
