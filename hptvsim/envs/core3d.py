@@ -336,6 +336,10 @@ class Game3DCore(GameBase[Obs3DLayout]):
         self.done = np.ones(b, dtype=bool)
         self.episode_return = np.zeros((b, n))
         self.obs = np.zeros((b, n, self.layout.size), dtype=np.float32)
+        self._scaled_ranges = np.zeros((b, n, self.layout.beams))  # 1, ranges / max_range clipped
+        self._obs_bounds = self.layout.bounds()
+        self._pair_distance = np.zeros((b, n, n))  # m, between the vehicles' centres
+        self._min_range = np.zeros((b, n))  # m, each vehicle's shortest sonar range
         self._time = np.zeros(b)  # s
         current = self.world.current
         # a depth profile makes the current depend on where a vehicle is, as a field that varies
@@ -414,19 +418,21 @@ class Game3DCore(GameBase[Obs3DLayout]):
 
     def _sense(self, dt: float) -> None:
         for sonar, idx in zip(self.sonars, self.sonar_members, strict=True):
-            measured = sonar.measure(self.poses, dt)
             if idx.size == self.num_agents:
-                self.ranges[...] = measured
+                sonar.measure(self.poses, dt, out=self.ranges)
             else:
+                measured = sonar.measure(self.poses, dt)
                 self.ranges[:, idx, :] = measured[:, idx, :]
 
-    def _targets(self) -> tuple[F64, F64]:
-        """Each agent's true 3-D distance to its target ``(B, N)`` and the target it knows ``(B, N, 3)``."""
+    def _targets(self, dist: F64) -> tuple[F64, F64]:
+        """Each agent's true 3-D distance to its target ``(B, N)`` and the target it knows ``(B, N, 3)``.
+
+        Args:
+            dist: ``(B, N, N)`` 3-D distances between the vehicles' centres [m] (:meth:`_pairs`).
+        """
         pos = self.poses[..., 0:3]
         if self.goals is not None:
             return np.linalg.norm(self.goals - pos, axis=-1), self.goals
-        diff = pos[:, :, None, :] - pos[:, None, :, :]
-        dist = np.linalg.norm(diff, axis=-1)  # (B, N, N)
         p = self.pursuer
         candidate = p[:, None] & ~p[None, :] | ~p[:, None] & p[None, :]
         masked = np.where(candidate[None], dist, np.inf)
@@ -445,12 +451,25 @@ class Game3DCore(GameBase[Obs3DLayout]):
             known[:, pi, 0:2] = reported
         return true_d, known
 
+    def _pairs(self) -> F64:
+        """``(B, N, N)`` 3-D distances [m] between the vehicles' centres (for targets and collisions)."""
+        pos = self.poses[..., 0:3]
+        dist: F64 = np.linalg.norm(pos[:, :, None, :] - pos[:, None, :, :], axis=-1)
+        return dist
+
     def _observe(self, known: F64) -> None:
         lay = self.layout
         o = self.obs
         k = lay.beams
         inv = 1.0 / lay.max_range
-        o[..., lay.sonar] = np.clip(self.ranges * inv, 0.0, 1.0)
+        # the sonar's columns: clip(ranges / max_range, 0, 1) as maximum then minimum (the same
+        # numbers as np.clip, NaN included, without its overhead), into a buffer kept between steps
+        self._min_range = self.ranges.min(axis=-1)  # m, kept for the step's reward (Eq. 17)
+        scaled = self._scaled_ranges
+        np.multiply(self.ranges, inv, out=scaled)
+        np.maximum(scaled, 0.0, out=scaled)
+        np.minimum(scaled, 1.0, out=scaled)
+        o[..., lay.sonar] = scaled
         pos, att = self.poses[..., 0:3], self.poses[..., 3:6]
         ds = lay.depth_scale
         lim = self.limits
@@ -460,7 +479,7 @@ class Game3DCore(GameBase[Obs3DLayout]):
         bearing = np.arctan2(delta[..., 1], delta[..., 0]) - psi  # NED: atan2(east, north)
         x0, x1, y0, y1 = self.extent
         values = [
-            self.ranges.min(axis=-1) * inv,
+            self._min_range * inv,
             pos[..., 2] / ds,
             self.altitude / ds,
             self.velocity[..., 0] / lim[:, 1],
@@ -479,8 +498,11 @@ class Game3DCore(GameBase[Obs3DLayout]):
         ]
         for i, v in enumerate(values):
             o[..., k + i] = v
-        low, high = lay.bounds()
-        np.clip(o, low, high, out=o)
+        # the sonar's columns are within their bounds [0, 1] already (a float64 in [0, 1] rounds to
+        # a float32 in [0, 1]): clip the rest
+        low, high = self._obs_bounds
+        tail = o[..., k:]
+        np.clip(tail, low[k:], high[k:], out=tail)
 
     def _flags(self) -> tuple[EndFlags, Bool, Bool]:
         pos = self.poses[..., 0:3]
@@ -488,9 +510,7 @@ class Game3DCore(GameBase[Obs3DLayout]):
         n = self.num_agents
         seabed = self.altitude < r[None, :]
         surface = pos[..., 2] < r[None, :]
-        gap = (
-            np.linalg.norm(pos[:, :, None, :] - pos[:, None, :, :], axis=-1) - (r[:, None] + r[None, :])[None]
-        )
+        gap = self._pair_distance - (r[:, None] + r[None, :])[None]
         gap[:, np.arange(n), np.arange(n)] = np.inf
         collision = seabed | surface | (gap < 0.0).any(axis=-1)
         x0, x1, y0, y1 = self.extent
@@ -537,7 +557,8 @@ class Game3DCore(GameBase[Obs3DLayout]):
 
     def _evaluate(self) -> None:
         self.altitude[...] = self.world.heightmap.depth_at(self.poses[..., 0:2]) - self.poses[..., 2]
-        self.distance[...], known = self._targets()
+        self._pair_distance = self._pairs()  # kept for _flags: the poses do not change in between
+        self.distance[...], known = self._targets(self._pair_distance)
         self._observe(known)
 
     # -- the interface -----------------------------------------------------------------------------
@@ -632,7 +653,7 @@ class Game3DCore(GameBase[Obs3DLayout]):
         w = self.task.reward
         terms = reward_terms(
             self.task,
-            min_range=self.ranges.min(axis=-1),
+            min_range=self._min_range,  # the ranges have not changed since _evaluate
             distance=self.distance,
             previous_distance=self.prev_distance,
             pursuer=self.pursuer,

@@ -580,18 +580,23 @@ def test_sonar3d_without_noise_equals_the_geometry(errors: GaussMarkovConfig) ->
     np.testing.assert_array_equal(s.truth(poses), truth)
 
 
+@pytest.mark.parametrize("backend3d", BACKENDS)
 @pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize(
     "errors",
     [GaussMarkovConfig(), GaussMarkovConfig(bias_std=0.0, noise_std=0.3), GaussMarkovConfig(noise_std=0.0)],
 )
 def test_sonar3d_errors_are_the_planar_sonars(
-    backend: Backend, errors: GaussMarkovConfig, monkeypatch: pytest.MonkeyPatch
+    backend: Backend, backend3d: Backend, errors: GaussMarkovConfig, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """Given the same true ranges and seed, the 3-D and the planar sonar report the same numbers."""
+    """Given the same true ranges and seed, the 3-D and the planar sonar report the same numbers.
+
+    Either sonar's errors on either backend: the fused C pass (``errors_kernel.c``) and the numpy
+    path give the same numbers.
+    """
     hm, poses, radii = sensor_setup()
     config = Sonar3dConfig(azimuth_beams=16, elevation_beams=4, max_range=30.0, errors=errors)
-    sonar = Sonar3d(config, hm, num_envs=5, num_agents=3, radii=radii, rng=21)
+    sonar = Sonar3d(config, hm, num_envs=5, num_agents=3, radii=radii, rng=21, backend=backend3d)
     truth = sonar.truth(poses)
     planar = Sonar(
         SonarConfig(beams=config.beams, max_range=30.0, errors=errors),
@@ -607,6 +612,15 @@ def test_sonar3d_errors_are_the_planar_sonars(
         return out
 
     monkeypatch.setattr(planar.geometric, "ranges", given_truth)
-    for dt in (0.0, 0.25, 0.25, 1.0):
-        np.testing.assert_array_equal(sonar.measure(poses, dt), planar.measure(np.zeros((5, 3, 3)), dt))
+    monkeypatch.setattr(sonar.geometric, "ranges", given_truth)
+    held = np.empty((5, 3, config.beams))
+    for k, dt in enumerate((0.0, 0.25, 0.25, 1.0)):
+        planar_ranges = planar.measure(np.zeros((5, 3, 3)), dt)
+        if k % 2:  # into the caller's buffer, as the 3-D game measures
+            assert sonar.measure(poses, dt, out=held) is held
+            np.testing.assert_array_equal(held, planar_ranges)
+        else:
+            np.testing.assert_array_equal(sonar.measure(poses, dt), planar_ranges)
         np.testing.assert_array_equal(sonar.errors.bias, planar.errors.bias)
+    with pytest.raises(ValueError, match="out must be a C-contiguous float64 array"):
+        sonar.measure(poses, 0.25, out=np.empty((5, 3, 2)))

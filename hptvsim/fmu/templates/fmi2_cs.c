@@ -8,8 +8,10 @@
  * whether the last parameter is an Integer (the planar model's control_mode), HPTV_NM is the
  * size of the mass matrix M = M_RB + M_A checked for positive definiteness.
  *
- * Integration: fmi2DoStep advances the state with explicit RK4 (hptv_rk4_step) in
- * n = ceil(H / h_max) equal sub-steps of length H / n, inputs held over the step.
+ * Integration: fmi2DoStep advances the state with explicit RK4 in n = ceil(H / h_max) equal
+ * sub-steps of length h = H / n, inputs held over the step. The RK4 step comes in two generated
+ * parts: hptv_rk4_pre(p, h) -> q, the HPTV_NQ subexpressions that depend on the parameters and h
+ * only, evaluated once per call, and hptv_rk4_core(x, w, p, h, q), once per sub-step.
  *
  * Beyond FMI 2.0, the binary exports hptvsim_advance_batch and hptvsim_output_batch: the
  * same advance and output code over arrays of vehicles, for hptvsim's batched backend. Both
@@ -153,6 +155,7 @@ static int hptv_advance(double *x, const double *w, const double *p, double H, d
     const casadi_real *arg[HPTV_SZ_ARG];
     casadi_real *res[HPTV_SZ_RES];
     double x_next[HPTV_NX];
+    double q[HPTV_NQ > 0 ? HPTV_NQ : 1];
     double h;
     long n, k;
     int i;
@@ -161,13 +164,18 @@ static int hptv_advance(double *x, const double *w, const double *p, double H, d
     n = (long)ceil(H / h_max - 1e-9);
     if (n < 1) n = 1;
     h = H / (double)n;
+    arg[0] = p; /* the parametric part, the same for every sub-step */
+    arg[1] = &h;
+    res[0] = q;
+    hptv_rk4_pre(arg, res, iwork, work, 0);
     arg[0] = x;
     arg[1] = w;
     arg[2] = p;
     arg[3] = &h;
+    arg[4] = q;
     res[0] = x_next;
     for (k = 0; k < n; k++) {
-        hptv_rk4_step(arg, res, iwork, work, 0);
+        hptv_rk4_core(arg, res, iwork, work, 0);
         for (i = 0; i < HPTV_NX; i++) x[i] = x_next[i];
     }
     return hptv_all_finite(x, HPTV_NX) ? 0 : 1;

@@ -1,0 +1,63 @@
+"""``hptvsim bench env``: the 3-D game at B = 1024 beside the planar game, and their ratio (issue 37).
+
+No timing is asserted: the rows are made up or their measurement is replaced, so these check the
+table's wiring and arithmetic only.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from hptvsim.bench import env as bench
+from hptvsim.bench.env import GAME3D_TARGET, EnvBenchResult, EnvBenchRow
+
+
+def _result(planar: float, game3d: float) -> EnvBenchResult:
+    result = EnvBenchResult(scenario="source")
+    result.rows += [
+        EnvBenchRow("hptvsim batched backend, B=64", 64, 4, 9.0e9),
+        EnvBenchRow("hptvsim batched backend, B=1024", 1024, 4, planar),
+        EnvBenchRow("hptvsim 3-D game batched, B=1024", 1024, 4, game3d),
+        EnvBenchRow("hptvsim 3-D game batched, B=64", 64, 4, 1.0),
+    ]
+    return result
+
+
+def test_the_ratio_is_the_3d_over_the_planar_agent_steps_at_b1024() -> None:
+    result = _result(planar=40_000.0, game3d=22_000.0)
+    assert result.game3d_vs_planar() == pytest.approx(0.55)
+    text = result.table()
+    assert "3-D / planar agent-steps/s at B = 1024: 0.55x (target >= 0.5x: meets)" in text
+    assert result.as_dict()["game3d_vs_planar_b1024"] == pytest.approx(0.55)
+    low = _result(planar=40_000.0, game3d=12_000.0).table()
+    assert "3-D / planar agent-steps/s at B = 1024: 0.30x (target >= 0.5x: MISSES)" in low
+    assert GAME3D_TARGET == 0.5
+
+
+def test_no_ratio_without_both_rows() -> None:
+    result = EnvBenchResult(scenario="source")
+    result.rows.append(EnvBenchRow("hptvsim batched backend, B=1024", 1024, 4, 100.0))
+    assert result.game3d_vs_planar() is None
+    assert "3-D / planar" not in result.table()
+
+
+def test_bench_env_measures_the_3d_game_at_b1024_right_after_the_planar_row(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    def planar(scenario: str, num_envs: int, seconds: float) -> EnvBenchRow:
+        return EnvBenchRow(f"hptvsim batched backend, B={num_envs}", num_envs, 4, 10.0)
+
+    def game3d(num_envs: int, seconds: float) -> EnvBenchRow:
+        return EnvBenchRow(f"hptvsim 3-D game batched, B={num_envs}", num_envs, 4, 6.0)
+
+    monkeypatch.setattr(bench, "_ours_fmu", lambda scenario, seconds: EnvBenchRow("hptvsim FMU", 1, 4, 1.0))
+    monkeypatch.setattr(bench, "_ours_batched", planar)
+    monkeypatch.setattr(bench, "_ours_3d", game3d)
+    monkeypatch.setattr(bench, "_mpe", lambda seconds: "mpe2 not installed (test)")
+    monkeypatch.setattr(bench, "_vmas", lambda num_envs, seconds: "vmas not installed (test)")
+    result = bench.bench_env(quick=True)
+    names = [r.name for r in result.rows]
+    i = names.index("hptvsim batched backend, B=1024")
+    assert names[i + 1] == "hptvsim 3-D game batched, B=1024"
+    assert result.game3d_vs_planar() == pytest.approx(0.6)
+    assert "3-D / planar agent-steps/s at B = 1024: 0.60x" in result.table()
