@@ -33,6 +33,7 @@ from hptvsim.service.hub import (
     SubscriberDroppedError,
     SubscriberLimitError,
     encode_json,
+    stale,
 )
 from hptvsim.service.schemas import (
     POLICY_PATTERN,
@@ -189,6 +190,7 @@ async def _events(svc: Service, key: str, frames: bool, static: bool) -> EventSt
         raise ApiError(exc.status, exc.detail, type="subscriber_limit", headers=headers) from None
     loop = asyncio.get_running_loop()
     end = loop.time() + svc.settings.event_stream_s
+    shown: dict[str, int] = {}  # the last step shown per event type (frames never go back)
 
     async def chunks() -> AsyncGenerator[bytes, None]:
         if key != ALL:
@@ -208,7 +210,7 @@ async def _events(svc: Service, key: str, frames: bool, static: bool) -> EventSt
             if static and known is not None:
                 yield known.sse()
             for latest in svc.hub.last_events(key):
-                if latest.type in kinds:
+                if latest.type in kinds and not stale(latest, shown):
                     yield latest.sse()
         else:
             yield format_sse_event(comment="connected", retry=2000)
@@ -220,6 +222,8 @@ async def _events(svc: Service, key: str, frames: bool, static: bool) -> EventSt
                 return
             if e is None:
                 yield KEEPALIVE
+                continue
+            if key != ALL and stale(e, shown):  # queued while the snapshot was taken
                 continue
             yield e.sse()
             if key != ALL and e.final:
@@ -709,11 +713,15 @@ async def _ws_stream(websocket: WebSocket, svc: Service, row: EpisodeRow) -> Non
         if fresh.status in FINAL:
             await websocket.close()
             return
+        shown: dict[str, int] = {}  # the last step shown per event type (frames never go back)
         for latest in svc.hub.last_events(row.id):
-            await send(latest.ws_text())
+            if not stale(latest, shown):
+                await send(latest.ws_text())
         while True:
             e = await sub.get()
             assert e is not None  # no timeout
+            if stale(e, shown):  # queued while the snapshot was taken
+                continue
             await send(e.ws_text())
             if e.final:
                 await websocket.close()

@@ -66,6 +66,7 @@ __all__ = [
     "SubscriberLimitError",
     "Subscription",
     "encode_json",
+    "stale",
 ]
 
 log = logging.getLogger("hptvsim.service")
@@ -101,6 +102,26 @@ SKIPPABLE = frozenset({"progress", "frame"})
 """Event types that later ones of the same type supersede (a slow subscriber may skip them)."""
 KEEPALIVE = format_sse_event(comment="keep-alive")
 """The server-sent comment sent when a stream is idle."""
+
+
+def stale(e: Event, shown: dict[str, int]) -> bool:
+    """Whether ``e`` is a frame or progress event no newer than one its stream has shown already.
+
+    A stream starts with the episode's latest frame and progress (:meth:`Hub.last_events`), but
+    it subscribed a moment before taking them, so events published in that moment are in its
+    queue too, older than what it showed: they are skipped, and a client never sees the step go
+    back. ``shown`` holds the last step shown per event type (updated here).
+    """
+    if e.type not in SKIPPABLE:
+        return False
+    step = e.data.get("step") if isinstance(e.data, dict) else None
+    if not isinstance(step, int):
+        return False
+    last = shown.get(e.type)
+    if last is not None and step <= last:
+        return True
+    shown[e.type] = step
+    return False
 
 
 def _finite(data: Any) -> Any:

@@ -34,6 +34,14 @@ and agree within ``split_max_z`` standard deviations). A fit with any non-identi
 reported as such; those parameters keep their starting values in the vehicle file written (the
 data do not support the estimate), and the prediction error after the fit is that of the file.
 
+**Does the fit predict better?** A model whose structure or inputs cannot explain the log (a
+thruster curve or allocation that is not the vehicle's, a missing term) makes the fit absorb the
+misfit into the free parameters, with intervals as narrow as any: a confident wrong answer. So
+the fitted model must also predict better than the starting one: where its k-step RMSE of some
+measured state exceeds the starting model's by more than :data:`WORSE_FACTOR` times (and by
+more than that state's noise), every parameter the checks above let through is reported *not
+identifiable* with that reason, and the vehicle file keeps the starting values.
+
 **Prediction error.** The k-step-ahead error (k = 1, 10, 100 steps of the log's grid): from every
 sample of a run, the state is set to the measurement (unmeasured states: the fit's estimate) and
 the model is run k steps on the logged inputs; the RMSE per measured state is over all such
@@ -64,6 +72,7 @@ from hptvsim.twin.table import (
 
 __all__ = [
     "HORIZONS",
+    "WORSE_FACTOR",
     "FitError",
     "FitOptions",
     "FitResult",
@@ -507,6 +516,15 @@ def fit_log(
     states[rows_flat[vr]] = X_opt.T[vr]
     rmse_before = k_step_rmse(plant, base, time, U, Y, states, runs, opt.horizons)
     rmse_after = k_step_rmse(plant, p_written, time, U, Y, states, runs, opt.horizons)
+    noise = {n: float(sigma[c]) for c, n in enumerate(names) if mask[c].any()}
+    worse = _worse_predictions(rmse_before, rmse_after, noise)
+    if worse is not None and any(e.identifiable for e in estimates):
+        estimates = [
+            replace(e, identifiable=False, reason=worse, written=e.initial) if e.identifiable else e
+            for e in estimates
+        ]
+        p_written = base.copy()
+        rmse_after = rmse_before
     return FitResult(
         plant=plant,
         free=tuple(free),
@@ -527,6 +545,37 @@ def fit_log(
         runs=runs,
         rmse_before=rmse_before,
         rmse_after=rmse_after,
+    )
+
+
+WORSE_FACTOR: Final = 1.25
+"""How much larger the fitted model's k-step RMSE of a state may be than the starting model's
+before the fit counts as predicting worse (see the module docstring)."""
+
+
+def _worse_predictions(
+    before: Mapping[int, Mapping[str, float]],
+    after: Mapping[int, Mapping[str, float]],
+    noise: Mapping[str, float],
+) -> str | None:
+    """Why the fitted model predicts worse than the starting one (the worst case), or None."""
+    worst: tuple[float, int, str, float, float] | None = None
+    for k, row in before.items():
+        for state, b in row.items():
+            a = after.get(k, {}).get(state, math.nan)
+            if not (math.isfinite(a) and math.isfinite(b)):
+                continue
+            if a > WORSE_FACTOR * b and a - b > noise.get(state, 0.0):
+                ratio = a / b if b > 0 else math.inf
+                if worst is None or ratio > worst[0]:
+                    worst = (ratio, k, state, b, a)
+    if worst is None:
+        return None
+    _, k, state, b, a = worst
+    return (
+        f"the fitted model predicts worse than the starting one ({state} over {k} steps: RMSE "
+        f"{b:.3g} -> {a:.3g}): the model or its inputs (thruster curve, allocation) do not explain "
+        "this log, and the fit absorbed the misfit into the parameters"
     )
 
 

@@ -30,7 +30,14 @@ from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect
 
 from hptvsim.service.bench import _large_episode
-from hptvsim.service.hub import Event, Hub, SubscriberDroppedError, SubscriberLimitError, Subscription
+from hptvsim.service.hub import (
+    Event,
+    Hub,
+    SubscriberDroppedError,
+    SubscriberLimitError,
+    Subscription,
+    stale,
+)
 
 # --- the hub on its own -----------------------------------------------------------------------
 
@@ -69,6 +76,25 @@ def test_each_event_is_encoded_once_for_every_subscriber_and_wire_form() -> None
         assert len(calls) == 1
 
     asyncio.run(run())
+
+
+def test_a_stream_never_shows_a_frame_older_than_one_it_showed() -> None:
+    """A stream starts with the latest frame; frames queued for it while it took that snapshot
+    (older ones) are skipped, newer ones and other events go through (the twin's live test saw
+    steps 180, 158, 180, ... before this)."""
+    shown: dict[str, int] = {}
+
+    def ev(kind: str, step: int | None = None, **data: object) -> Event:
+        stepped = {"step": step} if step is not None else {}
+        return Event({"type": kind, "episode": "e", "data": {**stepped, **data}})
+
+    assert not stale(ev("frame", 180), shown)  # the snapshot
+    assert not stale(ev("progress", 180), shown)
+    assert stale(ev("frame", 158), shown) and stale(ev("frame", 180), shown)
+    assert stale(ev("progress", 170), shown)
+    assert not stale(ev("frame", 200), shown) and not stale(ev("progress", 200), shown)
+    assert not stale(ev("status", status="finished", final=True), shown)  # never skipped
+    assert not stale(ev("static"), shown) and not stale(ev("frame"), {})  # no step: not judged
 
 
 def test_non_finite_numbers_are_sent_as_null() -> None:

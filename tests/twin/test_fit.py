@@ -21,6 +21,7 @@ from fit_helpers import BLUEROV2_FILE, bluerov2, multisine, simulated_log
 from hptvsim.cli import main
 from hptvsim.cosim.vehicles import load_vehicle_file
 from hptvsim.twin.fit import FitError, FitOptions, fit_log
+from hptvsim.twin.log import VehicleLog
 from hptvsim.twin.plant import make_plant
 from hptvsim.twin.table import LogError, LogTable, read_log_csv
 
@@ -243,3 +244,36 @@ def test_fit_over_two_armed_runs() -> None:
     for e in res.estimates:
         assert e.estimate == pytest.approx(truth[e.name], rel=REL_TOL) and e.low <= truth[e.name] <= e.high
     assert np.isnan(res.states[100]).all()
+
+
+def test_the_real_log_gives_no_confident_wrong_answer(tlog_data: VehicleLog, tmp_path: Path) -> None:
+    """``small.tlog``'s 16 s armed at the surface: the PWM-to-force model (T200 curve and
+    ArduSub's allocation) predicts a yaw the vehicle never made, and a fit of the yaw damping
+    absorbed it (N_r = -16.4 +- 0.03 N m s/rad, which makes the 100-step prediction of r worse:
+    0.047 -> 0.63 rad/s). Such a fit predicts worse than the starting vehicle, so every parameter
+    is reported not identifiable and the vehicle file keeps the starting values."""
+    log_csv = tmp_path / "small.csv"
+    tlog_data.to_csv(log_csv)
+    out = tmp_path / "fitted.toml"
+    result = CliRunner().invoke(
+        main,
+        [
+            "vehicle",
+            "fit",
+            str(log_csv),
+            "--vehicle",
+            str(BLUEROV2_FILE),
+            "--free",
+            "X_u,X_uu,N_r,N_rr",
+            "--out",
+            str(out),
+        ],
+    )
+    assert result.exit_code == 0, result.output
+    report = json.loads((tmp_path / "fitted_report" / "fit_report.json").read_text())
+    assert report["identifiable"] is False
+    verdicts = {p["name"]: p for p in report["parameters"]}
+    assert all(p["verdict"] == "not identifiable" for p in verdicts.values()), verdicts
+    assert "predicts worse than the starting one" in verdicts["N_r"]["reason"]
+    assert all(p["written"] == p["initial"] for p in verdicts.values())
+    assert report["rmse_after"] == report["rmse_before"]
