@@ -23,12 +23,12 @@ from hptvsim.native import load_library
 from hptvsim.sensors.errors import GaussMarkov, as_generator
 from hptvsim.sensors.sonar import _CFLAGS, GeometricSonar
 from hptvsim.world.grid import OccupancyGrid
-from hptvsim.world.sensor_config import SonarConfig
+from hptvsim.world.sensor_config import GaussMarkovConfig, SonarConfig
 
 if TYPE_CHECKING:
     from hptvsim.sensors.signal import SignalSonar  # scipy: imported where the signal level is used
 
-__all__ = ["Sonar"]
+__all__ = ["FusedRangeErrors", "Sonar"]
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
@@ -45,6 +45,83 @@ def _errors_kernel() -> ctypes.CDLL:
     """The fused Gauss-Markov kernel (``errors_kernel.c``), compiled, loaded and typed once."""
     source = Path(__file__).with_name("errors_kernel.c")
     return load_library(source, flags=_CFLAGS, declare=_declare, what="the sonar error kernel")
+
+
+class FusedRangeErrors:
+    """Eq. 3's errors, the clip and the no-echo rule over a sonar's ranges in one C pass.
+
+    The pass is ``errors_kernel.c``; it gives the numpy path's numbers, its normals drawn from
+    the generator in the same order (bias drive, then white noise). Every sonar with the C
+    backend (the planar :class:`Sonar`, the 3-D :class:`~hptvsim.sensors.sonar3d.Sonar3d`) runs
+    it.
+
+    Args:
+        errors_config: The sonar's error settings (Eq. 3).
+        max_range: The sonar's range [m]: measurements are clipped to ``[0, max_range]``, and a
+            beam without an echo reads ``max_range``.
+        errors: The sonar's error state (its biases are advanced in place).
+        shape: The ranges' shape.
+    """
+
+    def __init__(
+        self,
+        errors_config: GaussMarkovConfig,
+        max_range: float,
+        errors: GaussMarkov,
+        shape: tuple[int, ...],
+    ) -> None:
+        self.errors_config, self.max_range, self.shape = errors_config, max_range, shape
+        self._gm = _errors_kernel().hptv_gm_ranges
+        self._z: F64 = np.empty(0)  # the step's normals
+        self._z_ptr = self._z.ctypes.data
+        self._bias_ptr = errors.bias.ctypes.data  # GaussMarkov updates its bias in place
+        self._out_ptr: tuple[F64 | None, int] = (None, 0)  # the last caller buffer and its address
+        self._dt = math.nan
+        self._coef = (1.0, 0.0)  # the AR(1) coefficients of the last dt
+
+    def __call__(self, src_ptr: int, n: int, dt: float, rng: np.random.Generator, out: F64 | None) -> F64:
+        """The measured ranges of the ``n`` true ranges at address ``src_ptr`` (float64, C order).
+
+        Args:
+            src_ptr: Address of the true ranges.
+            n: How many.
+            dt: Time since the last measurement [s] (the biases advance by it).
+            rng: The sonar's generator now (the one the numpy path would draw from; a reset with
+                a seed replaces it).
+            out: A C-contiguous float64 array of :attr:`shape` to write into (default: a new one).
+
+        Raises:
+            ValueError: ``dt`` is negative or not finite.
+        """
+        cfg = self.errors_config
+        if dt != self._dt:
+            if not (dt >= 0.0 and math.isfinite(dt)):
+                raise ValueError(f"dt = {dt!r} is invalid; valid: a finite time step >= 0 s")
+            phi = math.exp(-dt / cfg.tau)
+            w_std = cfg.bias_std * math.sqrt(-math.expm1(-2.0 * dt / cfg.tau))
+            self._coef = (phi, w_std)
+            self._dt = dt
+        step_bias = cfg.bias_std != 0.0
+        add_noise = cfg.noise_std > 0.0
+        draws = (int(step_bias) + int(add_noise)) * n
+        if self._z.size != draws:
+            self._z = np.empty(draws)
+            self._z_ptr = self._z.ctypes.data
+        if draws:
+            rng.standard_normal(out=self._z)
+        if out is None:
+            out = np.empty(self.shape)
+            out_ptr = out.ctypes.data
+        else:  # a caller's buffer, usually the same one every step: its address is remembered
+            if self._out_ptr[0] is not out:
+                self._out_ptr = (out, out.ctypes.data)
+            out_ptr = self._out_ptr[1]
+        phi, w_std = self._coef
+        self._gm(
+            n, src_ptr, self._bias_ptr, self._z_ptr, phi, w_std, cfg.noise_std, self.max_range,
+            int(step_bias), int(cfg.bias_std > 0.0), int(add_noise), out_ptr,
+        )  # fmt: skip
+        return out
 
 
 class Sonar:
@@ -108,14 +185,12 @@ class Sonar:
         self.shape = (self.num_envs, n_sensing, config.beams)
         self.errors = GaussMarkov(config.errors, self.shape, rng=self.rng)
         self._truth: F64 = np.empty(self.shape)
-        self._z: F64 = np.empty(0)
-        self._z_ptr = self._z.ctypes.data
         self._truth_ptr = self._truth.ctypes.data
-        self._out_ptr: tuple[F64 | None, int] = (None, 0)  # the last caller buffer and its address
-        self._bias_ptr = self.errors.bias.ctypes.data  # GaussMarkov updates its bias in place
-        self._fused_dt = math.nan
-        self._fused_coef = (1.0, 0.0)
-        self._gm = _errors_kernel().hptv_gm_ranges if backend == "c" and config.errors.active else None
+        self._fused = (
+            FusedRangeErrors(config.errors, config.max_range, self.errors, self.shape)
+            if backend == "c" and config.errors.active
+            else None
+        )
 
     def reset(self, index: npt.ArrayLike | None = None) -> None:
         """Draw fresh error biases for the environments in ``index`` (``None``: all)."""
@@ -148,8 +223,10 @@ class Sonar:
             raise ValueError(f"out must be a C-contiguous float64 array of shape {self.shape}")
         if not self.config.errors.active:
             result = ranges.copy() if ranges is self._truth else ranges
-        elif self._gm is not None:
-            return self._measure_fused(ranges, dt, out)
+        elif self._fused is not None:
+            src = ranges if ranges.flags.c_contiguous else np.ascontiguousarray(ranges)
+            ptr = self._truth_ptr if src is self._truth else src.ctypes.data
+            return self._fused(ptr, src.size, dt, self.rng, out)
         else:
             max_range = self.config.max_range
             noisy = self.errors.measure(ranges, dt)
@@ -158,44 +235,4 @@ class Sonar:
         if out is None:
             return result
         np.copyto(out, result)
-        return out
-
-    def _measure_fused(self, ranges: F64, dt: float, out: F64 | None = None) -> F64:
-        """``errors.measure`` + clip + no-echo rule in one C pass (``errors_kernel.c``), same numbers.
-
-        The normals are drawn in one call, in the order the numpy path draws them (bias drive,
-        then white noise), so both paths consume the generator identically.
-        """
-        cfg = self.config.errors
-        if dt != self._fused_dt:
-            if not (dt >= 0.0 and math.isfinite(dt)):
-                raise ValueError(f"dt = {dt!r} is invalid; valid: a finite time step >= 0 s")
-            phi = math.exp(-dt / cfg.tau)
-            w_std = cfg.bias_std * math.sqrt(-math.expm1(-2.0 * dt / cfg.tau))
-            self._fused_coef = (phi, w_std)
-            self._fused_dt = dt
-        step_bias = cfg.bias_std != 0.0
-        add_noise = cfg.noise_std > 0.0
-        n = ranges.size
-        draws = (int(step_bias) + int(add_noise)) * n
-        if self._z.size != draws:
-            self._z = np.empty(draws)
-            self._z_ptr = self._z.ctypes.data
-        if draws:
-            self.rng.standard_normal(out=self._z)
-        src = ranges if ranges.flags.c_contiguous else np.ascontiguousarray(ranges)
-        src_ptr = self._truth_ptr if src is self._truth else src.ctypes.data
-        if out is None:
-            out = np.empty(self.shape)
-            out_ptr = out.ctypes.data
-        else:  # a caller's buffer, usually the same one every step: its address is remembered
-            if self._out_ptr[0] is not out:
-                self._out_ptr = (out, out.ctypes.data)
-            out_ptr = self._out_ptr[1]
-        phi, w_std = self._fused_coef
-        assert self._gm is not None
-        self._gm(
-            n, src_ptr, self._bias_ptr, self._z_ptr, phi, w_std, cfg.noise_std, self.config.max_range,
-            int(step_bias), int(cfg.bias_std > 0.0), int(add_noise), out_ptr,
-        )  # fmt: skip
         return out

@@ -61,7 +61,7 @@ import numpy.typing as npt
 
 from hptvsim.native import compile_c, load_library
 from hptvsim.sensors.errors import GaussMarkov, as_generator
-from hptvsim.sensors.measured import _errors_kernel
+from hptvsim.sensors.measured import FusedRangeErrors
 from hptvsim.sensors.sonar import (
     _CFLAGS,
     _PARALLEL_MIN_RAYS,
@@ -749,16 +749,13 @@ class Sonar3d:
         self.shape = (self.num_envs, self.num_agents, config.beams)
         self.errors = GaussMarkov(config.errors, self.shape, rng=self.rng)
         self._truth: F64 = np.empty(self.shape)
-        # the fused C pass of the errors (the planar Sonar's errors_kernel.c): its normals, the
-        # addresses it is handed every step, the AR(1) coefficients of the last dt
-        self._z: F64 = np.empty(0)
-        self._z_ptr = self._z.ctypes.data
         self._truth_ptr = self._truth.ctypes.data
-        self._bias_ptr = self.errors.bias.ctypes.data  # GaussMarkov updates its bias in place
-        self._out_ptr: tuple[F64 | None, int] = (None, 0)  # the last caller buffer and its address
-        self._fused_dt = math.nan
-        self._fused_coef = (1.0, 0.0)
-        self._gm = _errors_kernel().hptv_gm_ranges if backend == "c" and config.errors.active else None
+        # the fused C pass of the errors, the planar Sonar's
+        self._fused = (
+            FusedRangeErrors(config.errors, config.max_range, self.errors, self.shape)
+            if backend == "c" and config.errors.active
+            else None
+        )
 
     def reset(self, index: npt.ArrayLike | None = None) -> None:
         """Draw fresh error biases for the environments in ``index`` (``None``: all)."""
@@ -795,8 +792,8 @@ class Sonar3d:
         truth = self.geometric.ranges(poses, self.radii, active=active, out=self._truth)
         if not self.config.errors.active:
             result = truth.copy()
-        elif self._gm is not None:
-            return self._measure_fused(dt, out)
+        elif self._fused is not None:
+            return self._fused(self._truth_ptr, self._truth.size, dt, self.rng, out)
         else:
             max_range = self.config.max_range
             noisy = self.errors.measure(truth, dt)
@@ -805,42 +802,4 @@ class Sonar3d:
         if out is None:
             return result
         np.copyto(out, result)
-        return out
-
-    def _measure_fused(self, dt: float, out: F64 | None) -> F64:
-        """``errors.measure`` + clip + no-echo rule on the true ranges in one C pass, same numbers.
-
-        The normals are drawn in one call, in the order the numpy path draws them (bias drive,
-        then white noise), so both paths consume the generator identically.
-        """
-        cfg = self.config.errors
-        if dt != self._fused_dt:
-            if not (dt >= 0.0 and math.isfinite(dt)):
-                raise ValueError(f"dt = {dt!r} is invalid; valid: a finite time step >= 0 s")
-            phi = math.exp(-dt / cfg.tau)
-            w_std = cfg.bias_std * math.sqrt(-math.expm1(-2.0 * dt / cfg.tau))
-            self._fused_coef = (phi, w_std)
-            self._fused_dt = dt
-        step_bias = cfg.bias_std != 0.0
-        add_noise = cfg.noise_std > 0.0
-        n = self._truth.size
-        draws = (int(step_bias) + int(add_noise)) * n
-        if self._z.size != draws:
-            self._z = np.empty(draws)
-            self._z_ptr = self._z.ctypes.data
-        if draws:
-            self.rng.standard_normal(out=self._z)
-        if out is None:
-            out = np.empty(self.shape)
-            out_ptr = out.ctypes.data
-        else:  # a caller's buffer, usually the same one every step: its address is remembered
-            if self._out_ptr[0] is not out:
-                self._out_ptr = (out, out.ctypes.data)
-            out_ptr = self._out_ptr[1]
-        phi, w_std = self._fused_coef
-        assert self._gm is not None
-        self._gm(
-            n, self._truth_ptr, self._bias_ptr, self._z_ptr, phi, w_std, cfg.noise_std, self.config.max_range,
-            int(step_bias), int(cfg.bias_std > 0.0), int(add_noise), out_ptr,
-        )  # fmt: skip
         return out
