@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["EpisodeMetrics", "agent_role", "mean_std", "summarize"]
+__all__ = ["EpisodeMetrics", "agent_role", "collision_causes", "mean_std", "summarize"]
 
 
 @dataclass(frozen=True)
@@ -31,6 +31,9 @@ class EpisodeMetrics:
     final_distance: float | None
     success_rate: float | None
     returns: dict[str, float] = field(default_factory=dict)
+    collided_with: dict[str, str] = field(default_factory=dict)
+    """Each agent that collided: what it hit first (``seabed``, ``surface``, ``obstacle``,
+    ``site edge`` or another agent's name; the info's ``collided_with``)."""
 
 
 def agent_role(agent: str) -> str:
@@ -45,6 +48,22 @@ def mean_std(values: Sequence[float | None]) -> dict[str, float | None]:
         return {"mean": None, "std": None, "n": 0}
     arr = np.asarray(vals, dtype=float)
     return {"mean": float(arr.mean()), "std": float(arr.std()), "n": len(vals)}
+
+
+def collision_causes(episodes: Sequence[EpisodeMetrics]) -> dict[str, int]:
+    """How many times each kind of collision happened over episodes: ``"pursuer: seabed"`` etc.
+
+    An agent hitting another is counted as ``"<role>: <role>"`` (``"pursuer: pursuer"``), so
+    that the counts of different episodes add up.
+    """
+    counts: dict[str, int] = {}
+    for e in episodes:
+        for agent, what in e.collided_with.items():
+            for hit in (what or "unknown").split(", "):
+                other = agent_role(hit) if hit.rsplit("_", 1)[-1].isdigit() else hit
+                key = f"{agent_role(agent)}: {other}"
+                counts[key] = counts.get(key, 0) + 1
+    return dict(sorted(counts.items(), key=lambda kv: (-kv[1], kv[0])))
 
 
 def summarize(episodes: Sequence[EpisodeMetrics]) -> dict[str, dict[str, float | None]]:

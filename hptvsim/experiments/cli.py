@@ -38,11 +38,17 @@ def default_run_dir(name: str, algo: str, seed: int) -> Path:
 
 
 def _parse_env(text: str, options: dict[str, Any]) -> Any:
-    """``KIND:SCENARIO/TASK`` (``SCENARIO`` and ``TASK`` optional) as an EnvSpec."""
+    """``KIND:SCENARIO/TASK`` (``SCENARIO`` and ``TASK`` optional) as an EnvSpec.
+
+    ``SCENARIO`` may be a scenario file's path (``hptvsim:my/site.toml/goto``): the task follows
+    the last ``/``, and a text ending in ``.toml`` is a scenario file without a task.
+    """
     from hptvsim.train.envs import EnvSpec
 
     kind, _, rest = text.partition(":")
-    scenario, _, task = rest.partition("/")
+    scenario, task = rest, ""
+    if "/" in rest and not rest.endswith(".toml"):
+        scenario, _, task = rest.rpartition("/")
     return EnvSpec(kind=kind, scenario=scenario or "source", task=task or "pursuit", options=options)
 
 
@@ -240,6 +246,7 @@ def register(main: click.Group) -> None:
         """
         import json
 
+        from hptvsim.envs.metrics import collision_causes
         from hptvsim.experiments.policies import policies_from_specs
         from hptvsim.train.config import ConfigError, check_env_spec, load_run_config
         from hptvsim.train.envs import EnvSpec, make_env_factory
@@ -310,8 +317,16 @@ def register(main: click.Group) -> None:
             rows.append((f"mean over {len(results)} runs", across_seeds(results)))
         table = markdown_table(rows)
         click.echo(table)
+        for r in results:  # what collided with what (issue 37): the table has only the rate
+            causes = collision_causes(r.episodes)
+            if causes:
+                hit = sum(1 for e in r.episodes if e.collided_with)
+                listed = ", ".join(f"{k} {n}" for k, n in causes.items())
+                click.echo(f"collisions, {r.label}: {listed} (in {hit} of {len(r.episodes)} episodes)")
         if json_path is not None:
-            data: dict[str, Any] = {"runs": [r.as_dict() for r in results]}
+            data: dict[str, Any] = {
+                "runs": [{**r.as_dict(), "collision_causes": collision_causes(r.episodes)} for r in results]
+            }
             if len(results) > 1:
                 data["across_runs"] = across_seeds(results)
             json_path.parent.mkdir(parents=True, exist_ok=True)

@@ -152,6 +152,11 @@ class BatchedRunConfig:
         stages: The games, in order (a curriculum; each stage's budget in game steps per seed,
             the learners carried over); empty: the caller's ``make_game`` for ``budget_steps``.
         fixed: Policies of the agents that do not learn, by agent name or role (zoo names).
+        threads: torch threads of the learners (``torch.set_num_threads``). 1 by default: on a
+            2-core machine with anything else running, torch's default of one thread per core
+            made a 3-learner MAISAC update 30x slower (1.24 s instead of ~40 ms, a second
+            process beside it; ../shared/notes/rl-training.md saw 4-8x for SB3). More threads
+            pay only on an idle machine with several cores.
     """
 
     name: str = "fast"
@@ -171,6 +176,11 @@ class BatchedRunConfig:
     train_budget_s: float | None = None
     stages: tuple[StageGame, ...] = ()
     fixed: Mapping[str, str] = field(default_factory=dict)
+    threads: int = 1
+
+    def __post_init__(self) -> None:
+        if isinstance(self.threads, bool) or not isinstance(self.threads, int) or self.threads < 1:
+            raise ValueError(f"threads = {self.threads!r} is invalid; valid: an integer >= 1")
 
 
 @dataclass
@@ -300,6 +310,7 @@ def train_batched(
         FileNotFoundError: ``resume`` without a checkpoint for every seed.
         ValueError: Neither ``make_game`` nor stages; ``cfg.fixed`` without ``fixed``.
     """
+    torch.set_num_threads(cfg.threads)
     if make_game is not None:
         stages = [(StageGame("train", "", {}, cfg.budget_steps), make_game)]
     elif cfg.stages:
@@ -744,6 +755,8 @@ def batched_config_to_dict(cfg: BatchedRunConfig, *, seeds: Sequence[int] | None
         if getattr(cfg, key) is not None:
             out[key] = getattr(cfg, key)
     out["checkpoint_every_s"] = cfg.checkpoint_every_s
+    if cfg.threads != 1:  # how the run is computed, not what it trains: written only when set
+        out["threads"] = cfg.threads
     table = asdict(cfg.ppo if cfg.algo == "ippo" else cfg.sac)
     out["ppo" if cfg.algo == "ippo" else "sac"] = {
         k: list(v) if isinstance(v, tuple) else v for k, v in table.items() if v is not None
@@ -808,6 +821,7 @@ _TOP_KEYS = {
     "budget_s",
     "train_budget_s",
     "checkpoint_every_s",
+    "threads",
 }
 _EVAL_KEYS = {"every_s": "eval_every_s", "episodes": "eval_episodes", "seed": "eval_seed"}
 _EVAL_KEYS.update({k: k for k in ("target_capture", "stop_at_target")})

@@ -93,6 +93,7 @@ def run_episode(env: Any, policies: Mapping[str, Policy], seed: int) -> EpisodeM
     goto = _is_goto(env)
     captured_at: int | None = None
     collision = False
+    collided_with: dict[str, str] = {}
     distances: list[float] = []
     success: dict[str, bool] = {}
     t = 0
@@ -105,6 +106,9 @@ def run_episode(env: Any, policies: Mapping[str, Policy], seed: int) -> EpisodeM
         if captured_at is None and any(bool(i.get("captured", False)) for i in infos.values()):
             captured_at = t
         collision = collision or any(bool(i.get("collision", False)) for i in infos.values())
+        for a, i in infos.items():
+            if i.get("collision", False) and a not in collided_with:
+                collided_with[a] = str(i.get("collided_with", "") or "unknown")
         d = [float(i["distance"]) for a, i in infos.items() if "distance" in i and agent_role(a) == "pursuer"]
         if not d:
             d = [float(i["distance"]) for i in infos.values() if "distance" in i]
@@ -128,6 +132,7 @@ def run_episode(env: Any, policies: Mapping[str, Policy], seed: int) -> EpisodeM
         final_distance=distances[-1] if distances else None,
         success_rate=float(np.mean(list(success.values()))) if success else None,
         returns=returns,
+        collided_with=collided_with,
     )
 
 

@@ -187,3 +187,53 @@ def test_the_cli_prints_each_collision(tmp_path: Path) -> None:
     assert (
         "collision after" in out.output and "collision: evader_0 with site edge at (80.0, " in out.output
     ), out.output
+
+
+def test_evaluate_counts_what_collided_with_what(tmp_path: Path) -> None:
+    """``hptvsim evaluate`` (a scenario file in ``--env``) prints the causes under its table and
+    writes them per episode and per run in its JSON."""
+    from hptvsim.cli import main
+
+    js = tmp_path / "ev.json"
+    out = CliRunner().invoke(
+        main,
+        [
+            "evaluate",
+            "--env",
+            f"hptvsim:{GOTO_THE_FENCE}/goto",
+            "--policy",
+            "scripted:pure_pursuit",
+            "--episodes",
+            "2",
+            "--json",
+            str(js),
+        ],
+    )
+    assert out.exit_code == 0, out.output
+    assert "collisions, all=scripted:pure_pursuit: evader: site edge 2 (in 2 of 2 episodes)" in out.output
+    run = json.loads(js.read_text())["runs"][0]
+    assert run["collision_causes"] == {"evader: site edge": 2}
+    assert [e["collided_with"] for e in run["episodes"]] == [{"evader_0": "site edge"}] * 2
+
+
+def test_collision_causes_add_up_by_role() -> None:
+    from hptvsim.envs.metrics import EpisodeMetrics, collision_causes
+
+    def ep(hits: dict[str, str]) -> EpisodeMetrics:
+        return EpisodeMetrics(
+            seed=0, length=1, captured=False, time_to_capture_steps=None, time_to_capture_s=None,
+            collision=bool(hits), min_distance=None, final_distance=None, success_rate=None,
+            collided_with=hits,
+        )  # fmt: skip
+
+    eps = [
+        ep({"pursuer_0": "pursuer_1", "pursuer_1": "pursuer_0"}),
+        ep({"pursuer_2": "seabed, evader_0", "evader_0": "pursuer_2"}),
+        ep({}),
+    ]
+    assert collision_causes(eps) == {
+        "pursuer: pursuer": 2,
+        "evader: pursuer": 1,
+        "pursuer: evader": 1,
+        "pursuer: seabed": 1,
+    }

@@ -311,3 +311,32 @@ def test_a_run_stopped_on_request_resumes_with_no_episode_logged_twice(tmp_path:
         episodes = [int(r["episode"]) for r in rows[::4]]
         assert episodes == list(range(len(episodes)))  # numbered on from the checkpoint, none twice
         assert (f / "summary.json").is_file() and (f / "stages" / "target" / "stage.json").is_file()
+
+
+def test_a_run_uses_the_torch_threads_its_config_names(tmp_path: Path) -> None:
+    """``threads`` (default 1: a 2nd thread on a busy 2-core machine made updates 30x slower)
+    sets the learners' torch threads, is written to the config file only when not 1 (a run's
+    folder written before the setting existed stays its own), and a bad value is named."""
+    from hptvsim.train.batched_run import batched_config_from_dict, batched_config_to_dict
+    from hptvsim.train.config import ConfigError
+
+    base = {"regime": "fast", "algo": "ippo", "stage": [{"scenario": "target"}]}
+    assert batched_config_from_dict(base).threads == 1
+    assert "threads" not in batched_config_to_dict(batched_config_from_dict(base))
+    three = batched_config_from_dict({**base, "threads": 3})
+    assert three.threads == 3 and batched_config_to_dict(three)["threads"] == 3
+    for bad in (0, 1.5, True):
+        with pytest.raises(ConfigError, match=r"threads = .* is invalid; valid: an integer >= 1"):
+            batched_config_from_dict({**base, "threads": bad})
+    before = torch.get_num_threads()
+    try:
+        for threads in (2, 1):
+            torch.set_num_threads(3)
+            cfg = BatchedRunConfig(
+                name="t", algo="ippo", seeds=(0,), ppo=PPO, budget_steps=4 * 8, eval_every_s=1e9,
+                eval_episodes=2, checkpoint_every_s=1e9, device="cpu", threads=threads,
+            )  # fmt: skip
+            train_batched(cfg, pursuit, tmp_path / str(threads), fixed=scripted_evader, progress=False)
+            assert torch.get_num_threads() == threads
+    finally:
+        torch.set_num_threads(before)
