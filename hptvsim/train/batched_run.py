@@ -10,7 +10,8 @@ seed alone writes:
 * ``curve.csv``: wall-clock [s], game steps, updates, and at each evaluation the capture and
   collision rates over the fixed evaluation episodes and the training episodes' mean return;
 * ``eval.json``: the last evaluation, and when competence (``target_capture``) was first reached;
-* ``best/<agent>.zip``: the models of the evaluation with the highest capture rate (PPO's
+* ``best/<agent>.zip``: the models of the evaluation with the highest capture rate (the lowest
+  when only evaders learn; PPO's
   capture rate wanders by +-0.1 between evaluations once competent; ``eval.json`` has both);
 * ``checkpoint/``: the latest checkpoint (models, optimiser state, random streams, counters),
   from which ``--resume`` goes on (the games restart their episodes: a resumed run follows the
@@ -376,7 +377,10 @@ def train_batched(
     last_eval = -math.inf
     last_ckpt = last_flush = time.monotonic()
     last_log: dict[str, float] = {}
-    best = [max((r["eval_capture"] for r in c), default=-1.0) for c in curves]
+    # the best evaluation: the highest capture rate, or the lowest when only evaders learn
+    roles = dict(zip(eval_game.agents, eval_game.pursuer, strict=True))
+    sign = 1.0 if any(roles[a] for a in trainer.learners) else -1.0
+    best = [max((sign * r["eval_capture"] for r in c), default=-math.inf) for c in curves]
 
     def train_s() -> float:
         return time.monotonic() - t0 - evaluating
@@ -401,8 +405,8 @@ def train_batched(
                 "train_episodes": len(sd.returns),
             }
             curves[k].append(row)
-            if ev.capture_rate > best[k]:  # keep the best-evaluated models (PPO's capture wanders)
-                best[k] = ev.capture_rate
+            if sign * ev.capture_rate > best[k]:  # keep the best-evaluated models (PPO's capture wanders)
+                best[k] = sign * ev.capture_rate
                 trainer.save_seed(k, folders[k] / "best")
             if reached_s[k] is None and ev.capture_rate >= cfg.target_capture:
                 reached_s[k], reached_steps[k] = wall, trainer.game_steps
@@ -535,7 +539,7 @@ def train_batched(
                     "target_capture": cfg.target_capture,
                     "reached_target_s": reached_s[k],
                     "reached_target_steps": reached_steps[k],
-                    "best_capture": best[k],
+                    "best_capture": sign * best[k] if math.isfinite(best[k]) else None,
                     "last_losses": last_log,
                 },
                 indent=2,

@@ -340,3 +340,45 @@ def test_a_run_uses_the_torch_threads_its_config_names(tmp_path: Path) -> None:
             assert torch.get_num_threads() == threads
     finally:
         torch.set_num_threads(before)
+
+
+CHASE_TINY = str(Path(__file__).with_name("chase_tiny.toml"))
+
+
+def test_a_run_where_only_evaders_learn_keeps_its_least_captured_models_as_best(tmp_path: Path) -> None:
+    """``best/`` holds the models of the evaluation with the highest capture rate when pursuers
+    learn, the lowest when only evaders do (an evader is better the less it is caught)."""
+    import hashlib
+
+    from hptvsim.zoo import load_policy
+
+    def chase(num_envs: int, seed: int) -> Game:
+        return make_game(
+            CHASE_TINY, num_envs=num_envs, seed=seed, task="pursuit", extended_obs=True, reward=REWARD
+        )
+
+    def scripted_pursuers(game: Game) -> dict[str, Any]:
+        return {
+            a: load_policy("scripted:pure_pursuit", game, a).act
+            for a, p in zip(game.agents, game.pursuer, strict=True)
+            if p
+        }
+
+    seen: list[tuple[float, str]] = []
+    best_zip = tmp_path / "seed0" / "best" / "evader_0.zip"
+
+    def on_eval(row: dict[str, Any]) -> None:
+        seen.append((row["eval_capture"], hashlib.sha256(best_zip.read_bytes()).hexdigest()))
+
+    cfg = BatchedRunConfig(
+        name="e", algo="ippo", seeds=(0,), ppo=PPO, budget_steps=4 * 8 * 12, eval_every_s=0.0,
+        eval_episodes=16, checkpoint_every_s=1e9, device="cpu",
+    )  # fmt: skip
+    train_batched(cfg, chase, tmp_path, fixed=scripted_pursuers, progress=False, on_eval=on_eval)
+    captures = [c for c, _ in seen]
+    assert len(set(captures)) > 1, captures  # the evaluations differ (this scenario's purpose)
+    for k in range(1, len(seen)):
+        new_low = seen[k][0] < min(captures[:k])
+        assert (seen[k][1] != seen[k - 1][1]) == new_low, (k, captures)
+    summary = (tmp_path / "seed0" / "eval.json").read_text()
+    assert f'"best_capture": {min(captures)}' in summary
