@@ -260,10 +260,16 @@ def default_policy_of(game: Game, agent: str) -> str:
     """The policy ``agent`` of ``game`` follows when none is named (the episode engine's default).
 
     A shipped trained policy of the game (:attr:`~hptvsim.envs.protocol.Game.kind`) whose
-    ``default_for`` lists the task, else the game's own scripted baseline
-    (:meth:`~hptvsim.envs.protocol.Game.default_policy`).
+    ``default_for`` lists the task and that fits this game (:func:`check_policy_fits`: a scenario
+    whose sonar has other beams than the policy was trained with does not), else the game's own
+    scripted baseline (:meth:`~hptvsim.envs.protocol.Game.default_policy`).
     """
     trained = _trained_default(_role(game, agent), "goto" if game.goto else "pursuit", game.kind)
+    if trained is not None:
+        try:
+            check_policy_fits(trained, game, agent)
+        except ValueError:  # trained on another observation: the baseline plays instead
+            trained = None
     return trained if trained is not None else f"scripted:{game.default_policy(agent)}"
 
 

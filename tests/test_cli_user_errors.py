@@ -16,6 +16,7 @@ the stages that have not started yet while refusing a change to what is trained 
 from __future__ import annotations
 
 import csv
+import itertools
 import json
 import os
 import shutil
@@ -375,19 +376,19 @@ def test_episode_refuses_a_policy_made_for_another_role(work: Path) -> None:
 def test_the_command_line_and_the_service_agree_on_roles() -> None:
     roles: tuple[Literal["pursuer", "evader"], ...] = ("pursuer", "evader")
     for entry in policies():
-        for role in roles:
-            allowed = role in entry.roles
+        for role, game in itertools.product(roles, ("planar", "3d")):
+            allowed = role in entry.roles and game in entry.games
             try:
-                check_policy_spec(entry.name, role)
+                check_policy_spec(entry.name, role, game=game)
                 zoo_ok = True
             except ValueError:
                 zoo_ok = False
             try:
-                check_policy(entry.name, role)
+                check_policy(entry.name, role, game)
                 service_ok = True
             except CatalogError:
                 service_ok = False
-            assert zoo_ok == service_ok == allowed, (entry.name, role)
+            assert zoo_ok == service_ok == allowed, (entry.name, role, game)
 
 
 # --- every stage checked before the first step ---------------------------------------------------

@@ -343,10 +343,12 @@ COMMANDS: dict[str, tuple[Run | Help, ...]] = {
         ),
     ),
     "hptvsim demo --scenario ridge_3d --out hptvsim-out": (
-        Run(  # the 3-D episode with its depth plot (captured at step 454, about 1 s; at the
-            # former 1.2 and 0.8 m/s, before issue 37's attitude hold, at step 1089)
+        Run(  # the 3-D episode with its depth plot: the shipped 3-D MAISAC policies (issue 37)
+            # capture at step 294 (scripted 3-D pure pursuit at step 454; at the former 1.2 and
+            # 0.8 m/s, before issue 37's attitude hold, at step 1089)
             "hptvsim demo --scenario ridge_3d --out {tmp} --duration 5",
-            r"outcome: captured at 113\.50 s[\s\S]*episode plot: ",
+            r"policies: pursuer_0, pursuer_1, pursuer_2: maisac-3d-pursuers; evader_0: maisac-3d-evader"
+            r"\noutcome: captured at 73\.50 s[\s\S]*episode plot: ",
             ("{tmp}/trajectories.png", "{tmp}/episode.png"),
         ),
     ),

@@ -11,7 +11,7 @@ Every problem is an :class:`ApiError` naming the request field.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -307,9 +307,17 @@ def check_episode_costs(
 
 
 def check_policies_fit(
-    scenario: Any, policies: Mapping[str, str], req: EpisodeCreate, max_steps: int
-) -> None:
+    scenario: Any,
+    policies: Mapping[str, str],
+    req: EpisodeCreate,
+    max_steps: int,
+    defaulted: Collection[str] = (),
+) -> dict[str, str]:
     """Refuse a run whose trained policies do not fit its scenario (another beam count, say).
+
+    Agents in ``defaulted`` were given no policy: where their default does not fit, the game's
+    scripted baseline plays instead (:func:`hptvsim.zoo.default_policy_of`), and the returned
+    policies say so.
 
     The check an interactive episode gets when its host opens it (the policies' loaders, through
     :func:`hptvsim.zoo.check_policy_fits`, on the game built from the scenario), made at
@@ -321,10 +329,11 @@ def check_policies_fit(
     Raises:
         ApiError: 422 naming ``scenario`` and what does not fit.
     """
+    out = dict(policies)
     if not any(not p.startswith("scripted:") for p in policies.values()):
-        return
+        return out
     from hptvsim.service.engine import client_message
-    from hptvsim.zoo import check_policy_fits
+    from hptvsim.zoo import check_policy_fits, default_policy_of
 
     try:
         if scenario.simulation.game == "3d":
@@ -343,9 +352,13 @@ def check_policies_fit(
                 threads=1,
             )
         for agent, spec in policies.items():
-            check_policy_fits(spec, core, agent)
+            if agent in defaulted:
+                out[agent] = default_policy_of(core, agent)
+            else:
+                check_policy_fits(spec, core, agent)
     except ValueError as exc:
         raise ApiError(422, f"scenario: {client_message(exc)}", "scenario") from None
+    return out
 
 
 def resolve_request(req: EpisodeCreate, settings: Settings) -> tuple[Resolved, Any]:
@@ -416,9 +429,9 @@ def resolve_request(req: EpisodeCreate, settings: Settings) -> tuple[Resolved, A
             policies[agent] = check_policy(name, roles[agent], scenario.simulation.game)
         except CatalogError as exc:
             raise ApiError(422, f"{field}: {exc}", field) from None
-    for agent in agents:
-        if agent not in control and agent not in policies:
-            policies[agent] = default_policy(roles[agent], scenario.task.kind, scenario.simulation.game)
+    defaulted = [a for a in agents if a not in control and a not in policies]
+    for agent in defaulted:
+        policies[agent] = default_policy(roles[agent], scenario.task.kind, scenario.simulation.game)
     check_episode_costs(
         scenario,
         max_steps=int(max_steps),
@@ -427,8 +440,8 @@ def resolve_request(req: EpisodeCreate, settings: Settings) -> tuple[Resolved, A
         policies=policies,
         settings=settings,
     )
-    if req.mode == "run" and not isinstance(req.scenario, str):
-        check_policies_fit(scenario, policies, req, int(max_steps))
+    if not isinstance(req.scenario, str):  # a shipped scenario fits the shipped policies
+        policies = check_policies_fit(scenario, policies, req, int(max_steps), defaulted)
     return (
         Resolved(
             scenario_ref=ref,

@@ -204,16 +204,26 @@ def test_shipped_scenarios_and_ordinary_requests_are_accepted(api: httpx.Client)
 
 def test_run_whose_policy_does_not_fit_its_beams_gets_the_interactive_422(api: httpx.Client) -> None:
     """The shipped trained pursuers observe 16 beams; with 32, a run was accepted (201) and failed
-    in its worker while an interactive episode answered 422. Both answer the same 422 now; with
-    16 beams the run is accepted."""
+    in its worker while an interactive episode answered 422. Both answer the same 422 now when
+    the request names them; when it names no policy, both play the scripted baselines instead
+    (the defaults that fit); with 16 beams the run is accepted."""
     t = _tables(api, "source")
     t["sensors"] = {**t["sensors"], "sonar": {**t["sensors"]["sonar"], "beams": 32}}
-    run = api.post("/episodes", json={"scenario": t, "max_steps": 5})
-    live = api.post(
-        "/episodes", json={"scenario": t, "max_steps": 5, "mode": "interactive", "control": ["evader_0"]}
-    )
+    named = {f"pursuer_{i}": "maisac-pursuers" for i in range(3)}
+    run = api.post("/episodes", json={"scenario": t, "max_steps": 5, "policies": named})
+    interactive = {"mode": "interactive", "control": ["evader_0"]}
+    live = api.post("/episodes", json={"scenario": t, "max_steps": 5, **interactive, "policies": named})
     detail = _refused(run, "scenario", "the model observes")
     assert _refused(live, "scenario", "the model observes") == detail
+    scripted = [*["scripted:pure_pursuit"] * 3, "scripted:potential_field"]
+    for body in ({}, interactive):
+        r = api.post("/episodes", json={"scenario": t, "max_steps": 5, **body})
+        assert r.status_code == 201, r.text
+        got = r.json()["policies"]
+        assert [got.get(a) for a in ("pursuer_0", "pursuer_1", "pursuer_2")] == scripted[:3], got
+        if not body:
+            assert got["evader_0"] == scripted[3]
+        _cancel(api, r)
     _cancel(api, api.post("/episodes", json={"scenario": _tables(api, "source"), "max_steps": 5}))
 
 

@@ -18,12 +18,13 @@ from hptvsim.episodes.frames import EpisodeStatic, Frame, Trajectories
 def test_scenarios_and_policies_name_their_game(api: httpx.Client) -> None:
     scenarios = {s["name"]: s for s in api.get("/scenarios").json()}
     assert scenarios["dive_flat"]["game"] == "3d" and scenarios["target"]["game"] == "planar"
-    assert scenarios["dive_flat"]["default_policies"] == {
-        "pursuer": "scripted:pure_pursuit",
-        "evader": "scripted:potential_field",
+    assert scenarios["dive_flat"]["default_policies"] == {  # the shipped 3-D policies (issue 37)
+        "pursuer": "maisac-3d-pursuers",
+        "evader": "maisac-3d-evader",
     }
     three_d = api.get("/policies", params={"game": "3d"}).json()
-    assert {p["name"] for p in three_d} == {f"scripted:{n}" for n in POLICY_NAMES_3D}
+    trained_3d = {"maisac-3d-pursuers", "maisac-3d-evader"}
+    assert {p["name"] for p in three_d} == {f"scripted:{n}" for n in POLICY_NAMES_3D} | trained_3d
     assert all("3d" in p["games"] for p in three_d)
     planar = {p["name"] for p in api.get("/policies", params={"game": "planar"}).json()}
     assert "maisac-pursuers" in planar and "maisac-pursuers" not in {p["name"] for p in three_d}
@@ -132,6 +133,8 @@ def test_an_inline_3d_scenario_sets_its_sonar_beams_within_the_schema(api: httpx
     assert wait_final(api, ep["id"])["status"] == "finished"
     static = EpisodeStatic.from_dict(api.get(f"/episodes/{ep['id']}/static").json())
     assert len(static.agents[0].beam_angles) == 24 and static.agents[0].beam_elevations is not None
+    # the shipped 3-D policies observe 12 x 5 beams: by default the scripted ones play here
+    assert [a.policy for a in static.agents] == [*["scripted:pure_pursuit"] * 3, "scripted:potential_field"]
     too_many = {**sensors, "sonar3d": {"azimuth_beams": 65}}
     r = api.post("/episodes", json={"scenario": {**tables, "sensors": too_many}, "max_steps": 10})
     assert r.status_code == 422 and "azimuth_beams" in r.json()["detail"], r.text

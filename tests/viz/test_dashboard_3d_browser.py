@@ -215,8 +215,11 @@ def _hits_of_trajectory(static: dict[str, Any], traj: dict[str, Any], k: int) ->
     return out
 
 
-def _start_dive_flat(page: Any, *, seed: int, max_steps: int, pursuers: str | None = None) -> None:
-    """Pick dive_flat in the form (its 3-D tag, its 3-D policies) and run it (``pursuers``: their policy)."""
+def _start_dive_flat(
+    page: Any, *, seed: int, max_steps: int, pursuers: str | None = None, evader: str | None = None
+) -> None:
+    """Pick dive_flat in the form (its 3-D tag, its 3-D policies) and run it (``pursuers``,
+    ``evader``: their policies; default: the form's, the shipped 3-D ones)."""
     texts = page.eval_on_selector_all("#f-scenario option", "els => els.map(e => [e.value, e.textContent])")
     shown = dict(texts)
     assert "3-D" in shown["dive_flat"] and "3-D" in shown["ridge_3d"], shown
@@ -226,6 +229,8 @@ def _start_dive_flat(page: Any, *, seed: int, max_steps: int, pursuers: str | No
     page.wait_for_function("() => _inkOf('scenario-canvas') > 0.3", timeout=60_000)
     if pursuers is not None:
         page.select_option("#f-pursuer-policy", pursuers)
+    if evader is not None:
+        page.select_option("#f-evader-policy", evader)
     page.fill("#f-seed", str(seed))
     page.fill("#f-max-steps", str(max_steps))
     page.uncheck("#f-record")
@@ -314,7 +319,10 @@ def test_dashboard_shows_a_3d_episode_live(browser: Any, service: str) -> None:
 
 def test_dashboard_runs_scrubs_and_plots_depth_of_a_3d_episode(browser: Any, service: str) -> None:
     page, errors = _open(browser, service + "/")
-    _start_dive_flat(page, seed=2, max_steps=160)
+    # the scripted policies: the depth plot's checks below know how they dive
+    _start_dive_flat(
+        page, seed=2, max_steps=160, pursuers="scripted:pure_pursuit", evader="scripted:potential_field"
+    )
     page.wait_for_function(
         "() => document.querySelector('#live-status').textContent === 'finished'", timeout=180_000
     )
@@ -423,5 +431,44 @@ def test_the_3d_scenario_previews_label_each_spawn_depth(browser: Any, service: 
     labels = {t["text"] for t in _texts(page, "scenario-canvas")}
     for a in pv["frame"]["agents"]:
         assert f"z {a['z']:.1f} m" in labels, (a["name"], labels)
+    assert not errors, errors
+    page.close()
+
+
+SHIPPED_3D = {"pursuer": "maisac-3d-pursuers", "evader": "maisac-3d-evader"}
+RIDGE_SEED, RIDGE_OUTCOME = 1, "captured"  # the shipped pursuers catch the shipped evader in 285 steps
+
+
+def test_dashboard_plays_ridge_3d_with_the_shipped_3d_policies(browser: Any, service: str) -> None:
+    """Issue 37: the form's defaults in a 3-D scenario are the shipped 3-D MAISAC policies; an
+    episode of them over the ridge runs to its end, its metrics say how it ended and what, if
+    anything, collided with what. Screenshot ``dashboard_3d_shipped_policies.png``."""
+    page, errors = _open(browser, service + "/")
+    page.select_option("#f-scenario", "ridge_3d")
+    page.wait_for_selector("#scenario-info .tag.game-3d", timeout=10_000)
+    for role, name in SHIPPED_3D.items():
+        assert page.input_value(f"#f-{role}-policy") == name
+    page.fill("#f-seed", str(RIDGE_SEED))
+    page.fill("#f-max-steps", "1200")
+    page.uncheck("#f-record")
+    page.click("#run-button")
+    page.wait_for_function(
+        "() => document.querySelector('#live-status').textContent === 'finished'"
+        " && window.hptvsim.current?.traj?.step?.length > 1",
+        timeout=300_000,
+    )
+    ep = page.evaluate("window.hptvsim.current.id")
+    static = _api(service, f"/api/v1/episodes/{ep}/static")
+    assert static["game"] == "3d"
+    assert [a["policy"] for a in static["agents"]] == [*[SHIPPED_3D["pursuer"]] * 3, SHIPPED_3D["evader"]]
+    summary = _api(service, f"/api/v1/episodes/{ep}")["summary"]
+    metrics = page.inner_text("#live-metrics")
+    assert summary["outcome"] == RIDGE_OUTCOME, summary
+    for c in summary["collisions"]:  # each collision with its cause
+        assert f"{c['agent']} collided" in metrics and c["collided_with"] in metrics, (c, metrics)
+    _check_depth_plot(page, static["agents"])
+    SHOTS.mkdir(parents=True, exist_ok=True)
+    page.screenshot(path=str(SHOTS / "dashboard_3d_shipped_policies.png"), full_page=True)
+    assert page.evaluate("window.hptvsim.schemaErrors") == []
     assert not errors, errors
     page.close()

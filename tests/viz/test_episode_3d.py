@@ -139,10 +139,20 @@ def test_goto_3d_episode_reaches_its_goal() -> None:
     assert math.dist((a.x, a.y, a.z), goal) <= (r.static.agents[0].goal_radius or 0.0) + 1e-9
 
 
-def test_default_3d_episode_over_the_ridge_ends_in_capture() -> None:
-    """Default policies (3-D pure pursuit vs the 3-D potential field) play to a capture."""
-    r = run_episode("ridge_3d", seed=0)
+def test_scripted_3d_episode_over_the_ridge_ends_in_capture() -> None:
+    """3-D pure pursuit vs the 3-D potential field play to a capture over the ridge."""
+    scripted = {
+        **{f"pursuer_{i}": "scripted:pure_pursuit" for i in range(3)},
+        "evader_0": "scripted:potential_field",
+    }
+    r = run_episode("ridge_3d", scripted, seed=0)
     assert r.outcome == "captured"
     assert r.metrics.captured and not r.metrics.collision
     assert r.static.agents[0].policy == "scripted:pure_pursuit"
     assert r.static.agents[-1].policy == "scripted:potential_field"
+
+
+def test_a_default_3d_episode_plays_the_shipped_3d_policies() -> None:
+    r = run_episode("ridge_3d", seed=0, max_steps=40)
+    assert [a.policy for a in r.static.agents] == [*["maisac-3d-pursuers"] * 3, "maisac-3d-evader"]
+    assert r.static.game == "3d" and r.summary.steps == 40

@@ -155,6 +155,7 @@
  * @property {(number | null)} final_distance
  * @property {(number | null)} success_rate
  * @property {Object<string, number>} returns
+ * @property {Object<string, string>} collided_with
  */
 
 /**
@@ -1195,6 +1196,12 @@ export const FRAME_SCHEMA = {
           "additionalProperties": {
             "type": "number"
           }
+        },
+        "collided_with": {
+          "type": "object",
+          "additionalProperties": {
+            "type": "string"
+          }
         }
       },
       "required": [
@@ -1207,7 +1214,8 @@ export const FRAME_SCHEMA = {
         "min_distance",
         "final_distance",
         "success_rate",
-        "returns"
+        "returns",
+        "collided_with"
       ],
       "additionalProperties": false
     },
