@@ -173,13 +173,19 @@ class Robots:
         np.clip(actions[..., 1], -self.limits[:, 2], self.limits[:, 2], out=out[..., 1])
         return out
 
-    def sense(self, poses: F64, dt: float, out: F64) -> F64:
-        """Fill ``out`` ``(B, N, K)`` with measured sonar ranges for ``poses`` ``(B, N, 3)``."""
+    def sense(self, poses: F64, dt: float, out: F64, envs: npt.NDArray[np.intp] | None = None) -> F64:
+        """Fill ``out`` ``(B, N, K)`` with measured sonar ranges for ``poses`` ``(B, N, 3)``.
+
+        With ``envs``, only those environments' rows are measured and written (a reset's).
+        """
         if len(self.sonars) == 1 and self.sonar_members[0].size == poses.shape[1]:
-            self.sonars[0].measure(poses, dt, out=out)
+            self.sonars[0].measure(poses, dt, out=out, envs=envs)
             return out
         for sonar, idx in zip(self.sonars, self.sonar_members, strict=True):
-            out[:, idx, :] = sonar.measure(poses, dt)
+            if envs is None:
+                out[:, idx, :] = sonar.measure(poses, dt)
+            else:
+                out[np.ix_(envs, idx)] = sonar.measure(poses, dt, envs=envs)[envs]
         return out
 
     def reset_sensors(self, envs: npt.NDArray[np.intp], positions: F64) -> None:
@@ -552,10 +558,7 @@ class GameCore(GameBase[ObsLayout]):
         if self._steady_uniform_current:
             self.system.currents[envs] = self.world.current.sample(0.0, s.positions[envs])
         self.robots.reset_sensors(envs, s.positions)
-        # sonar for all envs (cheap), then keep only the reset rows
-        ranges = np.empty_like(s.ranges)
-        self.robots.sense(self._poses(), 0.0, ranges)
-        s.ranges[envs] = ranges[envs]
+        self.robots.sense(self._poses(), 0.0, s.ranges, envs)  # the reset environments only
         np.copyto(s.prev_distance, s.distance)
         self._evaluate(bookkeeping=False)
         if self._renderer is not None:

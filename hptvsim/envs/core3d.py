@@ -416,13 +416,18 @@ class Game3DCore(GameBase[Obs3DLayout]):
         self.velocity[...] = y[..., 6:12]
         self.z_dot[...] = y[..., 12]
 
-    def _sense(self, dt: float) -> None:
+    def _sense(self, dt: float, envs: npt.NDArray[np.intp] | None = None) -> None:
+        """Measure the ranges of every environment, or of ``envs`` only (the others kept)."""
         for sonar, idx in zip(self.sonars, self.sonar_members, strict=True):
             if idx.size == self.num_agents:
-                sonar.measure(self.poses, dt, out=self.ranges)
-            else:
+                sonar.measure(self.poses, dt, out=self.ranges, envs=envs)
+            elif envs is None:
                 measured = sonar.measure(self.poses, dt)
                 self.ranges[:, idx, :] = measured[:, idx, :]
+            else:
+                measured = sonar.measure(self.poses, dt, envs=envs)
+                rows = np.ix_(envs, idx)
+                self.ranges[rows] = measured[rows]
 
     def _targets(self, dist: F64) -> tuple[F64, F64]:
         """Each agent's true 3-D distance to its target ``(B, N)`` and the target it knows ``(B, N, 3)``.
@@ -601,11 +606,9 @@ class Game3DCore(GameBase[Obs3DLayout]):
             e = self.evader_index[k]
             xy = self.poses[..., 0:2]
             link.reset(xy[:, e, :], xy[:, self.pursuer_index, :], envs)
-        held_ranges = self.ranges.copy()
-        self._sense(0.0)
+        self._sense(0.0, envs)  # the reset environments only: the others keep their ranges
         keep = np.ones(b, dtype=bool)
         keep[envs] = False
-        self.ranges[keep] = held_ranges[keep]
         self._evaluate()
         self.obs[keep] = held_obs[keep]
         self.prev_distance[envs] = self.distance[envs]

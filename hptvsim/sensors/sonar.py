@@ -45,7 +45,7 @@ import ctypes
 import math
 import os
 import threading
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -192,6 +192,43 @@ def _thread_pool() -> ThreadPoolExecutor:
                 max_workers=max(1, (os.cpu_count() or 2) - 1), thread_name_prefix="sonar"
             )
         return _pool
+
+
+CHUNKS_PER_THREAD = 4
+"""Row ranges per thread in :func:`run_split`: threads that finish early take more, so a thread
+that shares its core (with the sonar's normals, or another process) does not hold up the rest."""
+
+
+def run_split(run: Callable[[int, int], None], b: int, threads: int) -> None:
+    """``run(b0, b1)`` over the rows ``[0, b)``: in this thread and ``threads - 1`` pool threads.
+
+    The rows are cut into :data:`CHUNKS_PER_THREAD` ranges per thread, taken in turn by whichever
+    thread is free (each row's numbers depend only on that row, so the split changes nothing).
+    """
+    threads = min(threads, b)
+    if threads <= 1:
+        run(0, b)
+        return
+    parts = min(b, threads * CHUNKS_PER_THREAD)
+    bounds = [round(b * t / parts) for t in range(parts + 1)]
+    chunks = iter(range(parts))
+    lock = threading.Lock()
+
+    def work() -> None:
+        while True:
+            with lock:
+                t = next(chunks, None)
+            if t is None:
+                return
+            run(bounds[t], bounds[t + 1])
+
+    pool = _thread_pool()
+    futures = [pool.submit(work) for _ in range(threads - 1)]
+    try:
+        work()
+    finally:
+        for f in futures:
+            f.result()
 
 
 def _default_threads() -> int:
@@ -480,16 +517,10 @@ class GeometricSonar(_Caster):
             if cast(sonar, b0, b1, n, *args) != 0:
                 raise ValueError(f"the sonar kernel handles at most 256 vehicles per environment, got {n}")
 
-        if b * n_sensing * self.beams < _PARALLEL_MIN_RAYS or min(self.threads, b) <= 1:
+        if b * n_sensing * self.beams < _PARALLEL_MIN_RAYS:
             run(0, b)
             return
-        threads = min(self.threads, b)
-        bounds = [round(b * t / threads) for t in range(threads + 1)]
-        pool = _thread_pool()
-        futures = [pool.submit(run, bounds[t], bounds[t + 1]) for t in range(1, threads)]
-        run(bounds[0], bounds[1])
-        for f in futures:
-            f.result()
+        run_split(run, b, self.threads)
 
     def floor(self, poses: npt.ArrayLike, *, out: F64 | None = None) -> F64:
         """The benchmark floor: per ray only its direction and a store (no traversal)."""

@@ -61,7 +61,7 @@ import numpy.typing as npt
 
 from hptvsim.native import compile_c, load_library
 from hptvsim.sensors.errors import GaussMarkov, as_generator
-from hptvsim.sensors.measured import FusedRangeErrors
+from hptvsim.sensors.measured import FusedRangeErrors, measure_into
 from hptvsim.sensors.sonar import (
     _CFLAGS,
     _PARALLEL_MIN_RAYS,
@@ -71,8 +71,8 @@ from hptvsim.sensors.sonar import (
     _default_threads,
     _libm_cos,
     _libm_sin,
-    _thread_pool,
     beam_angles,
+    run_split,
 )
 from hptvsim.world._schema import spec
 from hptvsim.world.sensor_config import (
@@ -528,16 +528,10 @@ class GeometricSonar3d(_Caster):
             if cast(sonar, b0, b1, n, *args) != 0:  # pragma: no cover - _check refuses it first
                 raise ValueError(f"the 3-D sonar detects at most {_MAX_VEHICLES} vehicles per environment")
 
-        threads = min(self.threads, b)
-        if threads <= 1 or b * n * self.beams < _PARALLEL_MIN_RAYS:
+        if b * n * self.beams < _PARALLEL_MIN_RAYS:
             run(0, b)
             return
-        bounds = [round(b * t / threads) for t in range(threads + 1)]
-        pool = _thread_pool()
-        futures = [pool.submit(run, bounds[t], bounds[t + 1]) for t in range(1, threads)]
-        run(bounds[0], bounds[1])
-        for f in futures:
-            f.result()
+        run_split(run, b, self.threads)
 
 
 # --- the numpy reference ------------------------------------------------------------------------
@@ -766,7 +760,13 @@ class Sonar3d:
         return self.geometric.ranges(poses, self.radii, active=active)
 
     def measure(
-        self, poses: npt.ArrayLike, dt: float, *, active: npt.ArrayLike | None = None, out: F64 | None = None
+        self,
+        poses: npt.ArrayLike,
+        dt: float,
+        *,
+        active: npt.ArrayLike | None = None,
+        out: F64 | None = None,
+        envs: npt.ArrayLike | None = None,
     ) -> F64:
         """Measured ranges ``(B, N, K)`` [m] for poses ``(B, N, 6)``; the error biases advance ``dt`` [s].
 
@@ -779,17 +779,38 @@ class Sonar3d:
             dt: Time since the last measurement [s].
             active: ``(B, N)`` booleans; inactive vehicles are not detected.
             out: A C-contiguous float64 ``(B, N, K)`` array to write into (default: a new array).
+            envs: Measure only these environments (distinct indices): only their rows of
+                ``out`` are written (a new array's others are NaN), only their biases advance,
+                only their normals are drawn (:func:`~hptvsim.sensors.measured.measure_rows`).
+                ``None``: all.
         """
         shape = np.shape(poses)
         if shape != (self.num_envs, self.num_agents, 6):
             raise ValueError(
                 f"this sonar was built for poses of shape {(self.num_envs, self.num_agents, 6)}, got {shape}"
             )
+        if envs is not None:
+            p = np.asarray(poses, dtype=np.float64)
+
+            def rows_truth(rows: npt.NDArray[np.intp], act: Bool | None) -> F64:
+                return self.geometric.ranges(p[rows], self.radii, active=act)
+
+            return measure_into(
+                out, dt, envs, rows_truth, active=active, shape=self.shape, errors=self.errors,
+                fused=self._fused, max_range=self.config.max_range,
+            )  # fmt: skip
         if out is not None and (
             out.shape != self.shape or out.dtype != np.float64 or not out.flags.c_contiguous
         ):
             raise ValueError(f"out must be a C-contiguous float64 array of shape {self.shape}")
-        truth = self.geometric.ranges(poses, self.radii, active=active, out=self._truth)
+        if self._fused is not None and self.geometric.threads > 1:
+            self._fused.start_drawing(self._truth.size, self.rng)  # beside the ray casts
+        try:
+            truth = self.geometric.ranges(poses, self.radii, active=active, out=self._truth)
+        except BaseException:
+            if self._fused is not None:
+                self._fused.cancel_drawing()
+            raise
         if not self.config.errors.active:
             result = truth.copy()
         elif self._fused is not None:
