@@ -55,9 +55,48 @@ def test_bench_env_measures_the_3d_game_at_b1024_right_after_the_planar_row(
     monkeypatch.setattr(bench, "_ours_3d", game3d)
     monkeypatch.setattr(bench, "_mpe", lambda seconds: "mpe2 not installed (test)")
     monkeypatch.setattr(bench, "_vmas", lambda num_envs, seconds: "vmas not installed (test)")
+    monkeypatch.setattr(bench, "step_parts", lambda seconds: [])
     result = bench.bench_env(quick=True)
     names = [r.name for r in result.rows]
     i = names.index("hptvsim batched backend, B=1024")
     assert names[i + 1] == "hptvsim 3-D game batched, B=1024"
     assert result.game3d_vs_planar() == pytest.approx(0.6)
     assert "3-D / planar agent-steps/s at B = 1024: 0.60x" in result.table()
+
+
+def test_the_parts_table_says_what_0_5x_leaves_the_3d_step() -> None:
+    result = _result(planar=40_000.0, game3d=12_000.0)
+    result.parts = [
+        bench.StepPart(bench.PART_DYNAMICS, 16.0, 5.0),
+        bench.StepPart(bench.PART_RAYS, 10.0, 2.0),
+        bench.StepPart(bench.PART_NORMALS, 5.0, 1.0),
+        bench.StepPart(bench.PART_WHOLE, 35.0, 9.0),
+    ]
+    assert result.parts_floor() == pytest.approx((18.0, 20.0))
+    text = result.table()
+    assert "  dynamics (RK4 in the FMU binaries)          16.00     5.00       3.20x" in text
+    assert (
+        "0.5x allows the 3-D step 18.00 ms on one thread; its dynamics and bookkeeping alone take 20.00 ms"
+        in text
+    )
+    assert "(more: sonar speed-ups alone cannot reach it)" in text
+    result.parts[3] = bench.StepPart(bench.PART_WHOLE, 25.0, 12.0)  # 24 ms allowed, 10 ms kept
+    assert "(more:" not in result.table()
+    assert result.as_dict()["step_parts_ms"][0] == {  # type: ignore[index]
+        "part": bench.PART_DYNAMICS,
+        "game3d": 16.0,
+        "planar": 5.0,
+    }
+
+
+def test_step_parts_measures_both_games_on_one_thread() -> None:
+    parts = bench.step_parts(0.02)
+    assert [p.name for p in parts] == [
+        bench.PART_DYNAMICS,
+        bench.PART_RAYS,
+        bench.PART_NORMALS,
+        bench.PART_WHOLE,
+    ]
+    assert all(p.game3d_ms > 0.0 and p.planar_ms > 0.0 for p in parts)
+    whole = parts[-1]
+    assert whole.game3d_ms > parts[0].game3d_ms and whole.planar_ms > parts[0].planar_ms

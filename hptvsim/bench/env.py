@@ -15,6 +15,10 @@ Rows, all with random actions drawn beforehand (drawing them is not timed):
   continuous actions, one environment;
 * VMAS ``simple_tag`` on the CPU (3 adversaries, 1 good agent), 1 and 1024 environments.
 
+Below the rows, where a batched step at B = 1024 goes in each game on one thread (the vehicles'
+RK4, the sonar ray casts, the Eq. 3 normals, the whole step with its resets) and what 0.5x leaves
+the 3-D step, against its dynamics and bookkeeping alone (:func:`step_parts`).
+
 Targets (the issues'): the single FMU-backed env at >= 3x mpe2's env-steps/s; the batched
 backend at or above VMAS's best agent-steps/s (aiming at 2x); the 3-D game's batched core at
 B = 1024 at >= 0.5x the planar batched backend's agent-steps/s at the same B (issue 37: the same
@@ -28,8 +32,10 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from hptvsim._output import machine_summary
 
@@ -56,11 +62,40 @@ class EnvBenchRow:
 
 
 @dataclass
+class StepPart:
+    """One part of a batched step at B = 1024 on one thread, in both games [ms]."""
+
+    name: str
+    game3d_ms: float
+    planar_ms: float
+
+
+@dataclass
 class EnvBenchResult:
-    """The rows, and the two ratios the targets are stated in."""
+    """The rows, and the two ratios the targets are stated in.
+
+    ``parts``: where a batched step at B = 1024 goes, on one thread, in the 3-D and the planar
+    game (:func:`step_parts`); the last part is the whole step with its resets.
+    """
 
     scenario: str
     rows: list[EnvBenchRow] = field(default_factory=list)
+    parts: list[StepPart] = field(default_factory=list)
+
+    def parts_floor(self) -> tuple[float, float] | None:
+        """The one-thread step time 0.5x allows the 3-D game, and its dynamics plus bookkeeping [ms].
+
+        The bookkeeping is what is left of the whole step after the dynamics, ray casts and
+        normals: observations, rewards, the link, resets. If the second number exceeds the first,
+        no sonar speed-up alone can reach the target.
+        """
+        by = {p.name: p for p in self.parts}
+        whole, dyn = by.get(PART_WHOLE), by.get(PART_DYNAMICS)
+        if whole is None or dyn is None:
+            return None
+        sensing = sum(p.game3d_ms for p in self.parts if p.name in (PART_RAYS, PART_NORMALS))
+        allowed = whole.planar_ms / GAME3D_TARGET
+        return allowed, whole.game3d_ms - sensing
 
     def _row(self, prefix: str) -> EnvBenchRow | None:
         return next((r for r in self.rows if r.name.startswith(prefix)), None)
@@ -110,6 +145,23 @@ class EnvBenchResult:
             verdict = "meets" if c >= GAME3D_TARGET else "MISSES"
             target = f"target >= {GAME3D_TARGET:g}x: {verdict}"
             lines.append(f"  3-D / planar agent-steps/s at B = 1024: {c:.2f}x ({target})")
+        if self.parts:
+            lines += [
+                "",
+                "  where a batched step at B = 1024 goes, one thread (ms):",
+                f"  {'part':<40} {'3-D':>8} {'planar':>8} {'3-D/planar':>11}",
+            ]
+            for p in self.parts:
+                ratio = p.game3d_ms / p.planar_ms if p.planar_ms > 0 else float("nan")
+                lines.append(f"  {p.name:<40} {p.game3d_ms:>8.2f} {p.planar_ms:>8.2f} {ratio:>10.2f}x")
+            floor = self.parts_floor()
+            if floor is not None:
+                allowed, kept = floor
+                lines.append(
+                    f"  {GAME3D_TARGET:g}x allows the 3-D step {allowed:.2f} ms on one thread; its dynamics"
+                    f" and bookkeeping alone take {kept:.2f} ms"
+                    + (" (more: sonar speed-ups alone cannot reach it)" if kept > allowed else "")
+                )
         return "\n".join(lines)
 
     def as_dict(self) -> dict[str, object]:
@@ -131,10 +183,13 @@ class EnvBenchResult:
             "fmu_vs_mpe2": self.fmu_vs_mpe(),
             "batched_vs_vmas": self.batched_vs_vmas(),
             "game3d_vs_planar_b1024": self.game3d_vs_planar(),
+            "step_parts_ms": [
+                {"part": p.name, "game3d": p.game3d_ms, "planar": p.planar_ms} for p in self.parts
+            ],
         }
 
 
-def _rate(step: Callable[[int], None], *, seconds: float, min_steps: int = 20) -> float:
+def _rate(step: Callable[[int], object], *, seconds: float, min_steps: int = 20) -> float:
     """Calls per second of ``step(k)``, best of 3 runs of about ``seconds / 3`` each."""
     step(0)  # warm up
     best = 0.0
@@ -238,6 +293,75 @@ def _ours_3d(num_envs: int, seconds: float) -> EnvBenchRow:
     )
 
 
+PART_DYNAMICS = "dynamics (RK4 in the FMU binaries)"
+PART_RAYS = "sonar ray casts"
+PART_NORMALS = "Eq. 3 normals (numpy)"
+PART_WHOLE = "whole step, resets included"
+
+
+def _ms(fn: Callable[[], object], seconds: float) -> float:
+    """Milliseconds per call of ``fn``, best of 3 runs (as :func:`_rate`)."""
+    return 1e3 / _rate(lambda _k: fn(), seconds=seconds, min_steps=5)
+
+
+def step_parts(seconds: float) -> list[StepPart]:
+    """Where a batched step at B = 1024 goes in both games, everything on one thread.
+
+    The 3-D game (``dive_flat``: 6-DOF RK4, 60 beams) beside the planar game (``source``: 3-DOF
+    RK4, 16 beams), random actions, resets as in the rows above. Parts: the vehicles' RK4 step,
+    the ray casts of every beam, drawing the Eq. 3 normals (two per beam), and the whole step.
+    """
+    from hptvsim.envs.core import GameCore
+    from hptvsim.envs.game3d import Game3DCore
+
+    b = 1024
+    rng = np.random.default_rng(0)
+    g3 = Game3DCore("dive_flat", num_envs=b, seed=0, threads=1)
+    g2 = GameCore("source", num_envs=b, seed=0, threads=1)
+    try:
+        g3.reset()
+        g2.reset()
+        for sonar3d in g3.sonars:
+            sonar3d.geometric.threads = 1
+        for sonar in g2.robots.sonars:
+            sonar.geometric.threads = 1
+        a3 = rng.uniform(-1.0, 1.0, (b, g3.num_agents, 3))
+        lim = g2.robots.limits
+        a2 = np.stack(
+            [rng.uniform(lim[:, 0], lim[:, 1], (b, 4)), rng.uniform(-lim[:, 2], lim[:, 2], (b, 4))], -1
+        )
+
+        def whole(game: Any, actions: npt.NDArray[np.float64]) -> Callable[[], None]:
+            def run() -> None:
+                result = game.step(actions)
+                if result.done.any():
+                    game.reset(np.flatnonzero(result.done))
+
+            return run
+
+        s3, s2 = g3.sonars[0], g2.robots.sonars[0]
+        out3, out2 = np.empty(s3.shape), np.empty(s2.shape)
+        z3, z2 = np.empty(2 * out3.size), np.empty(2 * out2.size)
+        poses2 = g2._poses()
+        return [
+            StepPart(PART_DYNAMICS, _ms(g3.system.step, seconds), _ms(g2.system.step, seconds)),
+            StepPart(
+                PART_RAYS,
+                _ms(lambda: s3.geometric.ranges(g3.poses, s3.radii, out=out3), seconds),
+                _ms(lambda: s2.geometric.ranges(poses2, s2.radii, out=out2), seconds),
+            ),
+            StepPart(
+                PART_NORMALS,
+                _ms(lambda: rng.standard_normal(out=z3), seconds),
+                _ms(lambda: rng.standard_normal(out=z2), seconds),
+            ),
+            StepPart(PART_WHOLE, _ms(whole(g3, a3), seconds), _ms(whole(g2, a2), seconds)),
+        ]
+    finally:
+        g3.close()
+        g2.close()
+
+
 def _mpe(seconds: float) -> EnvBenchRow | str:
     try:
         from mpe2 import simple_tag_v3
@@ -308,4 +432,5 @@ def bench_env(*, quick: bool = False, scenario: str = "source") -> EnvBenchResul
             result.rows.append(peer)
     for m in missing:
         result.rows.append(EnvBenchRow(f"(missing) {m}", 0, 0, 0.0))
+    result.parts = step_parts(seconds / 2)
     return result
