@@ -50,14 +50,20 @@ def _sat(value: Expr, limit: Expr) -> Expr:
     with ``a = SAT_KNEE`` and ``g = tanh``. Value, slope and curvature match at the knee
     (``g(0) = 0``, ``g'(0) = 1``, ``g''(0) = 0``), so the RK4 integrator keeps its accuracy, and
     ``|sat(x)| < L`` always. (``z / sqrt(1 + z^2)`` has the same properties but measured 20 %
-    slower in the generated C: glibc's ``tanh`` is fast for the large negative ``z`` of the
-    linear region, where both branches are evaluated.)
+    slower in the generated C.)
+
+    Speed: CasADi's ``SX`` ``if_else`` evaluates both branches, so the generated C computes the
+    outer branch's ``tanh`` at every RHS evaluation, in the linear region too, where it is then
+    discarded. There its argument is set to 0 (``z`` itself above the knee, where the branch is
+    used), and glibc returns ``tanh(0)`` in about 3 ns instead of about 15 ns for ``z`` in
+    ``[-4, 0)``. The result is bit for bit the same: the branch that is kept is unchanged.
     """
     a = SAT_KNEE
     s = ca.fabs(value) / limit
-    z = (s - a) / (1.0 - a)
+    linear = s <= a
+    z = ca.if_else(linear, 0.0, (s - a) / (1.0 - a))  # 0 where the branch is discarded (speed)
     outer = ca.sign(value) * limit * (a + (1.0 - a) * ca.tanh(z))
-    return ca.if_else(s <= a, value, outer)
+    return ca.if_else(linear, value, outer)
 
 
 def control_law(P: Mapping[str, Expr], nu: Expr, xi: Expr, w: Mapping[str, Expr]) -> tuple[Expr, Expr]:
