@@ -947,9 +947,13 @@ class Scenario:
 
     # --- what environments use ------------------------------------------------------------
 
-    @property
+    @cached_property
     def agents(self) -> tuple[AgentSpec, ...]:
-        """Every vehicle, pursuers first then evaders, each numbered from 0 within its role."""
+        """Every vehicle, pursuers first then evaders, each numbered from 0 within its role.
+
+        Built once per scenario (it is frozen): every reset's spawn reads it, and building the
+        vehicles' checked parameters took about 1.4 ms.
+        """
         agents: list[AgentSpec] = []
         for role in ROLES:
             k = 0
