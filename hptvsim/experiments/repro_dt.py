@@ -608,7 +608,8 @@ def evaluation_record(episodes: Sequence[Any], dt: float, *, l_max: float, l_min
     ``mean_distance_m[t]`` is the mean over the episodes still running at step ``t`` of the mean
     over their pursuers of the distance to the evader [m] (``running[t]`` of them); ``example``
     holds each pursuer's distance [m] over the first episode (the figures' single episode,
-    Figs. 16-17). Distances are rounded to 1 cm.
+    Figs. 16-17) and, when the episodes were recorded, ``example_xy`` every agent's ``[x, y]``
+    [m] over it (Fig. 15's trajectories, rounded to 1 cm). Distances are rounded to 1 cm.
     """
     agents = list(episodes[0].agents)
     p = np.flatnonzero(episodes[0].pursuer)
@@ -629,7 +630,14 @@ def evaluation_record(episodes: Sequence[Any], dt: float, *, l_max: float, l_min
         "mean_distance_m": [round(float(x), 2) for x in total / np.maximum(running, 1)],
         "running": running.tolist(),
         "example": {agents[i]: [round(float(x), 2) for x in first[:, i]] for i in p},
+        **({} if episodes[0].positions is None else {"example_xy": example_positions(episodes[0])}),
     }
+
+
+def example_positions(episode: Any) -> dict[str, list[list[float]]]:
+    """Every agent's ``[x, y]`` [m] over an episode (rows 0 to T), rounded to 1 cm (Fig. 15)."""
+    xy = np.asarray(episode.positions, dtype=np.float64)[: episode.length + 1]
+    return {a: [[round(float(v), 2) for v in row] for row in xy[:, i]] for i, a in enumerate(episode.agents)}
 
 
 def _game_agents(game: StageGame) -> list[tuple[str, str]]:
@@ -680,6 +688,10 @@ def run_dt(
     folder.mkdir(parents=True, exist_ok=True)
     _bring_to_spec(folder, dt_spec(spec, job, out, evaluation), log)
     if (folder / "summary.json").is_file():
+        models = out / experts_dir / "stages" / spec.stage
+        experts = {a: f"sb3:{models / f'{a}.zip'}" for a, _ in _game_agents(game)}
+        if all((models / f"{a}.zip").is_file() for a in experts):
+            add_example_positions(folder, experts, game, evaluation, spec.target, log)
         return result("done before")
     status = "resumed" if (folder / "datasets").exists() or (folder / "run").exists() else "trained"
     models = out / experts_dir / "stages" / spec.stage
@@ -780,22 +792,13 @@ def _evaluate(
     target: float | str,
 ) -> dict[str, Any]:
     """The DT pursuers against the expert evader on the fixed episodes (:func:`evaluation_record`)."""
-    from hptvsim.offline.policy import policies_from_file
     from hptvsim.offline.rollout import play
-    from hptvsim.zoo import load_policy
 
     t0 = time.perf_counter()
     core = eval_core(game, evaluation)
     try:
-        pursuers = [a for a, p in zip(core.agents, core.pursuer, strict=True) if p]
-        dts = policies_from_file(policy_file, core, pursuers, target_return=target)
-        policies = [
-            dts[a]
-            if a in dts
-            else load_policy(experts[a], core, a, seed=evaluation.seed + i, allow_paths=True)
-            for i, a in enumerate(core.agents)
-        ]
-        eps = play(core, policies, episodes=evaluation.episodes, seed=evaluation.seed, record=False)
+        policies, dts = _eval_policies(core, policy_file, experts, evaluation, target)
+        eps = play(core, policies, episodes=evaluation.episodes, seed=evaluation.seed, record=True)
         record = evaluation_record(
             eps, core.dt, l_max=core.task.target_distance, l_min=core.task.safe_distance
         )
@@ -820,6 +823,63 @@ def _evaluate(
         return record
     finally:
         core.close()
+
+
+def _eval_policies(
+    core: Any, policy_file: Path, experts: Mapping[str, str], evaluation: FixedEpisodes, target: float | str
+) -> tuple[list[Any], dict[str, Any]]:
+    """The evaluation's policies in ``core.agents`` order, and the DT pursuers among them by agent."""
+    from hptvsim.offline.policy import policies_from_file
+    from hptvsim.zoo import load_policy
+
+    pursuers = [a for a, p in zip(core.agents, core.pursuer, strict=True) if p]
+    dts = policies_from_file(policy_file, core, pursuers, target_return=target)
+    policies = [
+        dts[a] if a in dts else load_policy(experts[a], core, a, seed=evaluation.seed + i, allow_paths=True)
+        for i, a in enumerate(core.agents)
+    ]
+    return policies, dts
+
+
+def add_example_positions(
+    folder: Path,
+    experts: Mapping[str, str],
+    game: StageGame,
+    evaluation: FixedEpisodes,
+    target: float | str,
+    log: Callable[[str], None] = print,
+) -> bool:
+    """Give a DT step evaluated before ``example_xy`` existed its first episode's trajectories.
+
+    Replays the first batch of the fixed episodes with the step's DT and experts, recorded, and
+    writes ``example_xy`` into ``eval.json`` only if the replayed episode's distances are the
+    archived ``example`` to the centimetre (the same episode, not a new one).
+
+    Returns:
+        Whether ``eval.json`` was changed.
+    """
+    from hptvsim.offline.rollout import play
+
+    record = _read_json(folder / "eval.json")
+    policy_file = folder / "run" / "dt.pt"
+    if record is None or "example_xy" in record or not policy_file.is_file():
+        return False
+    core = eval_core(game, evaluation)
+    try:
+        policies, _ = _eval_policies(core, policy_file, experts, evaluation, target)
+        first = play(core, policies, episodes=core.num_envs, seed=evaluation.seed, record=True)[0]
+        replayed = evaluation_record(
+            [first], core.dt, l_max=core.task.target_distance, l_min=core.task.safe_distance
+        )
+    finally:
+        core.close()
+    if replayed["example"] != record.get("example"):
+        log(f"{folder}: the replayed first episode differs from eval.json's; no trajectories added")
+        return False
+    record["example_xy"] = replayed["example_xy"]
+    _write_json(folder / "eval.json", record)
+    log(f"{folder}: the first fixed episode's trajectories added to eval.json (Fig. 15)")
+    return True
 
 
 # --- results -------------------------------------------------------------------------------------
@@ -1038,6 +1098,8 @@ def dt_figures(results: DTResults, fig_dir: Path, *, window: int = 40) -> list[P
 
     * ``dt_loss.png`` (Fig. 14): every DT seed's training loss per pursuer's model over the
       updates, a colour per DT seed (the seed colours of the claims figure), a line style per model;
+    * ``dt_trajectories.png`` (Fig. 15): every agent's track in the first fixed episode, a panel
+      per DT seed whose evaluation kept them (``example_xy``), over the scenario's obstacle map;
     * ``dt_distance.png`` (Figs. 16-17): the DT pursuers' distance to the evader against the
       step: (a) the first fixed episode, raw (Fig. 16), (b) the same smoothed with a centred
       ``window``-step moving average (Fig. 17), (c) the mean over the fixed episodes still
@@ -1090,6 +1152,9 @@ def dt_figures(results: DTResults, fig_dir: Path, *, window: int = 40) -> list[P
         return written
     any_eval = next(iter(evals.values()))
     dt, l_max, l_min = float(any_eval["dt_s"]), float(any_eval["l_max_m"]), float(any_eval["l_min_m"])
+    tracked = {s: ev for s, ev in evals.items() if "example_xy" in ev}
+    if tracked:
+        written.append(_trajectories_figure(tracked, fig_dir / "dt_trajectories.png"))
     fig, axes = plt.subplots(3, 1, figsize=(8, 10), sharex=False)
     pursuers: list[str] = []
     for s, ev in evals.items():
@@ -1131,6 +1196,40 @@ def dt_figures(results: DTResults, fig_dir: Path, *, window: int = 40) -> list[P
     plt.close(fig)
     written.append(path)
     return written
+
+
+def _trajectories_figure(evals: Mapping[int, Mapping[str, Any]], path: Path) -> Path:
+    """Fig. 15: the first fixed episode's tracks, a panel per DT seed (see :func:`dt_figures`)."""
+    import matplotlib.pyplot as plt
+
+    from hptvsim.offline.figures import draw_tracks
+    from hptvsim.world.scenario import load_scenario
+
+    grids: dict[str, Any] = {}
+    fig, axes = plt.subplots(1, len(evals), figsize=(5.2 * len(evals), 4.9), squeeze=False)
+    for ax, (seed, ev) in zip(axes[0], sorted(evals.items()), strict=True):
+        name = str(ev.get("scenario", "target"))
+        if name not in grids:
+            grids[name] = load_scenario(name).build_world().obstacles
+        tracks = {a: np.asarray(xy, dtype=np.float64) for a, xy in dict(ev["example_xy"]).items()}
+        draw_tracks(ax, grids[name], tracks, list(ev.get("pursuers", [])))
+        first = (ev.get("episodes") or [{}])[0]
+        how = (
+            "captured"
+            if first.get("captured")
+            else ("collision" if first.get("collision") else "not captured")
+        )
+        ax.set_title(f"DT seed {seed}: {first.get('length', '?')} steps, {how}", fontsize=9)
+        ax.legend(fontsize=7, loc="best")
+    fig.suptitle(
+        "DT pursuers against the expert evader, the first fixed episode\n(paper Fig. 15; o start, x end,"
+        " grey: terrain)",
+        fontsize=10,
+    )
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
 
 
 def _model_labels(path: Path) -> dict[int, str]:

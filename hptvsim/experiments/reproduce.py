@@ -1940,7 +1940,7 @@ def _dt_section(
         "(a capture), so here the rate of episodes within l_max is the capture rate, and no pursuer "
         "gets within l_min without ending the episode at l_max first: the paper's \"rarely below the "
         "minimum safe distance\" has nothing to test in this game. Fig. 15 (one episode's tracks) "
-        "is not drawn here."
+        "draws the first fixed episode of each DT seed whose evaluation kept its positions."
     )
     w(
         f"- Folders: `{_rel(r.out)}/dt/<setting>-seed<k>/` (datasets, DT run, `eval.json`); each finished "
@@ -1956,7 +1956,8 @@ def _dt_section(
         if written:
             w(
                 "Training loss per DT seed (Fig. 14; a DT seed in its training seed's colour throughout), "
-                "and the DT pursuers' distance to the evader (Figs. 16-17):"
+                "the first fixed episode's tracks (Fig. 15) and the DT pursuers' distance to the evader "
+                "(Figs. 16-17):"
             )
             w("")
             for p in written:

@@ -12,6 +12,7 @@ Axes follow the project's plots: east to the right, north up (NED seen from abov
 
 from __future__ import annotations
 
+from collections.abc import Collection, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -19,6 +20,7 @@ import numpy as np
 import numpy.typing as npt
 
 from hptvsim.offline.rollout import Episode
+from hptvsim.palette import color_of
 
 __all__ = ["distance_figures", "loss_curves", "smooth", "trajectory_figure"]
 
@@ -86,14 +88,16 @@ def _labels(path: Path) -> dict[int, str]:
     return out
 
 
-def trajectory_figure(ep: Episode, core: Any, out: Path, *, title: str = "") -> Path:
-    """Fig. 15: the agents' tracks over the fenced obstacle map (o start, x end)."""
-    if ep.positions is None:
-        raise ValueError("the episode was played without record=True; it has no positions")
-    plt = _plt()
-    grid = core.grid
+def draw_tracks(ax: Any, grid: Any, tracks: Mapping[str, F64], pursuers: Collection[str]) -> None:
+    """The obstacle map and every agent's track on ``ax``: east right, north up, o start, x end.
+
+    Args:
+        ax: A matplotlib axes.
+        grid: The scenario's :class:`~hptvsim.world.grid.OccupancyGrid` (grey: terrain).
+        tracks: ``(T + 1, 2)`` ``[x, y]`` [m] of every agent.
+        pursuers: The agents that pursue (the others evade).
+    """
     x0, x1, y0, y1 = grid.geometry.extent
-    fig, ax = plt.subplots(figsize=(7, 5.6))
     ax.imshow(
         grid.occupied.astype(float),
         origin="lower",
@@ -103,19 +107,31 @@ def trajectory_figure(ep: Episode, core: Any, out: Path, *, title: str = "") -> 
         vmax=2.5,
         interpolation="nearest",
     )
-    for k, agent in enumerate(ep.agents):
-        p = ep.positions[:, k]
-        colour = f"C{k}" if ep.pursuer[k] else "#e6a700"
+    for k, (agent, p) in enumerate(tracks.items()):
+        try:
+            colour = color_of(agent)
+        except ValueError:  # a name not of the form role_index
+            colour = f"C{k}" if agent in pursuers else "#e6a700"
         ax.plot(p[:, 1], p[:, 0], color=colour, linewidth=1.3, label=agent)
         ax.plot(p[0, 1], p[0, 0], "o", color=colour, markersize=4)
         ax.plot(p[-1, 1], p[-1, 0], "x", color=colour, markersize=7)
+    ax.set_xlabel("east [m]")
+    ax.set_ylabel("north [m]")
+    ax.set_aspect("equal")
+
+
+def trajectory_figure(ep: Episode, core: Any, out: Path, *, title: str = "") -> Path:
+    """Fig. 15: the agents' tracks over the fenced obstacle map (o start, x end)."""
+    if ep.positions is None:
+        raise ValueError("the episode was played without record=True; it has no positions")
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(7, 5.6))
+    tracks = {agent: ep.positions[:, k] for k, agent in enumerate(ep.agents)}
+    draw_tracks(ax, core.grid, tracks, [a for a, p in zip(ep.agents, ep.pursuer, strict=True) if p])
     how = "captured" if ep.captured_at is not None else ("collision" if ep.collision else "not captured")
     ax.set_title(
         title or f"one episode, {ep.length} steps, {how} (o start, x end; grey: terrain)", fontsize=9
     )
-    ax.set_xlabel("east [m]")
-    ax.set_ylabel("north [m]")
-    ax.set_aspect("equal")
     ax.legend(fontsize=8, loc="best")
     fig.tight_layout()
     out.parent.mkdir(parents=True, exist_ok=True)

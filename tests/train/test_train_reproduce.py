@@ -15,8 +15,8 @@ from pathlib import Path
 import pytest
 from train_helpers import ROOT
 
-from hptvsim.experiments.repro_dt import ARCHIVE_FILES
-from hptvsim.experiments.reproduce import build_config, load_plan, plan_jobs, write_report
+from hptvsim.experiments.repro_dt import ARCHIVE_FILES, add_example_positions
+from hptvsim.experiments.reproduce import build_config, expert_game, load_plan, plan_jobs, write_report
 from hptvsim.train.batched_run import BatchedRunConfig
 from hptvsim.train.config import ConfigError, TrainConfig, load_config
 
@@ -315,6 +315,19 @@ def test_reproduce_end_to_end_at_toy_size(tmp_path: Path) -> None:
             and ev["evaluation"]["seed"] == plan.evaluation.seed
         )
         assert (step / "run" / "dt.pt").is_file()
+        # Fig. 15: the first fixed episode's tracks are kept, and replaying that episode (as a step
+        # evaluated before they were kept gets them) gives the very same positions
+        xy = ev["example_xy"]
+        assert set(xy) == set(ev["pursuers"]) | {"evader_0"}
+        assert all(len(track) == ev["episodes"][0]["length"] + 1 for track in xy.values())
+        del ev["example_xy"]
+        (step / "eval.json").write_text(json.dumps(ev))
+        root, expert_dir = tmp_path / "runs-root", f"runs/base-seed{k}"
+        models = root / expert_dir / "stages" / plan.dt.stage
+        experts = {a: f"sb3:{models / f'{a}.zip'}" for a in xy}
+        game = expert_game(plan, root, expert_dir)
+        assert add_example_positions(step, experts, game, plan.fixed_episodes, plan.dt.target, print)
+        assert json.loads((step / "eval.json").read_text())["example_xy"] == xy
         assert (
             len((step / "run" / "loss.csv").read_text().splitlines()) == 1 + 3 * 3
         )  # 6 updates, logged every 2
@@ -335,7 +348,11 @@ def test_reproduce_end_to_end_at_toy_size(tmp_path: Path) -> None:
             assert float(low) >= 0.0 and (not name.endswith("rate") or float(high) <= 1.0), line
     figs = sorted((tmp_path / "report").rglob("*.png"))
     assert {p.parent.name for p in figs} == {e.id for e in plan.experiments} | {"report", "dt"}
-    assert [p.name for p in figs if p.parent.name == "dt"] == ["dt_distance.png", "dt_loss.png"]
+    assert [p.name for p in figs if p.parent.name == "dt"] == [
+        "dt_distance.png",
+        "dt_loss.png",
+        "dt_trajectories.png",
+    ]
     assert [p.name for p in figs if p.parent.name == "report"] == ["claims.png"]
     seed_rows = [
         line

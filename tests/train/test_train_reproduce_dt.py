@@ -148,7 +148,13 @@ def test_the_interval_is_of_the_mean_less_the_threshold_and_stays_in_the_metrics
     assert dt_claim_result(rate, [0.9, 1.0, 0.2])[0].high == 1.0
 
 
-def _episode(distance: np.ndarray, *, captured_at: int | None = None, collision: bool = False) -> Episode:
+def _episode(
+    distance: np.ndarray,
+    *,
+    captured_at: int | None = None,
+    collision: bool = False,
+    positions: np.ndarray | None = None,
+) -> Episode:
     n = distance.shape[1]
     return Episode(
         agents=(*(f"pursuer_{i}" for i in range(n - 1)), "evader_0"),
@@ -161,6 +167,7 @@ def _episode(distance: np.ndarray, *, captured_at: int | None = None, collision:
         out_of_site=False,
         returns=np.arange(n, dtype=np.float64),
         distance=distance,
+        positions=positions,
     )
 
 
@@ -189,7 +196,13 @@ def test_an_episode_gives_each_pursuers_distance_slope_in_metres_per_second_and_
 
 
 def _write_step(
-    folder: Path, *, first: list[float], last: list[float], closest: list[float], slope: float
+    folder: Path,
+    *,
+    first: list[float],
+    last: list[float],
+    closest: list[float],
+    slope: float,
+    tracks: bool = False,
 ) -> None:
     """A DT step's result files as `run_dt` writes them, with made-up numbers."""
     (folder / "run").mkdir(parents=True, exist_ok=True)
@@ -207,7 +220,17 @@ def _write_step(
     eps = []
     for c in closest:  # every pursuer closes on the evader at `slope` [m/s], ending `c` m from it
         d = c - slope * dt * (20 - np.arange(21))
-        eps.append(_episode(np.stack([d, d, d, np.zeros(21)], axis=1), captured_at=20 if c < 25.0 else None))
+        # with tracks: the evader still at (300, 200) m, the pursuers coming from the west, apart
+        xy = np.tile(np.array([300.0, 200.0]), (21, 4, 1))
+        xy[:, :3, 1] -= d[:, None]
+        xy[:, :3, 0] += [-20.0, 0.0, 20.0]
+        eps.append(
+            _episode(
+                np.stack([d, d, d, np.zeros(21)], axis=1),
+                captured_at=20 if c < 25.0 else None,
+                positions=xy if tracks else None,
+            )
+        )
     (folder / "eval.json").write_text(json.dumps(evaluation_record(eps, dt, l_max=25.0, l_min=15.0)))
     (folder / "summary.json").write_text(
         json.dumps(
@@ -293,7 +316,8 @@ def test_the_report_judges_the_dt_claims_from_the_dt_steps_and_archives_them(tmp
         folder.mkdir(parents=True)
         (folder / "spec.json").write_text(json.dumps(dt_spec(plan.dt, job, out, plan.fixed_episodes)))
         first, last = [0.8 + 0.01 * job.seed] * 3, [0.05 + 0.01 * job.seed] * 3
-        _write_step(folder, first=first, last=last, closest=closest, slope=-1.0 - 0.1 * job.seed)
+        seed_slope = -1.0 - 0.1 * job.seed
+        _write_step(folder, first=first, last=last, closest=closest, slope=seed_slope, tracks=job.seed == 0)
     write_report(plan, out, report)
     text = report.read_text()
     table = text.split("## Verdicts")[1].split("### Every seed")[0]
@@ -307,7 +331,7 @@ def test_the_report_judges_the_dt_claims_from_the_dt_steps_and_archives_them(tmp
     assert f"no correction for testing {len(plan.claims) + len(plan.dt.claims)} claims at once" in text
     assert "| D2 | DT pursuers (DT seed = expert run's seed) | -1 | -1.1 |" in text
     section = text.split("## Decision Transformer pursuers")[1].split("\n## ")[0]
-    for name in ("dt_loss", "dt_distance"):
+    for name in ("dt_loss", "dt_trajectories", "dt_distance"):  # tracks: DT seed 0 kept them
         assert f"![{name}](r/dt/{name}.png)" in section
         assert (tmp_path / "docs" / "r" / "dt" / f"{name}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert (
