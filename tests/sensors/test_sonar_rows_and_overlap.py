@@ -119,6 +119,19 @@ def test_normals_drawn_beside_the_ray_casts_are_the_numbers_drawn_after_them(
     np.testing.assert_array_equal(serial.measure(poses, 0.25), beside.measure(poses, 0.25))
 
 
+def measured_shapes(monkeypatch: pytest.MonkeyPatch) -> list[tuple[int, ...]]:
+    """The shapes of the true ranges every row-subset measurement is given, from now on."""
+    shapes: list[tuple[int, ...]] = []
+    inner = measured.measure_rows
+
+    def spy(truth: np.ndarray, *args: Any, **kwargs: Any) -> np.ndarray:
+        shapes.append(truth.shape)
+        return inner(truth, *args, **kwargs)
+
+    monkeypatch.setattr(measured, "measure_rows", spy)
+    return shapes
+
+
 def test_a_3d_game_reset_senses_only_the_reset_environments(monkeypatch: pytest.MonkeyPatch) -> None:
     """Rows not reset keep their ranges and biases; the reset rows alone are measured (and drawn for)."""
     core = Game3DCore("dive_flat", num_envs=6, seed=3)
@@ -128,14 +141,7 @@ def test_a_3d_game_reset_senses_only_the_reset_environments(monkeypatch: pytest.
         core.step(rng.uniform(-1.0, 1.0, (6, core.num_agents, 3)))
     sonar = core.sonars[0]
     ranges, bias = core.ranges.copy(), sonar.errors.bias.copy()
-    shapes: list[tuple[int, ...]] = []
-    inner = measured.measure_rows
-
-    def spy(truth: np.ndarray, *args: Any, **kwargs: Any) -> np.ndarray:
-        shapes.append(truth.shape)
-        return inner(truth, *args, **kwargs)
-
-    monkeypatch.setattr(measured, "measure_rows", spy)
+    shapes = measured_shapes(monkeypatch)
     core.reset([2, 5])
     assert shapes == [(2, core.num_agents, sonar.config.beams)]  # two rows measured, not six
     kept = [0, 1, 3, 4]
@@ -157,14 +163,7 @@ def test_a_planar_game_reset_senses_only_the_reset_environments(monkeypatch: pyt
     for _ in range(3):
         core.step(np.stack([rng.uniform(lim[:, 0], lim[:, 1], (5, 4)), np.zeros((5, 4))], -1))
     ranges = core.state.ranges.copy()
-    shapes: list[tuple[int, ...]] = []
-    inner = measured.measure_rows
-
-    def spy(truth: np.ndarray, *args: Any, **kwargs: Any) -> np.ndarray:
-        shapes.append(truth.shape)
-        return inner(truth, *args, **kwargs)
-
-    monkeypatch.setattr(measured, "measure_rows", spy)
+    shapes = measured_shapes(monkeypatch)
     core.reset([3])
     assert shapes == [(1, 4, core.robots.sonars[0].config.beams)]
     np.testing.assert_array_equal(core.state.ranges[[0, 1, 2, 4]], ranges[[0, 1, 2, 4]])
