@@ -6,6 +6,8 @@ table's wiring and arithmetic only.
 
 from __future__ import annotations
 
+from typing import Any
+
 import pytest
 
 from hptvsim.bench import env as bench
@@ -41,6 +43,26 @@ def test_no_ratio_without_both_rows() -> None:
     assert "3-D / planar" not in result.table()
 
 
+def test_the_b1024_pair_is_measured_in_turns(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Planar, 3-D, planar, 3-D, ...: each game's best turn is its row (a passing load hits both)."""
+    calls: list[str] = []
+
+    def stepper(name: str) -> tuple[Any, Any]:
+        def step(k: int) -> None:
+            calls.append(name)
+
+        return step, lambda: calls.append(f"close {name}")
+
+    monkeypatch.setattr(bench, "_planar_stepper", lambda scenario, num_envs: stepper("planar"))
+    monkeypatch.setattr(bench, "_game3d_stepper", lambda num_envs: stepper("3-D"))
+    turns = iter([100.0, 30.0, 120.0, 25.0, 90.0, 40.0])  # calls/s of each turn, in order
+    monkeypatch.setattr(bench, "_rate", lambda step, *, seconds, min_steps: (step(0), next(turns))[1])
+    planar, game3d = bench._paired_b1024("source", 0.3, rounds=3)
+    assert calls == ["planar", "3-D"] * 3 + ["close planar", "close 3-D"]
+    assert planar.name == "hptvsim batched backend, B=1024" and planar.env_steps_per_s == 120.0 * 1024
+    assert game3d.name == "hptvsim 3-D game batched, B=1024" and game3d.env_steps_per_s == 40.0 * 1024
+
+
 def test_bench_env_measures_the_3d_game_at_b1024_right_after_the_planar_row(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
@@ -50,9 +72,13 @@ def test_bench_env_measures_the_3d_game_at_b1024_right_after_the_planar_row(
     def game3d(num_envs: int, seconds: float) -> EnvBenchRow:
         return EnvBenchRow(f"hptvsim 3-D game batched, B={num_envs}", num_envs, 4, 6.0)
 
+    def pair(scenario: str, seconds: float) -> tuple[EnvBenchRow, EnvBenchRow]:
+        return planar(scenario, 1024, seconds), game3d(1024, seconds)
+
     monkeypatch.setattr(bench, "_ours_fmu", lambda scenario, seconds: EnvBenchRow("hptvsim FMU", 1, 4, 1.0))
     monkeypatch.setattr(bench, "_ours_batched", planar)
     monkeypatch.setattr(bench, "_ours_3d", game3d)
+    monkeypatch.setattr(bench, "_paired_b1024", pair)
     monkeypatch.setattr(bench, "_mpe", lambda seconds: "mpe2 not installed (test)")
     monkeypatch.setattr(bench, "_vmas", lambda num_envs, seconds: "vmas not installed (test)")
     monkeypatch.setattr(bench, "step_parts", lambda seconds: [])
