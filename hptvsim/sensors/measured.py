@@ -167,6 +167,8 @@ class FusedRangeErrors:
             w_std = cfg.bias_std * math.sqrt(-math.expm1(-2.0 * dt / cfg.tau))
             self._coef = (phi, w_std)
             self._dt = dt
+        if bias is not None and (out is None or out.size != n or bias.size != n):
+            raise ValueError(f"with bias, out and bias must hold the {n} ranges' values")
         step_bias = cfg.bias_std != 0.0
         add_noise = cfg.noise_std > 0.0
         draws = self._draws(n)
@@ -184,9 +186,7 @@ class FusedRangeErrors:
             if draws:
                 rng.standard_normal(out=self._z)
         bias_ptr = self._bias_ptr if bias is None else bias.ctypes.data
-        if bias is not None:
-            if out is None or out.size != n or bias.size != n:
-                raise ValueError(f"with bias, out and bias must hold the {n} ranges' values")
+        if bias is not None and out is not None:
             out_ptr = out.ctypes.data
         elif out is None:
             out = np.empty(self.shape)
