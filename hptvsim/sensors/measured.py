@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import ctypes
 import math
-import threading
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
@@ -23,7 +22,7 @@ import numpy.typing as npt
 
 from hptvsim.native import load_library
 from hptvsim.sensors.errors import GaussMarkov, as_generator
-from hptvsim.sensors.sonar import _CFLAGS, GeometricSonar
+from hptvsim.sensors.sonar import _CFLAGS, GeometricSonar, named_pool
 from hptvsim.world.grid import OccupancyGrid
 from hptvsim.world.sensor_config import GaussMarkovConfig, SonarConfig
 
@@ -41,17 +40,10 @@ OVERLAP_MIN_DRAWS = 65536
 """Normals per measurement from which :meth:`FusedRangeErrors.start_drawing` draws on a thread
 (below it the hand-off costs more than it saves)."""
 
-_draw_lock = threading.Lock()
-_draw_executor: ThreadPoolExecutor | None = None
-
 
 def _draw_pool() -> ThreadPoolExecutor:
     """One worker that draws the sonars' normals beside their ray casts (its own, not the casts')."""
-    global _draw_executor
-    with _draw_lock:
-        if _draw_executor is None:
-            _draw_executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="sonar-normals")
-        return _draw_executor
+    return named_pool("sonar-normals", 1)
 
 
 def _declare(lib: ctypes.CDLL) -> None:

@@ -181,17 +181,23 @@ def _kernel() -> ctypes.CDLL:
 
 
 _pool_lock = threading.Lock()
-_pool: ThreadPoolExecutor | None = None
+_pools: dict[str, ThreadPoolExecutor] = {}
+
+
+def named_pool(name: str, workers: int) -> ThreadPoolExecutor:
+    """The process's thread pool ``name`` (``workers`` threads), made on first use.
+
+    The sensors' pools: ``sonar`` for the ray casts' row ranges, ``sonar-normals`` for the Eq. 3
+    draws beside them (:class:`~hptvsim.sensors.measured.FusedRangeErrors`); one each per process.
+    """
+    with _pool_lock:
+        if name not in _pools:
+            _pools[name] = ThreadPoolExecutor(max_workers=workers, thread_name_prefix=name)
+        return _pools[name]
 
 
 def _thread_pool() -> ThreadPoolExecutor:
-    global _pool
-    with _pool_lock:
-        if _pool is None:
-            _pool = ThreadPoolExecutor(
-                max_workers=max(1, (os.cpu_count() or 2) - 1), thread_name_prefix="sonar"
-            )
-        return _pool
+    return named_pool("sonar", max(1, (os.cpu_count() or 2) - 1))
 
 
 CHUNKS_PER_THREAD = 4
