@@ -23,7 +23,14 @@ for _sub in (
 ):  # as pytest's own rootdir handling would: the helpers import by name
     sys.path.insert(0, str(Path(__file__).parent / _sub))
 
-pytest_plugins = ["offline_fixtures", "pg_fixtures", "service_fixtures", "twin_fixtures", "viz_fixtures"]
+pytest_plugins = [
+    "needs",
+    "offline_fixtures",
+    "pg_fixtures",
+    "service_fixtures",
+    "twin_fixtures",
+    "viz_fixtures",
+]
 
 os.environ.setdefault("MPLBACKEND", "Agg")
 

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+from documented import agrees
 from test_cli_user_errors import ENV as CLI_ENV
 from test_cli_user_errors import HPTVSIM, hptvsim_many
 from twin_fixtures import ardusub_log
@@ -344,11 +345,11 @@ COMMANDS: dict[str, tuple[Run | Help, ...]] = {
     ),
     "hptvsim demo --scenario ridge_3d --out hptvsim-out": (
         Run(  # the 3-D episode with its depth plot: the shipped 3-D MAISAC policies (issue 37)
-            # capture at step 294 (scripted 3-D pure pursuit at step 454; at the former 1.2 and
-            # 0.8 m/s, before issue 37's attitude hold, at step 1089)
+            # capture at step 294 on AMD EPYC, 295 on an AVX-512 Intel Xeon (MKL's GEMM kernels
+            # differ; README "Numbers and CPUs"): the outcome and a time near the README's, not a step
             "hptvsim demo --scenario ridge_3d --out {tmp} --duration 5",
             r"policies: pursuer_0, pursuer_1, pursuer_2: maisac-3d-pursuers; evader_0: maisac-3d-evader"
-            r"\noutcome: captured at 73\.50 s[\s\S]*episode plot: ",
+            r"\noutcome: captured at 7[2-6]\.\d\d s[\s\S]*episode plot: ",  # README: "at about 74 s"
             ("{tmp}/trajectories.png", "{tmp}/episode.png"),
         ),
     ),
@@ -708,9 +709,12 @@ def test_the_readme_evaluation_prints_the_numbers_of_its_table(tmp_path: Path) -
     """The README's command, all 100 episodes (minutes): the capture and collision rates its table states."""
     match = SHIPPED_ROW.search(README.read_text(encoding="utf-8"))
     assert match is not None
-    capture, spread, collision = match.groups()
+    capture, _, collision = (float(v) for v in match.groups())
     res = run(argv(EVALUATE_SHIPPED, tmp_path, tmp_path), tmp_path, timeout=3600)
-    row = (
-        rf"\| pursuer=maisac-pursuers, evader=maisac-evader \| {re.escape(capture)} ± {re.escape(spread)} \|"
-    )
-    check(res, row + rf"[^|]*\| {re.escape(collision)} ± ")
+    row = r"\| pursuer=maisac-pursuers, evader=maisac-evader \| (\d\.\d\d) ± \d\.\d\d \|[^|]*\| (\d\.\d\d) ± "
+    check(res, row)
+    printed = re.search(row, res.stdout + res.stderr)
+    assert printed is not None
+    # the same 100 episodes; another CPU may end one or two of them otherwise (tests/documented.py)
+    assert agrees(float(printed.group(1)), capture, 100), (printed.group(0), capture)
+    assert agrees(float(printed.group(2)), collision, 100), (printed.group(0), collision)

@@ -35,6 +35,7 @@ from typing import Any
 import httpx
 import pytest
 import sqlalchemy as sa
+from needs import missing
 from pg_cluster import REQUIRE_VARIABLE, PgCluster, PgUnavailable
 from service_helpers import Server, open_files_under, start_server, wait_final
 
@@ -205,7 +206,7 @@ def test_retention_deletes_old_ended_episodes_rows_and_folders(tmp_path: Path, d
 def small_disk(tmp_path: Path) -> Iterator[Path]:
     """A data folder whose episodes live on a 32 MiB file system (tmpfs; needs root)."""
     if os.geteuid() != 0 or shutil.which("mount") is None:
-        pytest.skip("mounting a small file system needs root")
+        missing("mounting a small file system needs root and mount")
     data = tmp_path / "data"
     episodes = data / "episodes"
     episodes.mkdir(parents=True)
@@ -213,7 +214,7 @@ def small_disk(tmp_path: Path) -> Iterator[Path]:
         ["mount", "-t", "tmpfs", "-o", "size=32m", "tmpfs", str(episodes)], capture_output=True, text=True
     )
     if done.returncode != 0:
-        pytest.skip(f"cannot mount a tmpfs here: {done.stderr.strip()}")
+        missing(f"cannot mount a tmpfs here: {done.stderr.strip()}")
     try:
         yield data
     finally:
@@ -337,7 +338,7 @@ def test_an_episode_ending_while_the_database_is_read_only_is_stored_later_or_at
     tmp_path: Path,
 ) -> None:
     if os.geteuid() != 0 or shutil.which("chattr") is None:
-        pytest.skip("making files immutable needs root and chattr")
+        missing("making files immutable needs root and chattr")
     data = tmp_path / "data"
     files: list[Path] = []
     try:
@@ -345,7 +346,7 @@ def test_an_episode_ending_while_the_database_is_read_only_is_stored_later_or_at
             files = sorted(data.glob("hptvsim.db*"))
             probe = subprocess.run(["chattr", "+i", str(files[0])], capture_output=True, text=True)
             if probe.returncode != 0:
-                pytest.skip(f"this file system has no immutable files: {probe.stderr.strip()}")
+                missing(f"this file system has no immutable files: {probe.stderr.strip()}")
             _immutable(files, False)
             for restart in (False, True):
                 ep = api.post("/episodes", json=LONG).json()["id"]

@@ -23,6 +23,7 @@ from typing import Any
 import httpx
 import jsonschema  # type: ignore[import-untyped]  # no stubs installed
 import pytest
+from needs import needs
 from service_helpers import Server, start_server, wait_final
 
 from hptvsim.service import settings as settings_module
@@ -222,9 +223,7 @@ FLAGS = [
 ]
 
 
-@pytest.mark.skipif(
-    not (Path(CHROMIUM).is_file() or shutil.which("chromium")), reason="no Chromium (make system-deps)"
-)
+@needs(Path(CHROMIUM).is_file() or shutil.which("chromium") is not None, "no Chromium (make system-deps)")
 def test_the_dashboard_sends_the_key_in_headers_only(keyed: Server) -> None:
     """Run and watch an episode from the keyed dashboard: the live events arrive (a stream read
     with the key in a header), the download links work, and no address the browser asks for

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from documented import agrees
 
 from hptvsim.envs import GameCore
 from hptvsim.train.batched_run import load_batched_config
@@ -326,5 +327,5 @@ def test_the_shipped_3d_pursuers_capture_15_points_more_often_than_3d_pure_pursu
     seeded episodes of 1200 steps (300 s), as ``hptvsim evaluate``."""
     shipped = _evaluate(default_policy("pursuer", "pursuit", "3d"), "scripted:potential_field", "ridge_3d")
     scripted = _evaluate("scripted:pure_pursuit", "scripted:potential_field", "ridge_3d")
-    assert scripted["capture"] == pytest.approx(0.40)  # measured; collision 0.11
+    assert agrees(scripted["capture"], 0.40, 100), scripted  # measured 0.40, collision 0.11 (AMD EPYC)
     assert shipped["capture"] >= scripted["capture"] + 0.15, (shipped, scripted)

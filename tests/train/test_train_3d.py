@@ -78,7 +78,11 @@ def test_the_3d_runs_model_plays_in_the_episode_runner(run_3d: Path, tmp_path: P
     zip_ = run_3d / "stages" / "dive" / "evader_0.zip"
     result = run_episode("dive_goto", {"evader_0": f"sb3:{zip_}"}, seed=2, max_steps=40, allow_paths=True)
     assert result.static.game == "3d"
-    assert result.summary.steps == 40 or result.outcome != "truncated"
+    steps = result.summary.steps
+    assert 0 < steps <= 40 and (steps == 40) == (result.outcome == "truncated"), (steps, result.outcome)
+    evader = next(a for a in result.trajectories.agents if a.name == "evader_0")
+    assert len(evader.x) == steps + 1  # step 0 (after the reset) and one row per step
+    assert any(abs(c) > 0.05 for c in evader.v_cmd), "the model never commanded a speed"  # m/s
     assert result.static.agents[0].policy == f"sb3:{zip_}"
 
 

@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from needs import needs
 
 CHROMIUM = os.environ.get("HPTVSIM_CHROMIUM", "/usr/bin/chromium")
 FLAGS = [
@@ -164,9 +165,9 @@ def _api(url: str, path: str, body: dict[str, Any] | None = None) -> Any:
         return json.load(r)
 
 
-pytestmark = pytest.mark.skipif(
-    not (Path(CHROMIUM).is_file() or shutil.which("chromium")),
-    reason=f"no Chromium at {CHROMIUM} (apt-get install chromium; `make system-deps`)",
+pytestmark = needs(
+    Path(CHROMIUM).is_file() or shutil.which("chromium") is not None,
+    f"no Chromium at {CHROMIUM} (apt-get install chromium; `make system-deps`)",
 )
 
 
