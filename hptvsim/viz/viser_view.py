@@ -82,6 +82,7 @@ DEPTH_BANDS = 8  # terrain meshes, one colour each (viser's simple meshes have o
 MIN_DISPLAY_RADIUS = 2.5  # m, vehicles drawn at least this large (the evader's radius is 0.2 m)
 TIME_LABEL = "time [s]"  # the x axis of the view's plots: simulated seconds
 GUIDE_COLOR = "#9aa5b1"  # reference lines of plots (the capture distance)
+DISTANCE_POINTS = 2000  # at least (and under twice) this many rows span a long episode's distance plot
 LABEL_EM_PX = 12.0  # px, the em of viser's screen-space labels (font_screen_scale 1), at any zoom
 LABEL_CHAR_EM = 0.62  # width of a character of a vehicle's name [em] (system sans; generous)
 LABEL_HEIGHT_PX = 17.5  # px, a one-line label's box: line height (~1.2 em) and 0.2 of it as padding
@@ -708,7 +709,12 @@ class LiveView:
         self._thread: threading.Thread | None = None
         self._lock = threading.Lock()
         self._gui: dict[str, Any] = {}
-        self._distance: deque[tuple[float, ...]] = deque(maxlen=2000)  # (t [s], distances [m])
+        # (t [s], distances [m]) of every frame of the episode shown, drawn or not (frames that
+        # arrive together are drawn once: _drain); past DISTANCE_POINTS every other row is
+        # dropped and only every _distance_stride-th frame kept, so the plot spans the whole episode
+        self._distance: list[tuple[float, ...]] = []
+        self._distance_stride = 1
+        self._distance_seen = 0
         self._plotted: list[int] = []  # agents of the distance plot (indices into static.agents)
         self.follow_service = True
         self.error: str | None = None
@@ -1025,6 +1031,10 @@ class LiveView:
         while self._requests:
             req = self._requests.popleft()
             if req.kind == "frame":
+                if pending is not None and self.following is not None:
+                    label, frame = pending.value  # not drawn, but on the distance plot
+                    if label in (None, self.following):
+                        self._remember(frame)
                 pending = req
                 continue
             if pending is not None:
@@ -1038,6 +1048,8 @@ class LiveView:
         """Show a new episode: its scene, and a distance plot of its agents."""
         assert self.renderer is not None
         self._distance.clear()
+        self._distance_stride = 1
+        self._distance_seen = 0
         self.renderer.set_static(static)
         self._plotted = plotted_agents(static)
         self._build_plot(static)
@@ -1046,10 +1058,30 @@ class LiveView:
         assert self.renderer is not None
         self.renderer.show(frame)
         self.last_frame = frame
-        fresh = not self._distance or frame.time > self._distance[-1][0]  # not a frame shown again
-        if fresh and self._plotted and len(frame.agents) > max(self._plotted):
-            self._distance.append((frame.time, *(frame.agents[i].distance for i in self._plotted)))
+        self._remember(frame)
         self._update_gui(frame)
+
+    def _remember(self, frame: Frame | Mapping[str, Any]) -> None:
+        """Add a frame (or its plain data) to the distance plot's history, drawn or not."""
+        if isinstance(frame, Frame):
+            t, last, distances = frame.time, frame.done, [a.distance for a in frame.agents]
+        else:
+            try:
+                t, last = float(frame["time"]), bool(frame.get("done"))
+                distances = [float(a["distance"]) for a in frame["agents"]]
+            except (KeyError, TypeError, ValueError):
+                return  # not frame data: drawing it (Frame.from_dict) says so
+        if self._distance and t <= self._distance[-1][0]:
+            return  # a frame shown again, or an older one
+        if not self._plotted or len(distances) <= max(self._plotted):
+            return
+        self._distance_seen += 1
+        if (self._distance_seen - 1) % self._distance_stride and not last:
+            return
+        self._distance.append((t, *(distances[i] for i in self._plotted)))
+        if len(self._distance) >= 2 * DISTANCE_POINTS:
+            self._distance = self._distance[::2]
+            self._distance_stride *= 2
 
     def _run(self) -> None:
         last_render = 0.0
@@ -1316,7 +1348,8 @@ class LiveView:
         if self.error:
             lines.append(f"**{self.error}**")
         self._status("  \n".join(lines))
-        self._gui["progress"].value = 100.0 * frame.step / max(1, st.max_steps)
+        # an episode that ended (a capture before the step limit, too) is done: 100 %
+        self._gui["progress"].value = 100.0 if frame.done else 100.0 * frame.step / max(1, st.max_steps)
         plot = self._gui.get("plot")
         if plot is not None and len(self._distance) >= 2:
             arr = np.asarray(self._distance, dtype=np.float64)
