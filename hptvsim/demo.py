@@ -3,7 +3,10 @@
 1. A work-class UUV runs a lawnmower pattern and a spherical UUV a figure of eight, both in a
    0.3 m/s north-easterly current, stepped at the paper's 0.25 s through the lean FMI path
    (``trajectories.png``: each track on its own map, north up and east right, and commanded
-   versus achieved surge speed and yaw rate).
+   versus achieved surge speed and yaw rate). The current does not drift these tracks: the
+   built-in controller holds the commanded speed over ground (the DVL's) and zero sway. A map
+   beside them shows the same manoeuvres as raw forces without the controller
+   (``control_mode = 1``), which the current carries off; the figure says both.
 2. One episode of the game on the target scenario on the FMU backend, every agent with its
    default policy (:func:`hptvsim.zoo.default_policy`: the shipped trained ones where there are
    some): its outcome and metrics are printed (:func:`episode_report`) and ``episode.png``
@@ -74,8 +77,22 @@ def _figure_eight(t: float, v_max: float, omega_max: float) -> tuple[float, floa
     return 0.7 * v_max, 0.3 * omega_max * (1.0 if k % 2 == 0 else -1.0)
 
 
-def simulate_manoeuvre(vehicle_type: str, duration: float) -> dict[str, npt.NDArray[np.float64]]:
+def simulate_manoeuvre(
+    vehicle_type: str, duration: float, *, raw: bool = False, current: tuple[float, float] = _CURRENT
+) -> dict[str, npt.NDArray[np.float64]]:
     """Step one vehicle's FMU through its demo manoeuvre.
+
+    Args:
+        vehicle_type: ``work_class`` (a lawnmower) or ``spherical`` (a figure of eight).
+        duration: Simulated time [s].
+        raw: Without the built-in controller (``control_mode = 1``): the commands become the
+            feed-forward forces that hold them in still water (``X = -(X_u + X_uu |v|) v``,
+            ``N = -(N_r + N_rr |omega|) omega``, no sway force), with no feedback of the speed
+            over ground (the controller's DVL) or of the sway, so the current carries the
+            vehicle off. With the controller (default) it holds the commanded speed over
+            ground and zero sway: the current does not drift it.
+        current: The current's north and east components [m/s] (default: the demo's 0.3 m/s
+            north-easterly one).
 
     Returns:
         Arrays ``t`` [s], ``x``, ``y`` [m], ``psi`` [rad], ``u`` [m/s], ``r`` [rad/s],
@@ -84,8 +101,9 @@ def simulate_manoeuvre(vehicle_type: str, duration: float) -> dict[str, npt.NDAr
     params = vehicle_parameters(vehicle_type)
     pattern = _lawnmower if vehicle_type == "work_class" else _figure_eight
     inst = FmuModel(fmu_path(vehicle_type)).instantiate(vehicle_type)
-    inst.initialize({"x_0": 0.0, "y_0": 0.0, "psi_0": 0.0})
-    cmd = inst.bind_inputs(["v_cmd", "omega_cmd", "current_x", "current_y"])
+    inst.initialize({"x_0": 0.0, "y_0": 0.0, "psi_0": 0.0, **({"control_mode": 1.0} if raw else {})})
+    inputs = ["tau_X_cmd", "tau_Y_cmd", "tau_N_cmd"] if raw else ["v_cmd", "omega_cmd"]
+    cmd = inst.bind_inputs([*inputs, "current_x", "current_y"])
     out = inst.bind_outputs(["x", "y", "psi", "u", "r"])
     n = round(duration / DEFAULT_STEP)
     log = np.zeros((n + 1, 8))
@@ -93,7 +111,12 @@ def simulate_manoeuvre(vehicle_type: str, duration: float) -> dict[str, npt.NDAr
     for k in range(n):
         t = k * DEFAULT_STEP
         v, om = pattern(t, params.v_max, params.omega_max)
-        cmd[:] = (v, om, *_CURRENT)
+        if raw:
+            tau_X = -(params.X_u + params.X_uu * abs(v)) * v  # N, surge damping at v
+            tau_N = -(params.N_r + params.N_rr * abs(om)) * om  # N m, yaw damping at omega
+            cmd[:] = (tau_X, 0.0, tau_N, *current)
+        else:
+            cmd[:] = (v, om, *current)
         inst.step(DEFAULT_STEP)
         log[k + 1, 0] = t + DEFAULT_STEP
         log[k + 1, 1:6] = out
@@ -369,7 +392,8 @@ def _padded(lo: float, hi: float, pad: float = 0.08, least: float = 2.0) -> tupl
 def run_demo(out_dir: Path, *, duration: float = 120.0) -> Path:
     """Run both manoeuvres and write ``trajectories.png`` into ``out_dir``; returns its path."""
     runs = {vt: simulate_manoeuvre(vt, duration) for vt in ("work_class", "spherical")}
-    fig = trajectories_figure(runs, duration)
+    raw = {vt: simulate_manoeuvre(vt, duration, raw=True) for vt in runs}
+    fig = trajectories_figure(runs, duration, raw)
     out_dir.mkdir(parents=True, exist_ok=True)
     path = out_dir / "trajectories.png"
     fig.savefig(path, dpi=110)
@@ -377,18 +401,42 @@ def run_demo(out_dir: Path, *, duration: float = 120.0) -> Path:
     return path
 
 
-def trajectories_figure(runs: Mapping[str, Mapping[str, npt.NDArray[np.float64]]], duration: float) -> Any:
+def _current_arrow(ax: Any, label: str = "current 0.3 m/s") -> None:
+    """The current's direction (north-east) as an arrow in the map's upper left corner."""
+    n, e = _CURRENT
+    speed = math.hypot(n, e)
+    ax.annotate(
+        "",
+        xy=(0.08 + 0.12 * e / speed, 0.84 + 0.12 * n / speed),
+        xytext=(0.08, 0.84),
+        xycoords="axes fraction",
+        arrowprops={"arrowstyle": "-|>", "color": "white", "lw": 2.0},
+        zorder=6,
+    )
+    ax.text(0.05, 0.80, label, transform=ax.transAxes, color="white", fontsize=8, va="top", zorder=6)
+
+
+def trajectories_figure(
+    runs: Mapping[str, Mapping[str, npt.NDArray[np.float64]]],
+    duration: float,
+    raw: Mapping[str, Mapping[str, npt.NDArray[np.float64]]] | None = None,
+) -> Any:
     """The figure of the manoeuvres: a map per vehicle, surge speed and yaw rate in time.
 
     Each track has its own map panel, sized to the track's extent (a lawnmower is long and
-    narrow, a figure of eight small), so neither leaves a blank gap or shrinks to a blob.
+    narrow, a figure of eight small), so neither leaves a blank gap or shrinks to a blob. The
+    current does not drift these tracks: the built-in controller holds the commanded speed over
+    ground (the DVL's) and zero sway, and the figure says so; with ``raw`` a map beside them
+    shows the same manoeuvres as raw forces without the controller, which the current carries off.
 
     Args:
         runs: ``{vehicle type: simulate_manoeuvre(vehicle type, duration)}``.
         duration: Simulated time [s].
+        raw: ``{vehicle type: simulate_manoeuvre(vehicle type, duration, raw=True)}`` (optional).
 
     Returns:
-        A matplotlib figure: one map axes per vehicle, then the speed and yaw-rate axes.
+        A matplotlib figure: one map axes per vehicle, the raw mode's map (with ``raw``), then
+        the speed and yaw-rate axes.
     """
     from matplotlib.colors import to_hex
     from matplotlib.lines import Line2D
@@ -404,8 +452,17 @@ def trajectories_figure(runs: Mapping[str, Mapping[str, npt.NDArray[np.float64]]
         limits[vt] = (north, east)
         ratio = (east[1] - east[0]) / (north[1] - north[0])
         widths.append(map_h * min(max(ratio, 0.45), 1.3) + 0.7)  # in, with the y axis' labels
-    fig = plt.figure(figsize=(sum(widths) + 5.6, map_h + 1.6), layout="constrained")
-    grid = fig.add_gridspec(2, 3, width_ratios=(*widths, 5.6))
+    if raw:
+        north = _padded(
+            min(float(r["x"].min()) for r in raw.values()), max(float(r["x"].max()) for r in raw.values())
+        )
+        east = _padded(
+            min(float(r["y"].min()) for r in raw.values()), max(float(r["y"].max()) for r in raw.values())
+        )
+        ratio = (east[1] - east[0]) / (north[1] - north[0])
+        widths.append(map_h * min(max(ratio, 0.6), 1.3) + 0.7)
+    fig = plt.figure(figsize=(sum(widths) + 5.6, map_h + 1.9), layout="constrained")
+    grid = fig.add_gridspec(2, len(widths) + 1, width_ratios=(*widths, 5.6))
     water = to_hex(_seabed_cmap()(0.55))
     for col, (vt, run) in enumerate(runs.items()):
         ax = fig.add_subplot(grid[:, col])
@@ -420,10 +477,31 @@ def trajectories_figure(runs: Mapping[str, Mapping[str, npt.NDArray[np.float64]]
         ax.set_aspect("equal", adjustable="datalim")
         ax.set_xlabel("east y [m]")
         ax.set_ylabel("north x [m]")
-        ax.set_title(titles[vt], fontsize=10)
+        ax.set_title(f"{titles[vt]}\nwith the controller: no drift", fontsize=10)
         ax.grid(color="white", alpha=0.25)
-    ax_u = fig.add_subplot(grid[0, 2])
-    ax_r = fig.add_subplot(grid[1, 2], sharex=ax_u)
+        _current_arrow(ax)
+    if raw:
+        ax = fig.add_subplot(grid[:, len(runs)])
+        ax.set_facecolor(water)
+        for vt, run in raw.items():
+            color = VEHICLE_COLORS[vt]
+            ax.plot(run["y"], run["x"], color=color, lw=1.8, ls="--", path_effects=_outlined(1.8), zorder=3)
+            ax.plot(
+                run["y"][0], run["x"][0], marker="s", ms=6, color=color, mec=_OUTLINE, ls="none", zorder=4
+            )
+            ax.plot(
+                run["y"][-1], run["x"][-1], marker="o", ms=8, color=color, mec=_OUTLINE, ls="none", zorder=4
+            )
+        ax.update_datalim([(east[0], north[0]), (east[1], north[1])])
+        ax.autoscale_view(tight=True)
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_xlabel("east y [m]")
+        ax.set_ylabel("north x [m]")
+        ax.set_title("raw forces, no controller:\nthe current drifts both (dashed)", fontsize=10)
+        ax.grid(color="white", alpha=0.25)
+        _current_arrow(ax)
+    ax_u = fig.add_subplot(grid[0, len(widths)])
+    ax_r = fig.add_subplot(grid[1, len(widths)], sharex=ax_u)
     for vt, run in runs.items():
         color = VEHICLE_COLORS[vt]
         ax_u.plot(run["t"], run["u"], color=color, lw=1.5, path_effects=_outlined(1.5))
@@ -454,7 +532,9 @@ def trajectories_figure(runs: Mapping[str, Mapping[str, npt.NDArray[np.float64]]
     )
     fig.suptitle(
         f"Both vehicles through their FMUs: {duration:g} s in a 0.3 m/s north-easterly current "
-        f"(steps of {DEFAULT_STEP:g} s)",
+        f"(steps of {DEFAULT_STEP:g} s)\n"
+        "the built-in controller holds the speed over ground (DVL) and zero sway, so the current "
+        "does not drift its tracks" + ("; raw forces without it drift (right map)" if raw else ""),
         fontsize=11,
     )
     return fig

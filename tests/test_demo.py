@@ -182,3 +182,35 @@ def test_the_3d_episode_figure_adds_each_agents_depth_over_time(tmp_path: Path) 
             assert _count(pixels, color_of(name)) > 40, name
     finally:
         plt.close(fig)
+
+
+def test_the_trajectories_figure_says_why_the_current_does_not_drift_and_shows_raw_mode_drift(
+    tmp_path: Path,
+) -> None:
+    """Issue 50, point 9: with the built-in controller (speed over ground from the DVL, sway held
+    at zero) the 0.3 m/s current does not carry a vehicle off; with raw forces it does. The figure
+    says so and draws the raw mode's tracks on a map of their own, each vehicle in its colour."""
+    duration = 40.0  # s
+    runs = {vt: simulate_manoeuvre(vt, duration) for vt in VEHICLE_COLORS}
+    raw = {vt: simulate_manoeuvre(vt, duration, raw=True) for vt in VEHICLE_COLORS}
+    carried = 0.3 * duration * np.array([np.cos(np.pi / 4), np.sin(np.pi / 4)])  # m, current x time
+    for vt in VEHICLE_COLORS:
+        for mode, run in (("controller", runs[vt]), ("raw", raw[vt])):
+            still = simulate_manoeuvre(vt, duration, raw=mode == "raw", current=(0.0, 0.0))
+            shift = np.array([run["x"][-1] - still["x"][-1], run["y"][-1] - still["y"][-1]])  # m
+            if mode == "controller":  # holds its track: the current moves it little
+                assert np.hypot(*shift) < 0.25 * np.hypot(*carried), (vt, shift)
+            else:  # the current carries it about as far as the water moved, north-east
+                assert shift @ carried / (carried @ carried) > 0.6, (vt, shift)
+                assert np.hypot(*shift) > 0.6 * np.hypot(*carried), (vt, shift)
+    fig = trajectories_figure(runs, duration, raw)
+    title = fig._suptitle.get_text()
+    assert "holds the speed over ground (DVL) and zero sway" in title
+    assert "does not drift" in title and "raw forces" in title
+    axes = {ax.get_title(): ax for ax in fig.axes}
+    raw_ax = next(ax for t, ax in axes.items() if t.startswith("raw forces"))
+    assert sum("no drift" in t for t in axes) == 2
+    assert raw_ax.get_xlabel() == "east y [m]" and raw_ax.get_ylabel() == "north x [m]"
+    pixels = _pixels(fig, raw_ax, tmp_path)
+    for vt, color in VEHICLE_COLORS.items():
+        assert _count(pixels, color) > 30, vt
