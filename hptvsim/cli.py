@@ -26,6 +26,7 @@ from hptvsim._output import check_choice
 from hptvsim.bench import cli as bench_cli
 from hptvsim.cosim import cli as cosim_cli
 from hptvsim.experiments import cli as experiments_cli
+from hptvsim.export import cli as export_cli
 from hptvsim.sensors import cli as sensors_cli
 from hptvsim.service import cli as service_cli
 from hptvsim.twin import cli as twin_cli
@@ -214,6 +215,7 @@ def _register() -> None:
     cosim_cli.register(main)
     world_cli.register(main)
     experiments_cli.register(main)
+    export_cli.register(main)  # hptvsim policy export
     sensors_cli.register(main)
     viz_cli.register(main)
     twin_cli.register(main, store=_store_twin)  # --store: the service layer's, passed down

@@ -121,6 +121,12 @@ LAYERS: Final[tuple[Layer, ...]] = (
         "what a client may name: the shipped scenarios and the zoo's named policies, never a path",
     ),
     Layer(
+        "policy export",
+        ("hptvsim.export",),
+        "trained policies out of Python: `hptvsim policy export` writes ONNX files checked against "
+        "SB3, and a runtime that runs them with numpy and onnxruntime only",
+    ),
+    Layer(
         "experiments",
         ("hptvsim.experiments",),
         "what starts from policy names or needs training and offline RL together: training and "

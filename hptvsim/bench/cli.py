@@ -219,6 +219,17 @@ def bench_dt_cmd(quick: bool, as_json: bool) -> None:
         emit(result, as_json)
 
 
+@bench.command("policy")
+@click.option("--quick", is_flag=True, help="Seconds instead of a minute.")
+@_JSON
+def bench_policy_cmd(quick: bool, as_json: bool) -> None:
+    """One exported policy call on one core (onnxruntime) against SB3's torch predict, same run."""
+    from hptvsim.bench.policy import bench_policy
+
+    for result in bench_policy(quick=quick):
+        emit(result, as_json)
+
+
 @bench.command("episode")
 @click.option("--quick", is_flag=True, help="Seconds instead of a minute.")
 @click.option("--scenario", default="target", show_default=True)

@@ -1,0 +1,244 @@
+"""``hptvsim policy export`` and the ONNX runtime (issue 51, point 1).
+
+Every shipped SB3 policy exports to ``<agent>.onnx`` whose onnxruntime actions agree with the
+project's own SB3 policy (:class:`hptvsim.train.policy.SB3Policy`, SB3's deterministic
+``predict`` clipped to the action space: what the game's ``step`` is fed) to 1e-4 on
+observations of real episodes and of the observation space. The default suite exports one PPO
+planar team and the SAC 3-D evader; the rest are slow.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from hptvsim.cli import main
+from hptvsim.envs.games import make_game
+from hptvsim.export import build
+from hptvsim.export.build import TOLERANCE, ExportError, export_policy, sample_observations
+from hptvsim.export.runtime import ExportedPolicy, ExportedPolicyError, load_policies, read_metadata
+from hptvsim.train.policy import SB3Policy, load_sb3_model
+from hptvsim.zoo import list_policies
+
+onnx = pytest.importorskip("onnx")
+pytest.importorskip("onnxruntime")
+
+SHIPPED = {p.name: p for p in list_policies() if p.kind == "sb3"}
+FAST = {"ippo-pursuers": ("pursuer_1",), "maisac-3d-evader": ()}
+"""Default-suite exports: a PPO planar pursuer and the SAC 3-D evader (``()``: every agent)."""
+
+
+def _cli(*args: str) -> tuple[int, str]:
+    result = CliRunner().invoke(main, list(args))
+    return result.exit_code, result.output
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """The default suite's exports, through the command line."""
+    out = {}
+    for name, agents in FAST.items():
+        folder = tmp_path_factory.mktemp(name)
+        code, text = _cli("policy", "export", name, "--out", str(folder), *[f"--agent={a}" for a in agents])
+        assert code == 0, text
+        assert "max |onnxruntime - SB3|" in text
+        out[name] = folder
+    return out
+
+
+def _scenario_of(name: str) -> tuple[str, dict[str, Any]]:
+    prov = SHIPPED[name].provenance
+    options = {k: v for k, v in prov.get("options", {}).items() if k == "extended_obs"}
+    return str(prov["stage"]), options
+
+
+def _check_against_sb3(name: str, folder: Path) -> int:
+    """Compare every file of ``folder`` with SB3; returns how many agents were checked."""
+    info = SHIPPED[name]
+    scenario, options = _scenario_of(name)
+    game = make_game(scenario, **options)
+    policies = load_policies(folder)
+    assert policies
+    for agent, exported_policy in policies.items():
+        file = info.files.get(agent, info.path)
+        assert file is not None
+        model = load_sb3_model(file)
+        obs = sample_observations(game, agent, model, count=320, seed=3)
+        assert obs.shape == (320, exported_policy.n_obs)
+        real = obs[:160]
+        assert np.ptp(real, axis=0).max() > 0.1  # states of a real episode, not one repeated row
+        want = SB3Policy(model).act(obs)  # what the project feeds the game's step
+        got = exported_policy.act(obs)
+        assert got.dtype == np.float32
+        assert got.shape == want.shape == (320, exported_policy.n_act)
+        assert np.max(np.abs(got - want)) <= TOLERANCE, (name, agent)
+        np.testing.assert_allclose(exported_policy.act(obs[7]), want[7], atol=TOLERANCE)  # one row
+        low, high = exported_policy.action_low, exported_policy.action_high
+        assert np.all(got >= low) and np.all(got <= high)
+        assert np.ptp(got, axis=0).min() > 0.0  # the network acts, not a constant
+    return len(policies)
+
+
+@pytest.mark.parametrize("name", sorted(FAST))
+def test_export_agrees_with_sb3_predict(exported: dict[str, Path], name: str) -> None:
+    assert _check_against_sb3(name, exported[name]) == max(len(FAST[name]), 1)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(SHIPPED))
+def test_every_shipped_sb3_policy_exports(tmp_path: Path, name: str) -> None:
+    done = export_policy(name, tmp_path)
+    info = SHIPPED[name]
+    assert [e.agent for e in done] == (list(info.files) if info.files else [e.agent for e in done])
+    assert len(done) == (len(info.files) if info.files else 1)
+    assert _check_against_sb3(name, tmp_path) == len(done)
+
+
+def test_metadata_read_back_with_onnx(exported: dict[str, Path]) -> None:
+    path = exported["maisac-3d-evader"] / "evader_0.onnx"
+    proto = onnx.load(str(path))
+    onnx.checker.check_model(proto)
+    meta = {p.key: p.value for p in proto.metadata_props}
+    info = SHIPPED["maisac-3d-evader"]
+    assert meta["game"] == "3d"
+    assert meta["agent"] == "evader_0" and meta["role"] == "evader"
+    assert meta["algorithm"] == "SAC"
+    assert meta["hptvsim_version"] == "0.1.0"
+    assert info.path is not None
+    assert meta["source_sha256"] == hashlib.sha256(info.path.read_bytes()).hexdigest()
+    assert meta["source_sha256"] == info.provenance["sha256"]
+    provenance = json.loads(meta["provenance"])
+    assert provenance["command"] == info.provenance["command"] and provenance["seed"] == 0
+    observation = json.loads(meta["observation"])
+    assert [i.name for i in proto.graph.input] == ["obs"] and [o.name for o in proto.graph.output] == [
+        "action"
+    ]
+    dims = proto.graph.input[0].type.tensor_type.shape.dim
+    assert dims[0].dim_param == "batch" and dims[1].dim_value == len(observation)
+    named = {f["name"]: f for f in observation}
+    assert named["depth"]["unit"] == "m" and named["psi"]["scale"] == pytest.approx(np.pi)
+    assert named["u"]["unit"] == "m/s" and named["z_dot"]["unit"] == "m/s"
+    action = json.loads(meta["action"])
+    assert [a["name"] for a in action] == ["a_v", "a_omega", "a_w_z"]
+    assert all(a["low"] == -1.0 and a["high"] == 1.0 and a["unit"] == "1" for a in action)
+    commands = json.loads(meta["commands"])
+    assert [(c["name"], c["unit"]) for c in commands] == [("v", "m/s"), ("omega", "rad/s"), ("w_z", "m/s")]
+    assert json.loads(meta["action_convention"])["normalised"] is True
+    # the runtime reads the same
+    assert read_metadata(path)["observation"] == observation
+
+
+def test_planar_metadata_names_the_extended_observation(exported: dict[str, Path]) -> None:
+    meta = read_metadata(exported["ippo-pursuers"] / "pursuer_1.onnx")
+    names = [f["name"] for f in meta["observation"]]
+    assert names[-10:] == [
+        "distance",
+        "min_range",
+        "yaw",
+        "azimuth",
+        "sin_bearing",
+        "cos_bearing",
+        "u",
+        "r",
+        "north",
+        "east",
+    ]
+    assert meta["game"] == "planar" and meta["algorithm"] == "PPO"
+    assert [(a["name"], a["unit"]) for a in meta["action"]] == [("v", "m/s"), ("omega", "rad/s")]
+    assert meta["provenance"]["sha256"] == SHIPPED["ippo-pursuers"].provenance["sha256"]["pursuer_1"]
+
+
+def test_runtime_needs_neither_torch_nor_sb3(exported: dict[str, Path]) -> None:
+    folder = exported["ippo-pursuers"]
+    code = (
+        "import sys, numpy as np\n"
+        "from hptvsim.export.runtime import load_policies\n"
+        f"p = load_policies({str(folder)!r})['pursuer_1']\n"
+        "a = p.act(np.zeros((4, p.n_obs), np.float32))\n"
+        "assert a.shape == (4, 2), a.shape\n"
+        "heavy = ('torch', 'stable_baselines3', 'gymnasium')\n"
+        "bad = sorted(m for m in sys.modules if m.split('.')[0] in heavy)\n"
+        "ours = sorted(m for m in sys.modules if m.startswith('hptvsim'))\n"
+        "print(bad, ours)\n"
+        "assert not bad, bad[:3]\n"
+        "assert ours == ['hptvsim', 'hptvsim.export', 'hptvsim.export.runtime'], ours\n"
+    )
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
+    assert done.returncode == 0, done.stderr
+
+
+def test_runtime_refuses_bad_inputs(exported: dict[str, Path], tmp_path: Path) -> None:
+    p = ExportedPolicy(exported["ippo-pursuers"] / "pursuer_1.onnx")
+    with pytest.raises(ExportedPolicyError, match=r"expected \(26,\) or \(B, 26\)"):
+        p.act(np.zeros(25, np.float32))
+    with pytest.raises(ExportedPolicyError, match="no exported policies"):
+        load_policies(tmp_path)
+    (tmp_path / "x.onnx").write_bytes(b"not onnx")
+    with pytest.raises(ExportedPolicyError, match="not a readable ONNX model"):
+        load_policies(tmp_path)
+
+
+@pytest.mark.parametrize(
+    ("spec", "expect"),
+    [
+        ("nonsense", "unknown policy spec 'nonsense'; valid: a zoo policy of kind sb3 ("),
+        ("scripted:pure_pursuit", "is scripted, not a trained network; valid:"),
+        ("zip:/no/such.zip", "policy file not found: /no/such.zip"),
+        ("run:/no/such-run", "/no/such-run "),
+        (
+            "dt-pursuers",
+            "'dt-pursuers' is a Decision Transformer: not exported, because its action depends on",
+        ),
+        ("dt:policies/dt-pursuers.pt", "is a Decision Transformer: not exported"),
+    ],
+)
+def test_bad_spec_refused_in_one_line(tmp_path: Path, spec: str, expect: str) -> None:
+    code, text = _cli("policy", "export", spec, "--out", str(tmp_path / "out"))
+    assert code == 1
+    lines = text.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("Error: "), text
+    if spec.startswith(("run:", "zip:")):
+        assert f"(spec {spec!r})" in lines[0]
+    assert expect in lines[0]
+    if "valid:" in expect:
+        assert "run:DIR[@STAGE], zip:PATH" in lines[0] and "maisac-pursuers" in lines[0]
+    assert not (tmp_path / "out").exists() or not list((tmp_path / "out").iterdir())
+
+
+def test_run_and_zip_specs(tmp_path: Path) -> None:
+    info = SHIPPED["maisac-pursuers"]
+    stage = tmp_path / "run" / "stages" / "target"
+    stage.mkdir(parents=True)
+    (stage / "pursuer_2.zip").write_bytes(info.files["pursuer_2"].read_bytes())
+    (stage / "stage.json").write_text("{}")
+    (tmp_path / "run" / "summary.json").write_text(json.dumps({"stages": [{"stage": "target"}]}))
+    config = Path(__file__).parents[2] / "configs" / "train" / "shipped-pursuers.toml"
+    (tmp_path / "run" / "config.toml").write_text(config.read_text())  # the run that made them
+    done = export_policy(f"run:{tmp_path / 'run'}", tmp_path / "a")
+    assert [(e.agent, e.n_obs, e.n_act) for e in done] == [("pursuer_2", 26, 2)]
+    assert done[0].max_abs_diff <= TOLERANCE
+    meta = read_metadata(done[0].path)
+    assert meta["scenario"] == "target" and meta["provenance"]["stage"] == "target"
+    assert meta["options"]["extended_obs"] is True  # read from the run's config
+    # a lone file whose name is no agent's: the agent must be named
+    with pytest.raises(
+        ExportError, match=r"agent 'maisac-evader' is not one it drives in target; valid: .*evader_0"
+    ):
+        export_policy("zip:policies/maisac-evader.zip", tmp_path / "b")
+
+
+def test_an_export_that_disagrees_is_not_written(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(build, "TOLERANCE", -1.0)  # any difference, even 0, is too much
+    with pytest.raises(ExportError, match=r"export differs from SB3 by .* not written"):
+        export_policy("ippo-pursuers", tmp_path, agents=["pursuer_0"])
+    assert list(tmp_path.iterdir()) == []
