@@ -307,6 +307,15 @@ CASES: dict[str, tuple[list[str], tuple[str, ...]]] = {
         ("ridge_3d", "3d game", "planar"),
     ),
     "bench-dt": (["bench", "dt", "--nosuch"], ("--nosuch", "No such option")),
+    "bench-policy": (["bench", "policy", "--nosuch"], ("--nosuch", "No such option")),
+    "policy-export": (
+        ["policy", "export", "nosuch", "--out", "x"],
+        ("nosuch", "maisac-pursuers", "zip:PATH"),
+    ),
+    "policy-export-scenario": (
+        ["policy", "export", "maisac-evader", "--scenario", "ridge_3d", "--out", "x"],
+        ("ridge_3d", "planar game"),
+    ),
     "bench-service": (["bench", "service", "--url", "http://127.0.0.1:9"], ("127.0.0.1:9", "no hptvsim")),
 }
 

@@ -224,7 +224,7 @@ def choose_game(source: ExportSource, scenario: str | None, agents: Sequence[str
     Raises:
         ExportError: No such scenario, or no scenario whose game the model fits.
     """
-    from hptvsim.world.scenario import ScenarioError, list_scenarios
+    from hptvsim.world.scenario import ScenarioError
 
     tried = [scenario] if scenario else [source.scenario] if source.scenario else list(DEFAULT_SCENARIOS)
     errors = []
@@ -233,23 +233,27 @@ def choose_game(source: ExportSource, scenario: str | None, agents: Sequence[str
         try:
             game = _game(name, source.options)
         except (ScenarioError, ValueError) as exc:
-            if scenario:
-                raise ExportError(
-                    f"--scenario {name!r}: {exc}; valid: {', '.join(list_scenarios())} or a scenario file"
-                ) from None
-            errors.append(f"{name}: {exc}")
+            errors.append(f"{name!r}: {exc}")
             continue
         if game.kind not in source.games:
-            errors.append(f"{name}: the {game.kind} game; the policy plays {' and '.join(source.games)}")
+            plays = " and ".join(source.games)
+            errors.append(
+                f"{name!r} is a scenario of the {game.kind} game; {source.spec} plays the {plays} game"
+            )
             continue
-        probe = [a for a in agents if a in game.agents] or [_agents_of(source, game)[0]]
+        probe = [a for a in agents if a in game.agents] or _agents_of(source, game)[:1]
+        if not probe:
+            errors.append(f"{name!r} has no agent {source.spec} drives (agents: {', '.join(game.agents)})")
+            continue
         try:
             for agent in probe:
                 check_sb3(source.files.get(agent, next(iter(source.files.values()))), game, agent)
-        except (ValueError, IndexError) as exc:
-            errors.append(f"{name}: {exc}")
+        except ValueError as exc:
+            errors.append(f"{name!r}: {exc}")
             continue
         return game, name
+    if scenario:
+        raise ExportError(f"--scenario {errors[0]}")
     raise ExportError(
         f"{source.spec}: no scenario fits the model ({'; '.join(errors)}); give one with --scenario"
     )

@@ -215,6 +215,51 @@ def test_bad_spec_refused_in_one_line(tmp_path: Path, spec: str, expect: str) ->
     assert not (tmp_path / "out").exists() or not list((tmp_path / "out").iterdir())
 
 
+@pytest.mark.parametrize(
+    ("args", "expect"),
+    [
+        (["maisac-evader", "--scenario", "nosuch"], "--scenario 'nosuch': nosuch: no shipped scenario"),
+        (
+            ["maisac-evader", "--scenario", "ridge_3d"],
+            "--scenario 'ridge_3d' is a scenario of the 3d game; maisac-evader plays the planar game",
+        ),
+        (
+            ["maisac-3d-pursuers", "--scenario", "target"],
+            "--scenario 'target' is a scenario of the planar game; maisac-3d-pursuers plays the 3d game",
+        ),
+        (
+            ["ippo-pursuers", "--agent", "evader_0"],
+            "agent 'evader_0' is not one it drives in target; valid: pursuer_0, pursuer_1, pursuer_2",
+        ),
+    ],
+)
+def test_bad_scenario_or_agent_refused_in_one_line(tmp_path: Path, args: list[str], expect: str) -> None:
+    code, text = _cli("policy", "export", *args, "--out", str(tmp_path / "out"))
+    assert code == 1
+    lines = text.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("Error: ") and expect in lines[0], text
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.slow
+def test_bench_policy_measures_both_ways() -> None:
+    code, text = _cli("bench", "policy", "--quick", "--json")
+    assert code == 0, text
+    decoder, tables, at = json.JSONDecoder(), [], 0
+    while text[at:].strip():
+        at += len(text[at:]) - len(text[at:].lstrip())
+        table, at = decoder.raw_decode(text, at)
+        tables.append(table)
+    assert len(tables) == 2
+    assert "ippo-pursuers pursuer_0 (PPO" in tables[0]["title"]
+    assert "maisac-3d-pursuers pursuer_0 (SAC" in tables[1]["title"]
+    for table in tables:
+        rows = {r["name"]: r for r in table["rows"]}
+        assert table["floor"] == "SB3 predict (torch, 1 thread), batch 1"
+        assert rows[table["floor"]]["ratio_to_floor"] == 1.0
+        assert rows["ExportedPolicy.act (onnxruntime), batch 1"]["us_per_unit"] > 0.0
+
+
 def test_run_and_zip_specs(tmp_path: Path) -> None:
     info = SHIPPED["maisac-pursuers"]
     stage = tmp_path / "run" / "stages" / "target"
