@@ -81,6 +81,7 @@ from typing import Any, Literal
 import numpy as np
 import numpy.typing as npt
 
+from hptvsim.experiments.repro_archive import archive_files, open_text, present, restore_files
 from hptvsim.experiments.stats import Interval, Verdict, mean_interval, verdict
 from hptvsim.train.config import ConfigError
 
@@ -889,7 +890,7 @@ def _loss_rows(path: Path) -> dict[int, tuple[list[float], list[float]]]:
     """``model -> (updates, losses)`` of a ``loss.csv`` (empty when missing or unreadable)."""
     out: dict[int, tuple[list[float], list[float]]] = {}
     try:
-        with path.open(newline="") as f:
+        with open_text(path) as f:
             for row in csv.DictReader(f):
                 u, loss = out.setdefault(int(row["model"]), ([], []))
                 u.append(float(row["update"]))
@@ -1021,8 +1022,8 @@ def copy_changed(src: Path, dst: Path, files: Iterable[str | Path]) -> bool:
 
 
 def _copy_files(src: Path, dst: Path) -> bool:
-    """Copy :data:`ARCHIVE_FILES` present in ``src`` over ``dst``'s; whether anything changed."""
-    return copy_changed(src, dst, ARCHIVE_FILES)
+    """Archive :data:`ARCHIVE_FILES` present in the step's folder ``src`` into ``dst`` (CSV gzipped)."""
+    return archive_files(src, dst, ARCHIVE_FILES)
 
 
 def archive_dt(spec: DTSpec, out: Path, archive: Path, evaluation: FixedEpisodes) -> list[str]:
@@ -1058,6 +1059,9 @@ def restore_dt(
 ) -> list[str]:
     """Put the archived results of every DT step the plan asks for into ``out`` where it has not finished.
 
+    The archive's gzipped CSV files come back plain (:mod:`hptvsim.experiments.repro_archive`);
+    a finished step's folder that lacks some archived file gets only the files it lacks.
+
     A step is restored only when its archived spec is the one the plan asks now (else it is
     trained again) and when ``lock`` (of the step's folder) can be taken.
 
@@ -1068,15 +1072,19 @@ def restore_dt(
     for job in spec.jobs():
         src, dst = archive / f"dt-{job.name}", out / job.run_dir
         expected = dt_spec(spec, job, out, evaluation)
-        if not (src / "summary.json").is_file() or dt_progress(dst, expected, spec.updates) == "finished":
+        if not (src / "summary.json").is_file():
+            continue
+        files = present(src, ARCHIVE_FILES)
+        finished = dt_progress(dst, expected, spec.updates) == "finished"
+        if finished and all((dst / f).is_file() for f in files):
             continue
         old = _read_json(src / "spec.json")
         if old is None or _differs(old, expected) is not None:
             log(f"{src} holds a DT of another spec than the plan asks now: {job.run_dir} trains again")
             continue
-        try:
+        try:  # a finished step's folder keeps its own files; only those it lacks come from the archive
             with lock(dst):
-                _copy_files(src, dst)
+                restore_files(src, dst, files, missing_only=finished)
         except RuntimeError:
             log(f"{job.run_dir} is being trained by another process: not restored")
             continue
@@ -1236,7 +1244,7 @@ def _model_labels(path: Path) -> dict[int, str]:
     """``model -> the agents it drives`` from a ``loss.csv``."""
     out: dict[int, str] = {}
     try:
-        with path.open(newline="") as f:
+        with open_text(path) as f:
             for row in csv.DictReader(f):
                 out.setdefault(int(row["model"]), str(row["agents"]))
     except (OSError, KeyError, ValueError):

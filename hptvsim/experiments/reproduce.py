@@ -36,8 +36,9 @@ Folders::
     <report stem>/results/dt-<...>/  a finished DT step's results (loss.csv, eval.json, ...)
 
 The archive (:func:`archive_finished`) keeps what the report reads of every finished run (its
-config, ``run.json``, ``summary.json``, the episode and update logs, the stages' ``stage.json``
-and the evaluations; no models, no checkpoints: a few hundred kB per run) in a folder that is
+config, ``run.json``, ``summary.json``, the episode and update logs, gzipped
+(:mod:`hptvsim.experiments.repro_archive`), the stages' ``stage.json`` and the evaluations; no
+models, no checkpoints: tens of kB per run) in a folder that is
 committed with the report, so the results outlive the run folders: a fresh clone's sweep
 restores them (:func:`restore_archived`) and trains only the runs not in the archive, and the
 report regenerates from a clone alone. An archived run is restored only while the plan still
@@ -83,6 +84,7 @@ from typing import Any, Literal
 import numpy as np
 
 from hptvsim._process import pid_alive, usable_cores
+from hptvsim.experiments.repro_archive import archive_files, present, restore_files
 from hptvsim.experiments.repro_dt import (
     DT_METRICS,
     DTClaim,
@@ -93,7 +95,6 @@ from hptvsim.experiments.repro_dt import (
     StageGame,
     archive_dt,
     collect_dt,
-    copy_changed,
     dt_claim_result,
     dt_figures,
     dt_progress,
@@ -1243,8 +1244,12 @@ def figure_dir(report: Path, plan: Plan) -> Path:
 
 
 def _result_files(run_dir: Path) -> list[Path]:
-    """A run's result files (relative), ``summary.json`` last: a copy cut short is never finished."""
-    files = [Path(f) for f in ARCHIVE_FILES if (run_dir / f).is_file()]
+    """A run's result files (relative), ``summary.json`` last: a copy cut short is never finished.
+
+    ``run_dir`` is a run folder or its archive, whose CSV files are gzipped
+    (:mod:`hptvsim.experiments.repro_archive`): a CSV file is named by its plain name either way.
+    """
+    files = present(run_dir, ARCHIVE_FILES)
     for pattern in ARCHIVE_GLOBS:
         files += sorted(p.relative_to(run_dir) for p in run_dir.glob(pattern))
     if (run_dir / "summary.json").is_file():
@@ -1253,8 +1258,8 @@ def _result_files(run_dir: Path) -> list[Path]:
 
 
 def _copy_results(src: Path, dst: Path) -> bool:
-    """Copy the result files of ``src`` over those of ``dst``; whether anything changed."""
-    return copy_changed(src, dst, _result_files(src))
+    """Archive the result files of the run folder ``src`` into ``dst`` (CSV gzipped); whether any changed."""
+    return archive_files(src, dst, _result_files(src))
 
 
 def archive_finished(plan: Plan, out: Path, archive: Path) -> list[str]:
@@ -1295,14 +1300,18 @@ def restore_archived(plan: Plan, out: Path, archive: Path, log: Callable[[str], 
         name = Path(job.run_dir).name
         src, dst = archive / name, out / job.run_dir
         cfg = build_config(plan.settings[job.setting], job.seed, plan.fixed)
-        if _progress_of(src, cfg) != "finished" or _progress_of(dst, cfg) == "finished":
+        if _progress_of(src, cfg) != "finished":
+            continue
+        files = _result_files(src)
+        finished = _progress_of(dst, cfg) == "finished"
+        if finished and all((dst / f).is_file() for f in files):
             continue
         if config_dict(load_saved_config(src)) != config_dict(cfg):
             log(f"{src} was trained with another config than the plan builds now: {name} trains again")
             continue
-        try:
+        try:  # a finished run folder keeps its own files; only those it lacks come from the archive
             with _run_lock(dst, wait_s=0.0):
-                _copy_results(src, dst)
+                restore_files(src, dst, files, missing_only=finished)
         except RuntimeError:
             log(f"{name} is being trained by another process: not restored")
             continue

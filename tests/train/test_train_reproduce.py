@@ -751,11 +751,11 @@ def test_finished_runs_are_archived_beside_the_report_and_a_fresh_clone_trains_o
         "config.toml",
         "run.json",
         "summary.json",
-        "episodes.csv",
-        "updates.csv",
+        "episodes.csv.gz",
+        "updates.csv.gz",
         "stages/source/stage.json",
         "eval/source.json",
-    }  # results only: no models, no checkpoint
+    }  # results only, the logs gzipped: no models, no checkpoint
     assert "docs/repro/results/<setting>-seed<k>/" in report.read_text().replace(str(tmp_path) + "/", "")
     tables = _tables(report)
     assert any("capture rate" in t for t in tables)
