@@ -31,6 +31,7 @@ from hptvsim.sensors import cli as sensors_cli
 from hptvsim.service import cli as service_cli
 from hptvsim.twin import cli as twin_cli
 from hptvsim.twin import fit_cli as twin_fit_cli
+from hptvsim.twin import sitl_cli as twin_sitl_cli
 from hptvsim.viz import cli as viz_cli
 from hptvsim.world import cli as world_cli
 
@@ -220,6 +221,7 @@ def _register() -> None:
     viz_cli.register(main)
     twin_cli.register(main, store=_store_twin)  # --store: the service layer's, passed down
     twin_fit_cli.register(main)  # hptvsim vehicle fit, hptvsim twin predict
+    twin_sitl_cli.register(main)  # hptvsim vehicle sitl
     bench = bench_cli.register(main)
     service_cli.register(main, bench)  # the layer above the benchmarks adds its own
 
