@@ -16,7 +16,8 @@ same ones, in any game (:class:`~hptvsim.envs.protocol.Game`), without asking wh
   file, roles and the command, config and seed that made it; a folder of the user's own, with an
   ``index.toml`` of the same format, named by ``$HPTVSIM_POLICY_DIR``, adds its policies to them
   (a name both list is refused);
-* a path to a checkpoint: ``sb3:path/to/model.zip`` or ``dt:path/to/model.pt``.
+* a path to a checkpoint: ``sb3:path/to/model.zip`` or ``dt:path/to/model.pt``, or a training
+  run's models: ``run:RUN_DIR[@STAGE]`` (any folder ``hptvsim train`` writes; :mod:`hptvsim.train.runs`).
 
 A policy that acts in its game's action space where that is not the commands (the 3-D game's
 normalised actions) is wrapped in :class:`GameCommands`, which maps its actions to commands with
@@ -49,6 +50,7 @@ from hptvsim.train.policy import check_sb3, load_sb3  # SB3 itself is imported w
 __all__ = [
     "CHECKPOINT_GAMES",
     "GAMES",
+    "RUN_KIND",
     "USER_POLICY_ENV",
     "GameCommands",
     "PolicyChecker",
@@ -144,6 +146,10 @@ def _loader(kind: str) -> PolicyLoader:
         )
     return _LOADERS[kind]
 
+
+RUN_KIND: Final = "run"
+"""``run:RUN_DIR[@STAGE]``: the SB3 models a training run saved (:func:`hptvsim.train.runs.locate`;
+a path, so only where ``allow_paths`` is on)."""
 
 USER_POLICY_ENV: Final = "HPTVSIM_POLICY_DIR"
 """The environment variable naming a folder of the user's own policies (added to the shipped ones)."""
@@ -355,6 +361,14 @@ def check_policy_spec(
             )
         return
     kind, sep, path = spec.partition(":")
+    if sep and kind == RUN_KIND:
+        if not allow_paths:
+            raise ValueError(
+                f"policy {spec!r} names a training run's folder, which is not allowed here; "
+                f"valid: {', '.join(valid)}"
+            )
+        _run_model(spec, agent)
+        return
     if sep and kind in _LOADERS:
         if game not in CHECKPOINT_GAMES.get(kind, ("planar",)):
             kinds = [k for k, games in CHECKPOINT_GAMES.items() if game in games]
@@ -371,7 +385,11 @@ def check_policy_spec(
         if not Path(path).is_file():
             raise ValueError(f"policy file not found: {path} (policy {spec!r})")
         return
-    files = f", or <kind>:<checkpoint> with kind in {', '.join(_LOADERS)}" if allow_paths else ""
+    files = (
+        f", or <kind>:<checkpoint> with kind in {', '.join(_LOADERS)}, or {RUN_KIND}:RUN_DIR[@STAGE]"
+        if allow_paths
+        else ""
+    )
     raise UnknownPolicyError(f"unknown policy {spec!r}; valid for {who}: {', '.join(valid)}{files}")
 
 
@@ -460,8 +478,30 @@ def load_policy(
     return in_commands(_loader(kind)(file, game, agent), game, agent)
 
 
+def _run_model(spec: str, agent: str | None) -> Path:
+    """The SB3 model of ``agent`` that ``run:PATH[@STAGE]`` names (the run's folder when no agent).
+
+    Raises:
+        ValueError: No such run, stage or model (one line naming the folder).
+    """
+    from hptvsim.train.runs import locate
+
+    path, _, which = spec.partition(":")[2].partition("@")
+    try:
+        folder = locate(Path(path), which or None)[1]
+    except FileNotFoundError as exc:
+        raise ValueError(f"{exc} (policy {spec!r})") from None
+    if agent is None:
+        return folder
+    file = folder / f"{agent}.zip"
+    if not file.is_file():
+        have = ", ".join(sorted(p.stem for p in folder.glob("*.zip"))) or "none"
+        raise ValueError(f"{folder} has no model for {agent} (policy {spec!r}); models: {have}")
+    return file
+
+
 def _checkpoint(spec: str, agent: str) -> tuple[str, Path]:
-    """The kind and file of a trained policy ``spec`` (a shipped name, or ``<kind>:<path>``) for ``agent``."""
+    """The kind and file of ``spec`` (a shipped name, ``<kind>:<path>``, ``run:...``) for ``agent``."""
     known = {p.name: p for p in list_policies()}
     if spec in known:
         info = known[spec]
@@ -469,6 +509,8 @@ def _checkpoint(spec: str, agent: str) -> tuple[str, Path]:
         assert file is not None
         return info.kind, file
     kind, _, path = spec.partition(":")
+    if kind == RUN_KIND:
+        return "sb3", _run_model(spec, agent)
     return kind, Path(path)
 
 

@@ -127,10 +127,10 @@ class Help:
 
 
 EVALUATE_SHIPPED = (
-    "hptvsim evaluate --env hptvsim:target/pursuit --env-option extended_obs=true --pursuers maisac-pursuers"
-    " --evaders maisac-evader"
+    "hptvsim evaluate --env hptvsim:target/pursuit --pursuers maisac-pursuers --evaders maisac-evader"
 )
-"""The README's evaluation of the shipped policies, whose numbers its table states."""
+"""The README's evaluation of the shipped policies, whose numbers its table states (no
+``extended_obs``: the policies' layout comes from ``policies/index.toml``)."""
 
 QUICK = (
     "--no-progress --no-tensorboard --set stage.0.budget_steps=60 --set stage.1.budget_steps=60"
@@ -692,9 +692,9 @@ def test_the_readme_evaluation_plays_the_episodes_behind_its_table(tmp_path: Pat
     """A fast subset: the README's command plays the recorded measurement's first episodes exactly.
 
     The table's numbers were measured with the command recorded in ``policies/index.toml``
-    (explicit ``extended_obs`` and ``max_steps``); the README's own command must play the same
-    episodes (same settings, from the scenario), so that it prints the table's numbers (the slow
-    test below runs all 100).
+    (explicit ``extended_obs`` and ``max_steps``); the README's own command, which names neither,
+    must play the same episodes (the layout from the policies' metadata, the step limit from the
+    scenario), so that it prints the table's numbers (the slow test below runs all 100).
     """
     assert EVALUATE_SHIPPED in readme_commands()
     assert SHIPPED_ROW.search(README.read_text(encoding="utf-8")), "the README's table lost its shipped row"

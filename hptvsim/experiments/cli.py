@@ -52,6 +52,19 @@ def _parse_env(text: str, options: dict[str, Any]) -> Any:
     return EnvSpec(kind=kind, scenario=scenario or "source", task=task or "pursuit", options=options)
 
 
+def _used_specs(spec: Any, default: str, over: dict[str, str]) -> list[str]:
+    """The policy spec of every agent of the env ``spec`` (by agent, then role, then ``default``)."""
+    from hptvsim.envs.metrics import agent_role
+    from hptvsim.train.envs import make_parallel_env
+
+    env = make_parallel_env(spec)
+    try:
+        agents = list(env.possible_agents)
+    finally:
+        env.close()
+    return [over.get(a) or over.get(agent_role(a)) or default for a in agents]
+
+
 def register(main: click.Group) -> None:
     """Add the training and the offline-RL commands to ``hptvsim``."""
     from hptvsim.experiments import offline_cli
@@ -186,7 +199,12 @@ def register(main: click.Group) -> None:
         help="Environment (default: the runs' stage env), e.g. hptvsim:target/pursuit or toy:source/goto.",
     )
     @click.option(
-        "--env-option", "env_options", multiple=True, metavar="KEY=VALUE", help="Environment option."
+        "--env-option",
+        "env_options",
+        multiple=True,
+        metavar="KEY=VALUE",
+        help="Environment option, over the runs' env or --env's (an observation option that "
+        "contradicts the policies' own layout is refused).",
     )
     @click.option(
         "--policy",
@@ -242,15 +260,19 @@ def register(main: click.Group) -> None:
         """Capture rate, time to capture, collisions, distances and returns over fixed seeds.
 
         With RUN_DIRS (e.g. one per training seed) every run is evaluated with its own models
-        and a last row gives the mean ± std across runs. Without, give --env and the policies.
+        in the env it trained in, and a last row gives the mean ± std across runs; a folder of
+        seed<k> runs (`hptvsim train fast --out OUT`) counts as its runs. Without, give --env and
+        the policies. Trained policies observe the layout they were trained on (extended_obs,
+        from the run's config or policies/index.toml): no option needs to say it.
         """
         import json
 
         from hptvsim.envs.metrics import collision_causes
-        from hptvsim.experiments.policies import policies_from_specs
-        from hptvsim.train.config import ConfigError, check_env_spec, load_run_config
+        from hptvsim.experiments.policies import LayoutError, layout_env, policies_from_specs
+        from hptvsim.train.config import ConfigError, check_env_spec
         from hptvsim.train.envs import EnvSpec, make_env_factory
         from hptvsim.train.evaluate import across_seeds, evaluate, markdown_table
+        from hptvsim.train.runs import expand_runs, open_run
 
         over: dict[str, str] = {}
         if pursuers:
@@ -262,26 +284,37 @@ def register(main: click.Group) -> None:
             if not sep:
                 raise click.BadParameter(f"expected NAME=SPEC, got {item!r}", param_hint="--agent")
             over[agent_name] = agent_spec
-        env_spec = _parse_env(env_text, parse_overrides(env_options)) if env_text else None
+        user_options = parse_overrides(env_options)
+        env_spec = _parse_env(env_text, user_options) if env_text else None
         if env_spec is not None:
             try:
                 check_env_spec(env_spec, f"--env {env_spec.label()}")
             except ConfigError as exc:
                 raise click.ClickException(str(exc)) from None
-        jobs: list[tuple[str, EnvSpec, str, dict[str, str]]] = []
-        for run in run_dirs:
-            try:
-                cfg = load_run_config(run)
-            except (FileNotFoundError, ConfigError) as exc:
+        # (label, env, default spec, specs by agent or role, the env is a run's own)
+        jobs: list[tuple[str, EnvSpec, str, dict[str, str], bool]] = []
+        for arg in run_dirs:
+            try:  # a run folder, or a folder of seed<k> runs (`hptvsim train fast --out OUT`): a row each
+                runs = [open_run(p) for p in expand_runs(arg)]
+            except FileNotFoundError as exc:
                 raise click.ClickException(str(exc)) from None
-            names = [s.name for s in cfg.stages]
-            if stage is not None and stage not in names:
-                raise click.BadParameter(f"{run} has stages {', '.join(names)}", param_hint="--stage")
-            st = cfg.stages[names.index(stage)] if stage is not None else cfg.stages[-1]
-            spec = env_spec or st.env
-            run_over = {**dict(cfg.fixed), **over}
-            default = policy or f"run:{run}@{st.name}"
-            jobs.append((label or run.name, spec, default, run_over))
+            for run in runs:
+                try:  # the stage whose models play (or, with --policy, whose env)
+                    st = run.stage(stage) if policy else run.models(stage)[1]
+                except FileNotFoundError as exc:
+                    raise click.BadParameter(str(exc), param_hint="--stage") from None
+                spec = env_spec or st.env
+                if env_spec is None and user_options:  # --env-option over the run's own env
+                    spec = EnvSpec(
+                        kind=spec.kind,
+                        scenario=spec.scenario,
+                        task=spec.task,
+                        options={**spec.options, **user_options},
+                    )
+                run_over = {**dict(run.fixed), **over}
+                default = policy or f"run:{run.folder}" + (f"@{stage}" if stage else "")
+                name = run.folder.name if len(runs) == 1 else f"{arg.name}/{run.folder.name}"
+                jobs.append((label or name, spec, default, run_over, env_spec is None))
         if not run_dirs:
             if env_spec is None or not (policy or over):
                 raise click.UsageError(
@@ -294,10 +327,26 @@ def register(main: click.Group) -> None:
                     env_spec,
                     policy or "random",
                     over,
+                    False,
                 )
             )
+        for k, (name, spec, default, run_over, own) in enumerate(jobs):
+            if own:  # a run in the env it trained in: its layout, as its fixed policies played it
+                continue
+            try:  # the policies' own observation layout (extended_obs), from their metadata
+                jobs[k] = (
+                    name,
+                    layout_env(spec, _used_specs(spec, default, run_over), explicit=tuple(user_options)),
+                    default,
+                    run_over,
+                    own,
+                )
+            except LayoutError as exc:
+                raise click.ClickException(str(exc)) from None
+            except (KeyError, ValueError, RuntimeError, FileNotFoundError) as exc:
+                raise click.ClickException(str(exc.args[0]) if exc.args else repr(exc)) from None
         results = []
-        for name, spec, default, run_over in jobs:
+        for name, spec, default, run_over, _ in jobs:
             try:
                 res = evaluate(
                     make_env_factory(spec),

@@ -30,6 +30,8 @@ from typing import Any
 
 import numpy as np
 
+from hptvsim.train.runs import seed_runs
+
 __all__ = [
     "ClaimPanel",
     "WindowError",
@@ -53,6 +55,12 @@ def run_label(run_dir: Path) -> str:
     info = json.loads(info_path.read_text()) if info_path.is_file() else {}
     if info.get("label"):
         return str(info["label"])
+    if "algo" not in info and (run_dir / "config.toml").is_file():  # a batched run writes no run.json
+        import contextlib
+        import tomllib
+
+        with contextlib.suppress(tomllib.TOMLDecodeError):
+            info = tomllib.loads((run_dir / "config.toml").read_text())
     return str(info.get("algo", "run")).upper()
 
 
@@ -978,10 +986,10 @@ def trajectories(
     import matplotlib.pyplot as plt
 
     from hptvsim.experiments.policies import policies_from_specs
-    from hptvsim.train.config import load_run_config
     from hptvsim.train.envs import make_env_factory
+    from hptvsim.train.runs import open_run
 
-    cfg = load_run_config(run_dir)
+    cfg = open_run(run_dir)  # either trainer's run
     written = []
     out.mkdir(parents=True, exist_ok=True)
     for stage in cfg.stages:
@@ -1058,9 +1066,14 @@ def _expand(
             runs.append(p)
             labels.append(run_label(p))
             names.append(p.name)
+        elif per_seed := [r for r in seed_runs(p) if (r / "episodes.csv").is_file()]:
+            runs += per_seed  # `hptvsim train fast --out OUT [--seeds ...]`: one run per seed
+            labels += [run_label(r) for r in per_seed]
+            names.append(p.name)
         else:
             raise FileNotFoundError(
-                f"{p} is neither a training run (episodes.csv), a sweep (sweep.json) nor a DT run (dt.pt)"
+                f"{p} is neither a training run (episodes.csv), a folder of seed<k> runs, a sweep "
+                "(sweep.json) nor a DT run (dt.pt)"
             )
     seeds = len(runs)
     training = sum(1 for r in runs if not (r / "summary.json").is_file())  # written when a run ends

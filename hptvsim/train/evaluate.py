@@ -11,7 +11,10 @@ training seeds when several runs are evaluated; they are written as JSON and a M
 Policies come from specs (``policy_from_spec``):
 
 ``run:RUN_DIR`` or ``run:RUN_DIR@STAGE``
-    The SB3 zips a training run saved for its last (or the named) stage.
+    The SB3 zips a training run saved for its last finished (or the named) stage; ``RUN_DIR``
+    is either trainer's run folder, a folder of one seed's run (``hptvsim train fast --out
+    OUT``), or a run's ``stages/<stage>``, ``models`` or ``best`` folder, and ``STAGE`` may be
+    ``models`` or ``best`` too (a batched run's final and best models; :mod:`hptvsim.train.runs`).
 ``zip:PATH``
     One SB3 model file (SAC or PPO).
 ``toy:greedy``
@@ -28,7 +31,6 @@ Policies come from specs (``policy_from_spec``):
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -37,7 +39,6 @@ from typing import Any
 import numpy as np
 
 from hptvsim.envs.metrics import EpisodeMetrics, agent_role, mean_std, summarize
-from hptvsim.train.config import load_run_config
 from hptvsim.train.envs import EnvFactory
 
 __all__ = [
@@ -200,25 +201,18 @@ def sb3_policy(model: Any) -> Policy:
 
 
 def run_stage_dir(run_dir: Path, stage: str | None = None) -> Path:
-    """The model folder of a run's named stage, or of its last finished stage."""
-    root = run_dir / "stages"
-    if stage is not None:
-        folder = root / stage
-        if not folder.is_dir():
-            have = sorted(p.name for p in root.iterdir()) if root.is_dir() else []
-            raise FileNotFoundError(
-                f"{run_dir} has no stage {stage!r}; finished stages: {', '.join(have) or 'none'}"
-            )
-        return folder
-    summary = run_dir / "summary.json"
-    order: list[str] = []
-    if summary.is_file():
-        order = [s["stage"] for s in json.loads(summary.read_text()).get("stages", [])]
-    if not order and (run_dir / "config.toml").is_file():
-        order = [s.name for s in load_run_config(run_dir).stages if (root / s.name / "stage.json").is_file()]
-    if not order:
-        raise FileNotFoundError(f"{run_dir} has no finished stage (train it first)")
-    return root / order[-1]
+    """The model folder of a run's named stage, or of its last finished stage.
+
+    ``run_dir`` is any folder :func:`hptvsim.train.runs.locate` takes (a run, a folder of one
+    seed's run, a run's ``stages/<stage>``, ``models`` or ``best`` folder); ``stage`` may also be
+    ``models`` or ``best`` (a batched run's final and best models).
+
+    Raises:
+        FileNotFoundError: No such run, stage or folder (one line naming it).
+    """
+    from hptvsim.train.runs import locate
+
+    return locate(run_dir, stage)[1]
 
 
 def reset_policies(policies: Mapping[str, Any]) -> None:
