@@ -240,6 +240,7 @@ function fillPolicies(game) {
 }
 
 const previewMap = new TopDownMap($("scenario-canvas"), { compact: true });
+state.previewMap = previewMap; // for tests: where its labels went (previewMap.labels)
 const previews = new Map();
 
 /** The scenario's description, its map (drawn like the episode map) and its default policies. */
@@ -336,11 +337,63 @@ const TERMS = [
   ["r_E1", "Σ r_E1, closing on the target (Eq. 18)"],
   ["r_E2", "Σ r_E2, target within capture distance (Eq. 19)"],
 ];
+const WEIGHT = { r_C: "delta_C", r_E1: "delta_E1", r_E2: "delta_E2" }; // [task.reward]'s weight of each term
+const DELTA = { r_C: "δ_C", r_E1: "δ_E1", r_E2: "δ_E2" };
+
+const weightsOf = new Map(); // scenario name -> its [task.reward] (GET /scenarios/{name}), or null
+
+/**
+ * The reward weights (delta_C, delta_E1, delta_E2 of Eq. 20) of a shipped scenario's episodes,
+ * from its tables; null where the service has no such scenario (a twin episode, an inline one).
+ */
+async function scenarioWeights(name) {
+  if (!weightsOf.has(name)) {
+    let w = null;
+    if (state.scenarios.some((s) => s.name === name)) {
+      try {
+        w = (await api(`/scenarios/${encodeURIComponent(name)}`))?.task?.reward || null;
+      } catch {
+        w = null;
+      }
+    }
+    weightsOf.set(name, w);
+  }
+  return weightsOf.get(name);
+}
+
+/** Whether one step's reward is the weighted sum of its terms (Eq. 20; a crash's penalty and an agent done, with reward 0, aside). */
+function rewardFits(w, a, k) {
+  const sum = w.delta_C * a.r_C[k] + w.delta_E1 * a.r_E1[k] + w.delta_E2 * a.r_E2[k];
+  const r = a.reward[k];
+  const close = (x, y) => Math.abs(x - y) <= 1e-6 * (1 + Math.abs(x) + Math.abs(y));
+  return close(r, sum) || r === 0 || close(r, sum - (w.crash_penalty || 0));
+}
 
 function newSeries(st) {
   const per = () => new Map(st.agents.map((a) => [a.name, []]));
-  // depth and seabed (depth z + altitude) [m]: 3-D game only
-  return { t: [], distance: per(), terms: { r_C: per(), r_E1: per(), r_E2: per() }, hasTerms: true, depth: per(), seabed: per() };
+  // depth and seabed (depth z + altitude) [m]: 3-D game only; speeds [m/s] and attitude [deg]: a
+  // real vehicle's log (twin episodes); misfit: steps whose reward is not Eq. 20 of the weights
+  return {
+    t: [], distance: per(), terms: { r_C: per(), r_E1: per(), r_E2: per() }, hasTerms: true, depth: per(), seabed: per(),
+    speed: per(), heave: per(), roll: per(), pitch: per(), weights: null, misfit: 0, checked: 0,
+    heading: new Map(st.agents.map((a) => [a.name, { xs: [], ys: [] }])), // [deg], its own times (gaps where it wraps)
+  };
+}
+
+const DEG = 180 / Math.PI;
+
+/** Heading [deg] in [0, 360), NaN where it wraps (no line across the plot from 359 to 0). */
+function headingDeg(psi, prev) {
+  const h = (((psi * DEG) % 360) + 360) % 360;
+  return prev !== undefined && Number.isFinite(prev) && Math.abs(h - prev) > 180 ? [NaN, h] : [h];
+}
+
+/** The speeds and attitude of one vehicle's row (or frame) k, appended to the series. */
+function addMotion(s, name, u, v, w, phi, theta, psi) {
+  s.speed.get(name)?.push(Math.hypot(u, v));
+  s.heave.get(name)?.push(Number.isFinite(w) ? w : NaN);
+  s.roll.get(name)?.push(Number.isFinite(phi) ? phi * DEG : NaN);
+  s.pitch.get(name)?.push(Number.isFinite(theta) ? theta * DEG : NaN);
 }
 
 /** Series of a finished episode's trajectories: distances and the running sums of the terms. */
@@ -349,6 +402,17 @@ function seriesOfTrajectory(st, traj) {
   s.t = traj.time;
   for (const a of traj.agents) {
     s.distance.set(a.name, a.distance);
+    a.x.forEach((_, k) => addMotion(s, a.name, a.u[k], a.v[k], a.w?.[k], a.phi?.[k], a.theta?.[k]));
+    // the heading with a gap where it wraps: its own times
+    const hx = [];
+    const hy = [];
+    a.psi.forEach((psi, k) => {
+      for (const h of headingDeg(psi, hy[hy.length - 1])) {
+        hx.push(traj.time[k]);
+        hy.push(h);
+      }
+    });
+    s.heading.set(a.name, { xs: hx, ys: hy });
     if (a.z) {
       s.depth.set(a.name, a.z);
       s.seabed.set(a.name, a.altitude ? a.z.map((z, k) => z + a.altitude[k]) : []);
@@ -365,10 +429,38 @@ function seriesOfTrajectory(st, traj) {
   return s;
 }
 
+/** Weigh the series' terms with w if every step's reward is their weighted sum (see rewardFits). */
+function checkWeights(s, traj, w) {
+  s.weights = w;
+  s.misfit = 0;
+  s.checked = 0;
+  if (!w || !s.hasTerms) return;
+  for (const a of traj.agents) {
+    if (!a.reward) continue;
+    for (let k = 1; k < a.reward.length; k++) {
+      s.checked += 1;
+      if (!rewardFits(w, a, k)) s.misfit += 1;
+    }
+  }
+}
+
 function addFrame(s, f) {
   s.t.push(f.time);
   for (const a of f.agents) {
     s.distance.get(a.name)?.push(a.distance);
+    addMotion(s, a.name, a.u, a.v, a.w, a.phi, a.theta);
+    const h = s.heading.get(a.name);
+    if (h) {
+      for (const v of headingDeg(a.psi, h.ys[h.ys.length - 1])) {
+        h.xs.push(f.time);
+        h.ys.push(v);
+      }
+    }
+    if (s.weights && f.step > 0 && Number.isFinite(a.reward) && Number.isFinite(a.r_C)) {
+      s.checked += 1;
+      const one = { reward: [a.reward], r_C: [a.r_C], r_E1: [a.r_E1], r_E2: [a.r_E2] };
+      if (!rewardFits(s.weights, one, 0)) s.misfit += 1;
+    }
     if (Number.isFinite(a.z)) {
       s.depth.get(a.name)?.push(a.z);
       s.seabed.get(a.name)?.push(Number.isFinite(a.altitude) ? a.z + a.altitude : NaN);
@@ -380,8 +472,38 @@ function addFrame(s, f) {
   }
 }
 
-/** Distance and reward-term plots of one episode; cursor: a time [s] to mark. */
+/** Whether an episode's static part is a real vehicle's log (`hptvsim twin`), not a simulation. */
+function isTwin(st) {
+  return st?.backend === "log";
+}
+
+/**
+ * How the reward-term plots are drawn: weighted with the episode's weights where every step's
+ * reward is their weighted sum (then the three panels add up to the return, Eq. 20), else the
+ * unweighted terms, said so, with the weights where known.
+ */
+function termsScale(series) {
+  const w = series.weights;
+  const weighted = !!w && series.misfit === 0;
+  const num = (v) => (Math.abs(v) >= 0.01 || v === 0 ? String(+v.toPrecision(3)) : v.toExponential(1));
+  const panels = TERMS.map(([term, title]) => {
+    const rest = title.slice(title.indexOf(",") + 1).trim();
+    if (weighted) return { term, factor: w[WEIGHT[term]], title: `${DELTA[term]} Σ ${term} (${DELTA[term]} = ${num(w[WEIGHT[term]])}), ${rest}` };
+    const note = w ? `unweighted (${DELTA[term]} = ${num(w[WEIGHT[term]])} in the return)` : "unweighted";
+    return { term, factor: 1, title: `Σ ${term}, ${note}, ${rest}` };
+  });
+  return { weighted, panels, ylabel: "reward" };
+}
+
+/** Distance and reward-term plots of one episode (its own layout for a real vehicle's log); cursor: a time [s] to mark. */
 function drawEpisodePlots(st, series, cursor) {
+  // vehicles without a sonar (a real vehicle's log) have no fans to show
+  $("show-sonar").parentElement.hidden = st.agents.every((a) => !a.beam_angles?.length);
+  if (isTwin(st)) {
+    drawTwinPlots(st, series, cursor);
+    return;
+  }
+  setPlotLayout(false);
   const info = st.agents;
   const pursuit = st.task === "pursuit";
   const shown = pursuit ? info.filter((a) => a.role === "pursuer") : info;
@@ -394,18 +516,111 @@ function drawEpisodePlots(st, series, cursor) {
     hline: pursuit ? { y: st.capture_distance, label: `capture (${st.capture_distance} m)` } : null,
     cursor,
   });
+  const scale = termsScale(series);
+  const weigh = (m, f) => new Map([...m].map(([k, ys]) => [k, f === 1 ? ys : ys.map((y) => f * y)]));
   const terms = panelChart(
     $("plot-terms"),
-    TERMS.map(([term, title]) => ({ title, ylabel: "reward", series: series.hasTerms ? mk(series.terms[term], info) : [] })),
+    scale.panels.map(({ term, factor, title }) => ({
+      title,
+      ylabel: scale.ylabel,
+      series: series.hasTerms ? mk(weigh(series.terms[term], factor), info) : [],
+    })),
     {
       xlabel: "simulated time [s]",
       cursor,
+      endDots: true,
       empty: series.hasTerms ? "no data yet" : "this episode was stored without its reward terms",
     },
   );
-  // what is drawn, for tests: each panel's plot area and data range, in TERMS' order
-  state.termsPlot = { terms: TERMS.map(([term]) => term), areas: terms };
+  // what is drawn, for tests: each panel's plot area and data range, in TERMS' order, and the weights
+  state.termsPlot = {
+    terms: TERMS.map(([term]) => term),
+    areas: terms,
+    weighted: scale.weighted,
+    factors: scale.panels.map((p) => p.factor),
+    titles: scale.panels.map((p) => p.title),
+  };
   drawDepthPlot(st, series, cursor);
+}
+
+const PLOT_SIZE = { "plot-distance": [210, 300], "plot-terms": [330, 380] }; // [px] heights: pursuit, twin
+const PLOT_LABELS = {
+  "plot-distance": ["each pursuer's distance to the evader over time", "each vehicle's speeds over time (recorded)"],
+  "plot-terms": ["each agent's reward terms over time", "each vehicle's roll, pitch and heading over time (recorded)"],
+};
+
+/** The plots' sizes and descriptions for a simulated episode or (twin) a real vehicle's log. */
+function setPlotLayout(twin) {
+  for (const [id, heights] of Object.entries(PLOT_SIZE)) {
+    const c = $(id);
+    const h = heights[twin ? 1 : 0];
+    if (c.height !== h) c.height = h;
+    c.setAttribute("aria-label", PLOT_LABELS[id][twin ? 1 : 0]);
+  }
+  document.getElementById("live").classList.toggle("twin", twin);
+}
+
+/**
+ * A real vehicle's events (arming, disarming, flight modes) as the twin's static part lists them
+ * in its description ("Events: armed at 207.0 s; mode MANUAL at 0.8 s."), times [s] since the log's
+ * first sample; those at one time (within 1 % of the record) are joined.
+ */
+function twinEvents(st, span) {
+  const m = /Events: (.*?)(?: and \d+ more)?\.\s*$/.exec(st.description || "");
+  if (!m || m[1] === "none") return [];
+  const out = [];
+  for (const part of m[1].split("; ")) {
+    const e = /^(.*) at (-?[\d.]+) s$/.exec(part.trim());
+    if (!e) continue;
+    const t = Number(e[2]); // on the frames' time axis (the log's: replay.episode_of)
+    const last = out[out.length - 1];
+    if (last && Math.abs(t - last.t) <= 0.01 * span) last.label += `, ${e[1]}`;
+    else out.push({ t, label: e[1], color: /disarm/.test(e[1]) ? "#93a4b8" : /arm/.test(e[1]) ? "#2fb380" : "#e0a43a" });
+  }
+  return out;
+}
+
+/**
+ * A real vehicle's log: its speeds (horizontal over ground and heave) and its attitude (roll,
+ * pitch, heading) over the recorded time, one line per vehicle in its colour, its events (modes,
+ * arming) marked on each; the depth plot under them. No distance, no rewards: nothing was pursued.
+ */
+function drawTwinPlots(st, series, cursor) {
+  setPlotLayout(true);
+  const t0 = series.t.length ? series.t[0] : 0;
+  const span = series.t.length ? series.t[series.t.length - 1] - t0 : 1;
+  const marks = twinEvents(st, span);
+  const mk = (m) => st.agents.map((a) => ({ label: a.name, color: a.color, xs: series.t, ys: m.get(a.name) || [] }));
+  const speeds = panelChart(
+    $("plot-distance"),
+    [
+      { title: "horizontal speed √(u² + v²) of each vehicle", ylabel: "speed [m/s]", series: mk(series.speed) },
+      { title: "heave speed w (positive down)", ylabel: "w [m/s]", series: mk(series.heave) },
+    ],
+    { xlabel: "recorded time [s]", cursor, marks, empty: "no samples yet" },
+  );
+  const heading = st.agents.map((a) => {
+    const h = series.heading.get(a.name);
+    return { label: a.name, color: a.color, xs: h?.xs || [], ys: h?.ys || [] };
+  });
+  const attitude = panelChart(
+    $("plot-terms"),
+    [
+      { title: "roll φ", ylabel: "roll [deg]", series: mk(series.roll) },
+      { title: "pitch θ", ylabel: "pitch [deg]", series: mk(series.pitch) },
+      { title: "heading ψ (clockwise from north)", ylabel: "heading [deg]", series: heading },
+    ],
+    { xlabel: "recorded time [s]", cursor, marks, empty: "no samples yet" },
+  );
+  state.termsPlot = null;
+  state.twinPlot = {
+    events: marks,
+    speedAreas: speeds,
+    attitudeAreas: attitude,
+    agents: st.agents.map((a) => a.name),
+    points: st.agents.map((a) => (series.speed.get(a.name) || []).length),
+  };
+  drawDepthPlot(st, series, cursor, marks);
 }
 
 const SEABED_FILL = "rgba(217, 199, 154, 0.07)"; // the palette's land colour, faint: below the seabed
@@ -415,11 +630,13 @@ const SEABED_FILL = "rgba(217, 199, 154, 0.07)"; // the palette's land colour, f
  * the surface at the top; the seabed under each vehicle (its depth z + altitude) dashed in the same
  * colour with the ground below it shaded; the goal's depth in goto. Hidden in the planar game.
  */
-function drawDepthPlot(st, series, cursor) {
+function drawDepthPlot(st, series, cursor, marks = []) {
   const canvas = $("plot-depth");
   canvas.hidden = st.game !== "3d";
   if (canvas.hidden) return;
-  const seabed = st.agents.map((a) => ({
+  const twin = isTwin(st);
+  // a log does not know the seabed (its static part's is a placeholder): none is drawn
+  const seabed = twin ? [] : st.agents.map((a) => ({
     label: "",
     color: a.color,
     dash: [5, 4],
@@ -428,16 +645,17 @@ function drawDepthPlot(st, series, cursor) {
     ys: series.seabed.get(a.name) || [],
   }));
   const depth = st.agents.map((a) => ({ label: a.name, color: a.color, xs: series.t, ys: series.depth.get(a.name) || [] }));
-  const key = { label: "seabed under each (dashed)", color: "#93a4b8", dash: [5, 4], xs: [], ys: [] };
+  const key = twin ? [] : [{ label: "seabed under each (dashed)", color: "#93a4b8", dash: [5, 4], xs: [], ys: [] }];
   const goal = st.agents.find((a) => a.goal && a.goal.length > 2 && Number.isFinite(a.goal[2]));
-  const areas = lineChart(canvas, [...seabed, ...depth, key], {
-    title: "depth of each vehicle (surface at the top)",
+  const areas = lineChart(canvas, [...seabed, ...depth, ...key], {
+    title: twin ? "depth of each vehicle, recorded (surface at the top)" : "depth of each vehicle (surface at the top)",
     ylabel: "depth z [m]",
-    xlabel: "simulated time [s]",
+    xlabel: twin ? "recorded time [s]" : "simulated time [s]",
     flip: true,
     ymin: 0,
     hline: goal ? { y: goal.goal[2], label: `goal depth (${+goal.goal[2].toFixed(1)} m)` } : null,
     cursor,
+    marks,
   });
   // what is drawn, for tests: the series' agents and lengths, and where the plot area is
   state.depthPlot = { agents: depth.map((d) => d.label), points: depth.map((d) => d.ys.length), area: areas?.[0] || null };
@@ -471,7 +689,8 @@ function setStatus(status, detail) {
   b.className = `badge ${status}`;
   $("cancel-button").hidden = !ACTIVE.has(status);
   const ep = c.episode;
-  $("live-text").textContent = `${ep.scenario}, seed ${ep.seed}: ${status}${c.detail ? `, ${c.detail}` : ""}`;
+  const what = ep.backend === "log" ? ep.label || ep.scenario : `${ep.scenario}, seed ${ep.seed}`; // a log has no seed
+  $("live-text").textContent = `${what}: ${status}${c.detail ? `, ${c.detail}` : ""}`;
   const listed = state.episodes.find((e) => e.id === c.id);
   if (listed) listed.status = status;
   const row = document.querySelector(`#episode-table tbody tr[data-id="${CSS.escape(c.id)}"] .badge`);
@@ -520,11 +739,14 @@ function watch(ep) {
     }
     refreshList(); // the table agrees with the live view at once, not at the next poll
   });
+  const weights = scenarioWeights(ep.scenario);
   es.addEventListener("static", (e) => {
     if (!mine()) return;
     const st = checkSchema("EpisodeStatic", withoutEpisode(JSON.parse(e.data)));
     state.current.static = st;
-    state.current.series = newSeries(st);
+    const series = newSeries(st);
+    state.current.series = series;
+    if (!isTwin(st)) weights.then((w) => { series.weights = w; });
     map.caption = "";
     map.setStatic(st);
     if (st.game === "3d") drawDepthPlot(st, state.current.series, null);
@@ -563,13 +785,16 @@ async function showFinished(id) {
     c.episode = ep;
     $("live-progress").style.width = ep.status === "finished" ? "100%" : $("live-progress").style.width;
     const sum = ep.summary;
+    const twin = ep.backend === "log";
     const detail = [
-      sum ? `${sum.outcome} after ${sum.steps} steps (${sum.sim_time.toFixed(1)} s simulated, ` +
+      sum && twin ? `recorded: a real vehicle's log, ${sum.steps + 1} samples up to t = ${sum.sim_time.toFixed(1)} s` : "",
+      sum && !twin ? `${sum.outcome} after ${sum.steps} steps (${sum.sim_time.toFixed(1)} s simulated, ` +
         `${sum.wall_time.toFixed(2)} s wall)` : "",
       ep.error ? `(${ep.error})` : "",
     ].filter(Boolean).join(" ");
     setStatus(ep.status, detail);
-    showMetrics(sum);
+    if (twin) $("live-metrics").replaceChildren(); // the twin's own, once its trajectory is loaded
+    else showMetrics(sum);
     showLinks(ep);
     if (!c.static) {
       try {
@@ -583,8 +808,12 @@ async function showFinished(id) {
     if (ep.has_trajectory && c.static) {
       const traj = checkSchema("Trajectories", await api(`/episodes/${id}/trajectory?format=json`));
       if (state.current !== c) return;
+      const w = isTwin(c.static) ? null : await scenarioWeights(ep.scenario);
+      if (state.current !== c) return;
       c.traj = traj;
       c.series = seriesOfTrajectory(c.static, traj);
+      checkWeights(c.series, traj, w);
+      if (isTwin(c.static)) showTwin(c.static, traj);
       map.caption = "";
       map.setReplay(traj);
       map.setCollisions(sum?.collisions);
@@ -676,6 +905,68 @@ function showMetrics(sum) {
     d.append(b, s);
     box.append(d);
   }
+}
+
+/**
+ * What a real vehicle's log holds: how long it was recorded, its samples, each vehicle's depth
+ * range, top speed and track length, and its modes and events (each a button that scrubs there).
+ */
+function showTwin(st, traj) {
+  const box = $("live-metrics");
+  box.replaceChildren();
+  const n = traj.time.length;
+  const items = [
+    ["recorded [s]", fmt(traj.time[n - 1] - traj.time[0])],
+    ["samples", `${n} (every ${fmt(st.dt, 2)} s)`],
+  ];
+  for (const a of traj.agents) {
+    const info = st.agents.find((b) => b.name === a.name);
+    const z = (a.z || []).filter(Number.isFinite);
+    let length = 0;
+    for (let k = 1; k < a.x.length; k++) length += Math.hypot(a.x[k] - a.x[k - 1], a.y[k] - a.y[k - 1]);
+    const top = Math.max(...a.u.map((u, k) => Math.hypot(u, a.v[k])));
+    const who = traj.agents.length > 1 ? `${a.name} ` : "";
+    items.push(
+      [`${who}vehicle`, info?.vehicle_type || a.name],
+      // (a depth a hair above the surface, the sensor's noise, as 0.00 rather than -0.00)
+      [`${who}depth [m]`, z.length ? `${fmt(Math.max(0, Math.min(...z)), 2)} … ${fmt(Math.max(...z), 2)}` : "–"],
+      [`${who}top speed [m/s]`, fmt(top, 2)],
+      [`${who}track [m]`, fmt(length, 1)],
+    );
+  }
+  for (const [label, value] of items) {
+    const d = document.createElement("div");
+    const b = document.createElement("b");
+    b.textContent = value;
+    const sp = document.createElement("span");
+    sp.textContent = label;
+    d.append(b, sp);
+    box.append(d);
+  }
+  const t0 = traj.time[0];
+  const events = twinEvents(st, traj.time[n - 1] - t0);
+  const list = document.createElement("div");
+  list.id = "twin-events";
+  list.className = "twin-events";
+  const head = document.createElement("span");
+  head.textContent = events.length ? "modes and events:" : "modes and events: none logged";
+  list.append(head);
+  for (const e of events) {
+    const b = document.createElement("button");
+    b.type = "button";
+    b.className = "ghost small";
+    b.style.borderColor = e.color;
+    b.textContent = `${fmt(e.t)} s: ${e.label}`;
+    b.title = "show this moment";
+    b.addEventListener("click", () => {
+      stopPlaying();
+      let k = traj.time.findIndex((t) => t >= e.t);
+      if (k < 0) k = n - 1;
+      scrubTo(k);
+    });
+    list.append(b);
+  }
+  box.append(list);
 }
 
 /** A download link of the API's; with a key, a click fetches it with the key in a header. */
@@ -803,7 +1094,7 @@ function renderList() {
         cell(String(ep.seed)),
         st,
         cell(String(ep.steps)),
-        cell(ep.summary?.outcome || ""),
+        cell(ep.backend === "log" && ep.summary ? "recorded" : ep.summary?.outcome || ""),
         cell(fmt(ep.summary?.metrics?.min_distance)),
         actions,
       );
@@ -856,7 +1147,7 @@ async function compare(ids, scroll = true) {
       const fig = document.createElement("figure");
       fig.className = "compare-item";
       const canvas = document.createElement("canvas");
-      canvas.width = 440;
+      canvas.width = 440; // until its figure's width is known (below)
       canvas.height = 480;
       canvas.id = `compare-map-${i}`;
       const cap = document.createElement("figcaption");
@@ -872,7 +1163,12 @@ async function compare(ids, scroll = true) {
           (sum ? ` — ${sum.outcome} after ${sum.sim_time.toFixed(1)} s` : ""),
       );
       fig.append(canvas, cap);
+      box.style.setProperty("--n", String(ids.length));
       box.append(fig);
+      // the maps share the comparison's width (a column each): drawn at their shown size
+      const w = Math.max(300, Math.round(fig.clientWidth || 440));
+      canvas.width = w;
+      canvas.height = Math.round((w * 480) / 440);
       const m = new TopDownMap(canvas);
       m.setStatic(st);
       m.caption = String.fromCharCode(65 + i);
@@ -923,7 +1219,10 @@ function compareTo(k) {
     };
   });
   const st = c.items[0].static;
-  lineChart($("compare-distance"), series, {
+  const plot = $("compare-distance");
+  const width = Math.round(plot.parentElement.clientWidth - 2); // as wide as the card's content
+  if (width > 300 && plot.width !== width) plot.width = width;
+  lineChart(plot, series, {
     title: "distance from the nearest pursuer to the evader",
     ylabel: "distance [m]",
     xlabel: "simulated time [s]",

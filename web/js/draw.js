@@ -8,6 +8,7 @@ const GRID = "#2a3a50";
 const AXIS = "#93a4b8";
 const TEXT = "#d0d7e0";
 const FONT = "11px system-ui, sans-serif";
+const SMALL_FONT = "10px system-ui, sans-serif";
 const HIT_FRACTION = 0.98; // as hptvsim.episodes.stepper.HIT_FRACTION: a beam this close to its maximum saw nothing
 
 /** Colours of episodes compared on one timeline (distinct from the agents' warm palette). */
@@ -657,45 +658,93 @@ export class TopDownMap {
     const [sx, sy] = [this.ox, this.oy];
     const overlap = (x, y, w, b) =>
       Math.max(0, Math.min(x + w, b[0] + b[2]) - Math.max(x, b[0])) * Math.max(0, Math.min(y + h, b[1] + b[3]) - Math.max(y, b[1]));
-    const out = [];
-    for (const a of agents) {
-      if (!Number.isFinite(a.z)) continue;
-      const [px, py] = this.px(a.x, a.y);
-      const text = `z ${a.z.toFixed(1)} m`;
-      const w = ctx.measureText(text).width + 4;
-      const places = [];
-      for (let col = 0; col < 3; col++) {
-        for (let row = 0; row < (col ? 8 : 12); row++) {
-          for (const side of [1, -1]) {
-            const x = side > 0 ? px + 10 + col * (w + 6) : px - 10 - w - col * (w + 6);
-            places.push([x, py - 17 - h * row, col + row], [x, py + 3 + h * row, col + row]);
+    const labelled = agents.filter((a) => Number.isFinite(a.z));
+    const marks = labelled.map((a) => this.px(a.x, a.y));
+    // the distance [px] from a marker to a label's box, and whether a leader line from a marker to
+    // a box passes by another marker (it would read as that one's)
+    const gap = ([x, y, w], [mx, my]) => Math.hypot(Math.min(Math.max(mx, x), x + w) - mx, Math.min(Math.max(my, y), y + h) - my);
+    const passes = (box, i) => {
+      const [mx, my] = marks[i];
+      const [nx, ny] = [Math.min(Math.max(mx, box[0]), box[0] + box[2]), Math.min(Math.max(my, box[1]), box[1] + h)];
+      const len2 = (nx - mx) ** 2 + (ny - my) ** 2;
+      if (len2 < 1) return false;
+      return marks.some(([ox, oy], j) => {
+        if (j === i) return false;
+        const t = Math.max(0, Math.min(1, ((ox - mx) * (nx - mx) + (oy - my) * (ny - my)) / len2));
+        return Math.hypot(mx + t * (nx - mx) - ox, my + t * (ny - my) - oy) < 8;
+      });
+    };
+    // it reads as another's: nearer another vehicle than its own, unless a leader line joins it to
+    // its own and the other is not right beside it; or its leader passes by another vehicle
+    const misleads = (box, i, ring) => {
+      const own = gap(box, marks[i]);
+      const led = ring > 0 && own > 8;
+      const nearer = marks.some((o, j) => j !== i && gap(box, o) < own + 2 && (!led || gap(box, o) < 16));
+      return nearer || (led && passes(box, i));
+    };
+    const placeIn = (order) => {
+      const taken = [...placed];
+      const out = new Array(labelled.length);
+      let score = 0;
+      for (const i of order) {
+        const a = labelled[i];
+        const [px, py] = marks[i];
+        const text = `z ${a.z.toFixed(1)} m`;
+        const w = ctx.measureText(text).width + 4;
+        const places = [];
+        for (let col = 0; col < 3; col++) {
+          for (let row = 0; row < (col ? 8 : 12); row++) {
+            for (const side of [1, -1]) {
+              const x = side > 0 ? px + 10 + col * (w + 6) : px - 10 - w - col * (w + 6);
+              places.push([x, py - 17 - h * row, col + row], [x, py + 3 + h * row, col + row]);
+            }
           }
         }
+        places.sort((p, q) => p[2] - q[2]); // nearer rings first (stable: right before left, above before below)
+        const inSite = ([x, y]) => x >= sx && x + w <= sx + this.siteW && y >= sy && y + h <= sy + this.siteH;
+        const inside = places.filter(inSite);
+        const cost = ([x, y]) => taken.reduce((sum, b) => sum + overlap(x, y, w, b), 0);
+        const free = inside.filter((q) => cost(q) === 0);
+        const clear = free.find((q) => !misleads([q[0], q[1], w], i, q[2]));
+        const [x, y, ring] = clear || free[0] ||
+          (inside.length ? inside.reduce((best, q) => (cost(q) < cost(best) ? q : best)) : places[0]);
+        const box = [x, y, w, h];
+        taken.push(box);
+        score += (clear ? 0 : 1000) + (free.length ? 0 : 10000) + gap(box, marks[i]);
+        // a label away from its marker: a line from the marker's edge to the label's nearest point
+        let leader = null;
+        if (ring > 0) {
+          const [nx, ny] = [Math.min(Math.max(px, x), x + w), Math.min(Math.max(py, y), y + h)];
+          const d = Math.hypot(nx - px, ny - py);
+          if (d > 8) leader = [px + ((nx - px) * 6.5) / d, py + ((ny - py) * 6.5) / d, nx, ny];
+        }
+        out[i] = { name: a.name, text, color: info.get(a.name)?.color || "#fff", box, leader };
       }
-      places.sort((p, q) => p[2] - q[2]); // nearer rings first (stable: right before left, above before below)
-      const inSite = ([x, y]) => x >= sx && x + w <= sx + this.siteW && y >= sy && y + h <= sy + this.siteH;
-      const inside = places.filter(inSite);
-      const cost = ([x, y]) => placed.reduce((sum, b) => sum + overlap(x, y, w, b), 0);
-      const [x, y, ring] = inside.find((q) => cost(q) === 0) ||
-        (inside.length ? inside.reduce((best, q) => (cost(q) < cost(best) ? q : best)) : places[0]);
-      placed.push([x, y, w, h]);
-      // a label away from its marker: a line from the marker's edge to the label's nearest point
-      let leader = null;
-      if (ring > 0) {
-        const [nx, ny] = [Math.min(Math.max(px, x), x + w), Math.min(Math.max(py, y), y + h)];
-        const d = Math.hypot(nx - px, ny - py);
-        if (d > 8) leader = [px + ((nx - px) * 6.5) / d, py + ((ny - py) * 6.5) / d, nx, ny];
-      }
-      out.push({ name: a.name, text, color: info.get(a.name)?.color || "#fff", box: [x, y, w, h], leader });
+      return { out, score, taken };
+    };
+    // vehicles close together: the order in which they take their places matters (the first takes
+    // the nearest); a few orders are tried and the layout that misleads least, then the tightest, kept
+    const idx = labelled.map((_, i) => i);
+    const by = (f) => [...idx].sort((p, q) => f(p) - f(q));
+    const orders = [idx, [...idx].reverse(), by((i) => marks[i][1]), by((i) => -marks[i][1]), by((i) => marks[i][0]), by((i) => -marks[i][0])];
+    let best = null;
+    for (const order of orders) {
+      const r = placeIn(order);
+      if (!best || r.score < best.score - 1e-9) best = r;
     }
+    const out = best ? best.out : [];
+    if (best) placed.splice(0, placed.length, ...best.taken);
     for (const l of out) {
       if (!l.leader) continue;
-      ctx.strokeStyle = l.color;
-      ctx.lineWidth = 1.2;
-      ctx.beginPath();
-      ctx.moveTo(l.leader[0], l.leader[1]);
-      ctx.lineTo(l.leader[2], l.leader[3]);
-      ctx.stroke();
+      // in its colour over a dark casing: it reads over sonar fans and tracks
+      for (const [color, width] of [["rgba(13, 21, 32, 0.85)", 3.2], [l.color, 1.4]]) {
+        ctx.strokeStyle = color;
+        ctx.lineWidth = width;
+        ctx.beginPath();
+        ctx.moveTo(l.leader[0], l.leader[1]);
+        ctx.lineTo(l.leader[2], l.leader[3]);
+        ctx.stroke();
+      }
     }
     for (const { box: [x, y, w], text, color } of out) {
       ctx.fillStyle = "rgba(13, 21, 32, 0.72)";
@@ -810,6 +859,7 @@ export class TopDownMap {
   sonarBar(ctx, x, y) {
     const h = Math.min(90, this.siteH - (y - this.oy) - 34);
     if (h < 30) return; // a short map: no room under the depth bar
+    if (this.static.agents.every((a) => !(a.max_range > 0))) return; // no vehicle has a sonar
     const ranges = [...new Set(this.static.agents.map((a) => a.max_range))];
     const far = ranges.length === 1 ? tickText(+ranges[0].toFixed(0)) : "max";
     this.gradientBar(ctx, x, y, h, rangeColor, ["0", far], "sonar");
@@ -977,6 +1027,9 @@ export function panelChart(canvas, panels, options = {}) {
     return null;
   }
   if (x1 === x0) x1 = x0 + 1;
+  // endDots: a dot marks each line's last point, a little inside the frame's right edge (a jump
+  // at the last step, as a capture's +900, would otherwise be a stroke on the frame itself)
+  if (options.endDots) x1 += 0.02 * (x1 - x0);
   const X = (x) => m.l + ((x - x0) / (x1 - x0)) * (W - m.l - m.r);
   const areas = [];
   panels.forEach((p, i) => {
@@ -1080,6 +1133,30 @@ export function panelChart(canvas, panels, options = {}) {
       if (runs) ctx.restore();
     }
     ctx.lineJoin = "miter";
+    if (options.endDots) {
+      // each line's last point as a dot in its colour (outlined: it reads over other lines)
+      for (const s of p.series) {
+        let k = s.xs.length - 1;
+        while (k >= 0 && !(Number.isFinite(s.xs[k]) && Number.isFinite(s.ys[k]))) k--;
+        if (k < 0) continue;
+        ctx.fillStyle = s.color;
+        ctx.strokeStyle = "#0d1520";
+        ctx.lineWidth = 1;
+        ctx.beginPath();
+        ctx.arc(X(s.xs[k]), Y(s.ys[k]), 3.5, 0, 2 * Math.PI);
+        ctx.fill();
+        ctx.stroke();
+      }
+    }
+    for (const mark of options.marks || []) {
+      // an event: a dotted vertical line in every panel, its text in the first one
+      if (!(mark.t >= x0 && mark.t <= x1)) continue;
+      ctx.strokeStyle = mark.color || "#e0a43a";
+      ctx.lineWidth = 1;
+      ctx.setLineDash([1, 3]);
+      ctx.beginPath(); ctx.moveTo(X(mark.t), top); ctx.lineTo(X(mark.t), bottom); ctx.stroke();
+      ctx.setLineDash([]);
+    }
     if (Number.isFinite(options.cursor)) {
       ctx.strokeStyle = "#ffffff";
       ctx.lineWidth = 1;
@@ -1099,6 +1176,32 @@ export function panelChart(canvas, panels, options = {}) {
       ctx.restore();
     }
   });
+  // the events' texts along the top of the first panel, one row each where they would overlap
+  if (areas.length && options.marks?.length) {
+    const a = areas[0];
+    const Xa = (x) => a.left + ((x - a.x0) / (a.x1 - a.x0)) * (a.right - a.left);
+    const rows = [];
+    ctx.font = SMALL_FONT;
+    ctx.textAlign = "left";
+    ctx.textBaseline = "top";
+    const boxes = [];
+    for (const mark of options.marks) {
+      if (!(mark.t >= a.x0 && mark.t <= a.x1)) continue;
+      const w = ctx.measureText(mark.label).width + 4;
+      const x = Math.min(a.right - w - 1, Xa(mark.t) + 2);
+      let row = 0;
+      while (rows[row] !== undefined && rows[row] > x - 2) row++;
+      rows[row] = x + w;
+      const y = a.top + 2 + 12 * row;
+      ctx.fillStyle = "rgba(13, 21, 32, 0.8)";
+      ctx.fillRect(x, y, w, 12);
+      ctx.fillStyle = mark.color || "#e0a43a";
+      ctx.fillText(mark.label, x + 2, y + 1);
+      boxes.push({ label: mark.label, t: mark.t, box: [x, y, w, 12] });
+    }
+    areas.marks = boxes;
+    ctx.font = FONT;
+  }
   // the shared time axis under the last panel, labels kept inside the canvas
   const bottom = H - m.b;
   ctx.fillStyle = AXIS;
