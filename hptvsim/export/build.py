@@ -22,9 +22,10 @@ Every export is checked before it is written: onnxruntime's actions against the 
 observations from a short real episode and from the model's observation space must agree to
 :data:`TOLERANCE`. The runtime that loads these files is :mod:`hptvsim.export.runtime`.
 
-A Decision Transformer (kind ``dt``) is refused: its action depends on a context of the last
-``K`` steps and on a return-to-go that its policy updates from rewards it estimates outside the
-network (:mod:`hptvsim.offline.policy`).
+A Decision Transformer (kind ``dt``: ``dt-pursuers``, ``dt:PATH``) acts on a context of the last
+``K`` steps and a return-to-go, so its file takes them as inputs instead of ``obs``
+(:mod:`hptvsim.export.dt`), checked against :class:`~hptvsim.offline.policy.DTPolicy` on a real
+rollout; :class:`hptvsim.export.runtime.ExportedDT` keeps the window.
 """
 
 from __future__ import annotations
@@ -69,7 +70,7 @@ TOLERANCE: Final = 1e-4
 
 OPSET: Final = 17
 
-SPEC_FORMS: Final = "a zoo policy of kind sb3 ({names}), run:DIR[@STAGE], zip:PATH or sb3:PATH"
+SPEC_FORMS: Final = "a trained zoo policy ({names}), run:DIR[@STAGE], zip:PATH, sb3:PATH or dt:PATH"
 
 DEFAULT_SCENARIOS: Final = ("target", "ridge_3d")
 """Scenarios tried, in order, for a model whose provenance names none (the first it fits)."""
@@ -85,6 +86,7 @@ class ExportSource:
 
     Attributes:
         spec: The spec as given.
+        kind: ``sb3`` or ``dt`` (a Decision Transformer: :mod:`hptvsim.export.dt`).
         files: Agent -> SB3 zip; an empty key ``""`` where the agents are not known yet (one file
             for every agent of its roles).
         roles: Roles it drives (``pursuer``, ``evader``).
@@ -96,6 +98,7 @@ class ExportSource:
 
     spec: str
     files: dict[str, Path]
+    kind: str = "sb3"
     roles: tuple[str, ...] = ("pursuer", "evader")
     games: tuple[str, ...] = ("planar", "3d")
     scenario: str | None = None
@@ -113,22 +116,22 @@ class Exported:
     n_act: int
     max_abs_diff: float
     checked: int
+    reference: str = "SB3"
 
 
-def _sb3_names() -> list[str]:
-    return [p.name for p in list_policies() if p.kind == "sb3"]
+def _trained_names() -> list[str]:
+    return [p.name for p in list_policies() if p.kind in ("sb3", "dt")]
 
 
 def _bad_spec(spec: str, why: str) -> ExportError:
-    return ExportError(f"{why} {spec!r}; valid: {SPEC_FORMS.format(names=', '.join(_sb3_names()))}")
+    return ExportError(f"{why} {spec!r}; valid: {SPEC_FORMS.format(names=', '.join(_trained_names()))}")
 
 
 def resolve_spec(spec: str) -> ExportSource:
-    """The SB3 files a spec names (nothing is loaded).
+    """The SB3 or DT files a spec names (nothing is loaded).
 
     Raises:
-        ExportError: An unknown spec, a missing file or run, or a policy of another kind (a
-            Decision Transformer: refused, saying why).
+        ExportError: An unknown spec, a missing file or run, or a scripted policy.
     """
     infos = {p.name: p for p in list_policies()}
     if spec in infos:
@@ -137,7 +140,15 @@ def resolve_spec(spec: str) -> ExportSource:
     if not sep or not rest:
         raise _bad_spec(spec, "unknown policy spec")
     if kind == "dt":
-        raise _dt_refusal(spec)
+        if not Path(rest).is_file():
+            raise ExportError(f"policy file not found: {rest} (spec {spec!r})")
+        return ExportSource(
+            spec=spec,
+            files={"": Path(rest)},
+            kind="dt",
+            games=("planar",),
+            provenance={"file": Path(rest).name},
+        )
     if kind in ("zip", "sb3"):
         path = Path(rest)
         if not path.is_file():
@@ -148,21 +159,11 @@ def resolve_spec(spec: str) -> ExportSource:
     raise _bad_spec(spec, "unknown policy spec")
 
 
-def _dt_refusal(spec: str) -> ExportError:
-    return ExportError(
-        f"{spec!r} is a Decision Transformer: not exported, because its action depends on a context of "
-        "the last K steps and on a return-to-go its policy updates from rewards estimated outside the "
-        f"network; export an SB3 policy ({', '.join(_sb3_names())})"
-    )
-
-
 def _from_zoo(info: PolicyInfo) -> ExportSource:
-    if info.kind == "dt":
-        raise _dt_refusal(info.name)
-    if info.kind != "sb3":
+    if info.kind not in ("sb3", "dt"):
         raise ExportError(
             f"policy {info.name!r} is {info.kind}, not a trained network; valid: "
-            f"{SPEC_FORMS.format(names=', '.join(_sb3_names()))}"
+            f"{SPEC_FORMS.format(names=', '.join(_trained_names()))}"
         )
     files = dict(info.files) if info.files else {"": info.path} if info.path is not None else {}
     options = info.provenance.get("options", {})
@@ -170,6 +171,7 @@ def _from_zoo(info: PolicyInfo) -> ExportSource:
     return ExportSource(
         spec=info.name,
         files=files,
+        kind=info.kind,
         roles=info.roles,
         games=info.games,
         scenario=str(stage) if stage else None,
@@ -247,7 +249,7 @@ def choose_game(source: ExportSource, scenario: str | None, agents: Sequence[str
             continue
         try:
             for agent in probe:
-                check_sb3(source.files.get(agent, next(iter(source.files.values()))), game, agent)
+                _check(source, source.files.get(agent, next(iter(source.files.values()))), game, agent)
         except ValueError as exc:
             errors.append(f"{name!r}: {exc}")
             continue
@@ -257,6 +259,16 @@ def choose_game(source: ExportSource, scenario: str | None, agents: Sequence[str
     raise ExportError(
         f"{source.spec}: no scenario fits the model ({'; '.join(errors)}); give one with --scenario"
     )
+
+
+def _check(source: ExportSource, file: Path, game: Game, agent: str) -> None:
+    """Raise :class:`ValueError` where ``file`` cannot drive ``agent`` of ``game``."""
+    if source.kind == "dt":
+        from hptvsim.offline.policy import load_dt  # torch
+
+        load_dt(file, game, agent)
+    else:
+        check_sb3(file, game, agent)
 
 
 def _agents_of(source: ExportSource, game: Game) -> list[str]:
@@ -371,7 +383,7 @@ def _metadata(
         "role": "pursuer" if game.pursuer[i] else "evader",
         "game": game.kind,
         "scenario": scenario,
-        "algorithm": type(model).__name__,
+        "algorithm": getattr(model, "name", type(model).__name__),
         "observation": json.dumps(observation_fields(game, agent, n_obs)),
         "action": json.dumps(action),
         "commands": json.dumps(commands),
@@ -483,7 +495,8 @@ def export_policy(
     import torch
 
     source = resolve_spec(spec)
-    if "" in source.files and not agents and len(source.files) == 1 and source.scenario is None:
+    lone = source.kind == "sb3" and "" in source.files and len(source.files) == 1
+    if lone and not agents and source.scenario is None:
         stem = source.files[""].stem
         agents = (stem,)  # a lone file: its name names its agent (pursuer_0.zip), checked below
     game, scenario_name = choose_game(source, scenario, agents)
@@ -502,6 +515,9 @@ def export_policy(
     done = []
     for agent in driven:
         file = source.files.get(agent) or source.files[next(iter(source.files))]
+        if source.kind == "dt":
+            done.append(_export_dt(source, game, scenario_name, agent, file, out))
+            continue
         try:
             check_sb3(file, game, agent)
             model = load_sb3_model(file)
@@ -549,3 +565,58 @@ def export_policy(
         os.replace(partial, target)
         done.append(Exported(agent, target, n_obs, n_act, diff, len(obs)))
     return done
+
+
+def _export_dt(
+    source: ExportSource, game: Game, scenario: str, agent: str, file: Path, out: Path
+) -> Exported:
+    """One agent's Decision Transformer, context as inputs (:mod:`hptvsim.export.dt`), checked."""
+    import onnx
+
+    from hptvsim.export.dt import dt_metadata, dt_rollout_check, export_dt_graph
+    from hptvsim.offline.policy import data_reward, load_dt, load_policy_file, model_index
+
+    try:
+        policy = load_dt(file, game, agent)
+    except ValueError as exc:
+        raise ExportError(f"{source.spec}: {exc}") from None
+    payload = load_policy_file(file)
+    role = "pursuer" if game.pursuer[game.agents.index(agent)] else "evader"
+    weights = data_reward(payload, model_index(payload, agent, role, where=file.name))
+    target = out / f"{agent}.onnx"
+    partial = out / f".{agent}.onnx.partial"
+    export_dt_graph(policy, partial, OPSET)
+    proto = onnx.load(str(partial))
+    meta = _metadata(source, game, scenario, agent, file, _DTSpaces(policy))
+    meta.update(dt_metadata(policy, policy.returns, weights))
+    meta["onnx_input"] = "returns_to_go, states, actions, timesteps, at (hptvsim.export.dt)"
+    for key, value in meta.items():
+        entry = proto.metadata_props.add()
+        entry.key, entry.value = key, value
+    proto.producer_name = "hptvsim"
+    proto.producer_version = __version__
+    onnx.checker.check_model(proto)
+    onnx.save(proto, str(partial))
+    steps, envs = 40, 4
+    diff = dt_rollout_check(policy, game, agent, partial, steps=steps, envs=envs)
+    if not diff <= TOLERANCE:
+        partial.unlink()
+        raise ExportError(
+            f"{source.spec}: {agent}'s export differs from DTPolicy by {diff:.3g} (> {TOLERANCE:g}); "
+            "not written"
+        )
+    os.replace(partial, target)
+    cfg = policy.config
+    return Exported(agent, target, int(cfg.state_dim), int(cfg.act_dim), diff, steps * envs, "DTPolicy")
+
+
+class _DTSpaces:
+    """A DT policy's spaces as :func:`_metadata` reads them from an SB3 model."""
+
+    def __init__(self, policy: Any) -> None:
+        from types import SimpleNamespace
+
+        size = int(policy.config.state_dim)
+        self.observation_space = SimpleNamespace(shape=(size,))
+        self.action_space = SimpleNamespace(low=policy.low, high=policy.high, shape=(len(policy.low),))
+        self.name = "DecisionTransformer"

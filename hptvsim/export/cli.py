@@ -36,7 +36,8 @@ def export_cmd(spec: str, out_dir: Path, scenario: str | None, agents: tuple[str
 
     Input ``obs`` [batch, n_obs] float32, output ``action`` [batch, n_act] float32 (the
     deterministic action in the game's step units), metadata in the file; each export is checked
-    against SB3's predict on real and sampled observations before it is written.
+    against SB3's predict on real and sampled observations before it is written. A Decision
+    Transformer (dt-pursuers, dt:PATH) takes its context as inputs instead (hptvsim.export.dt).
     """
     from hptvsim.export.build import ExportError, export_policy
 
@@ -46,7 +47,7 @@ def export_cmd(spec: str, out_dir: Path, scenario: str | None, agents: tuple[str
         raise click.ClickException(str(exc)) from None
     for e in done:
         click.echo(
-            f"wrote {e.path} (obs {e.n_obs}, action {e.n_act}; max |onnxruntime - SB3| "
+            f"wrote {e.path} (obs {e.n_obs}, action {e.n_act}; max |onnxruntime - {e.reference}| "
             f"{e.max_abs_diff:.2g} over {e.checked} observations)"
         )
 

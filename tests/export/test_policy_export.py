@@ -3,8 +3,9 @@
 Every shipped SB3 policy exports to ``<agent>.onnx`` whose onnxruntime actions agree with the
 project's own SB3 policy (:class:`hptvsim.train.policy.SB3Policy`, SB3's deterministic
 ``predict`` clipped to the action space: what the game's ``step`` is fed) to 1e-4 on
-observations of real episodes and of the observation space. The default suite exports one PPO
-planar team and the SAC 3-D evader; the rest are slow.
+observations of real episodes and of the observation space. The default suite exports a PPO
+planar pursuer, the SAC 3-D evader and one pursuer's Decision Transformer (context as inputs,
+checked against :class:`hptvsim.offline.policy.DTPolicy`); the rest are slow.
 """
 
 from __future__ import annotations
@@ -33,8 +34,8 @@ onnx = pytest.importorskip("onnx")
 pytest.importorskip("onnxruntime")
 
 SHIPPED = {p.name: p for p in list_policies() if p.kind == "sb3"}
-FAST = {"ippo-pursuers": ("pursuer_1",), "maisac-3d-evader": ()}
-"""Default-suite exports: a PPO planar pursuer and the SAC 3-D evader (``()``: every agent)."""
+FAST = {"ippo-pursuers": ("pursuer_1",), "maisac-3d-evader": (), "dt-pursuers": ("pursuer_1",)}
+"""Default-suite exports: a PPO planar pursuer, the SAC 3-D evader (``()``: every agent), a DT."""
 
 
 def _cli(*args: str) -> tuple[int, str]:
@@ -50,7 +51,7 @@ def exported(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
         folder = tmp_path_factory.mktemp(name)
         code, text = _cli("policy", "export", name, "--out", str(folder), *[f"--agent={a}" for a in agents])
         assert code == 0, text
-        assert "max |onnxruntime - SB3|" in text
+        assert f"max |onnxruntime - {'DTPolicy' if name.startswith('dt') else 'SB3'}|" in text
         out[name] = folder
     return out
 
@@ -88,7 +89,7 @@ def _check_against_sb3(name: str, folder: Path) -> int:
     return len(policies)
 
 
-@pytest.mark.parametrize("name", sorted(FAST))
+@pytest.mark.parametrize("name", sorted(set(FAST) & set(SHIPPED)))
 def test_export_agrees_with_sb3_predict(exported: dict[str, Path], name: str) -> None:
     assert _check_against_sb3(name, exported[name]) == max(len(FAST[name]), 1)
 
@@ -159,6 +160,7 @@ def test_planar_metadata_names_the_extended_observation(exported: dict[str, Path
 
 def test_runtime_needs_neither_torch_nor_sb3(exported: dict[str, Path]) -> None:
     folder = exported["ippo-pursuers"]
+    dt_file = exported["dt-pursuers"] / "pursuer_1.onnx"
     code = (
         "import sys, numpy as np\n"
         "from hptvsim.export.runtime import load_policies\n"
@@ -171,6 +173,12 @@ def test_runtime_needs_neither_torch_nor_sb3(exported: dict[str, Path]) -> None:
         "print(bad, ours)\n"
         "assert not bad, bad[:3]\n"
         "assert ours == ['hptvsim', 'hptvsim.export', 'hptvsim.export.runtime'], ours\n"
+        "from hptvsim.export.runtime import ExportedDT\n"
+        f"dt = ExportedDT({str(dt_file)!r})\n"
+        "dt.reset(2)\n"
+        "for _ in range(3):\n"
+        "    assert dt.act(np.zeros((2, dt.n_obs), np.float32), reward=np.ones(2)).shape == (2, 2)\n"
+        "assert not [m for m in sys.modules if m.split('.')[0] in heavy]\n"
     )
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
@@ -191,15 +199,11 @@ def test_runtime_refuses_bad_inputs(exported: dict[str, Path], tmp_path: Path) -
 @pytest.mark.parametrize(
     ("spec", "expect"),
     [
-        ("nonsense", "unknown policy spec 'nonsense'; valid: a zoo policy of kind sb3 ("),
+        ("nonsense", "unknown policy spec 'nonsense'; valid: a trained zoo policy ("),
         ("scripted:pure_pursuit", "is scripted, not a trained network; valid:"),
         ("zip:/no/such.zip", "policy file not found: /no/such.zip"),
         ("run:/no/such-run", "/no/such-run "),
-        (
-            "dt-pursuers",
-            "'dt-pursuers' is a Decision Transformer: not exported, because its action depends on",
-        ),
-        ("dt:policies/dt-pursuers.pt", "is a Decision Transformer: not exported"),
+        ("dt:/no/such.pt", "policy file not found: /no/such.pt"),
     ],
 )
 def test_bad_spec_refused_in_one_line(tmp_path: Path, spec: str, expect: str) -> None:
@@ -207,7 +211,7 @@ def test_bad_spec_refused_in_one_line(tmp_path: Path, spec: str, expect: str) ->
     assert code == 1
     lines = text.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("Error: "), text
-    if spec.startswith(("run:", "zip:")):
+    if spec.startswith(("run:", "zip:", "dt:")):
         assert f"(spec {spec!r})" in lines[0]
     assert expect in lines[0]
     if "valid:" in expect:
@@ -287,3 +291,72 @@ def test_an_export_that_disagrees_is_not_written(tmp_path: Path, monkeypatch: py
     with pytest.raises(ExportError, match=r"export differs from SB3 by .* not written"):
         export_policy("ippo-pursuers", tmp_path, agents=["pursuer_0"])
     assert list(tmp_path.iterdir()) == []
+
+
+# --- the Decision Transformer: its context as inputs ----------------------------------------------
+
+
+def test_dt_exports_with_its_context_as_inputs(exported: dict[str, Path]) -> None:
+    path = exported["dt-pursuers"] / "pursuer_1.onnx"
+    proto = onnx.load(str(path))
+    assert [i.name for i in proto.graph.input] == ["returns_to_go", "states", "actions", "timesteps", "at"]
+    meta = read_metadata(path)
+    info = next(p for p in list_policies() if p.name == "dt-pursuers")
+    assert meta["kind"] == "dt" and meta["game"] == "planar" and meta["agent"] == "pursuer_1"
+    assert meta["context"] == "20" and meta["returns"]["q50"] < meta["returns"]["q90"]
+    assert meta["source_sha256"] == info.provenance["sha256"]
+    assert [f["name"] for f in meta["observation"]][-4:] == ["distance", "min_range", "yaw", "azimuth"]
+    assert set(meta["reward_weights"]) >= {"delta_C", "delta_E1", "delta_E2"}
+    with pytest.raises(ExportedPolicyError, match="a Decision Transformer: load it with ExportedDT"):
+        ExportedPolicy(path)
+
+
+@pytest.mark.parametrize("hide_actions", [True, False])
+def test_exported_dt_keeps_the_window_as_dt_policy_does(
+    exported: dict[str, Path], tmp_path: Path, hide_actions: bool
+) -> None:
+    """A 60-step rollout (the window of 20 fills, then slides) with the same rewards given to both.
+
+    The shipped DT hides its action tokens (trained with ``action_dropout = 1``); the same model
+    reading them, exported the same way, checks the actions' path through the graph.
+    """
+    from hptvsim.export.dt import export_dt_graph
+    from hptvsim.export.runtime import ExportedDT
+    from hptvsim.offline.policy import DTPolicy, load_dt
+
+    zoo = next(p for p in list_policies() if p.name == "dt-pursuers")
+    assert zoo.path is not None
+    game = make_game("target", num_envs=3)
+    loaded = load_dt(zoo.path, game, "pursuer_1")
+    assert loaded.hide_actions
+    reference = DTPolicy(  # as the zoo loads it, but taking the rewards it is given
+        loaded.model, loaded.stats, target_return="q90", hide_actions=hide_actions
+    )
+    path = exported["dt-pursuers"] / "pursuer_1.onnx"
+    if not hide_actions:
+        export_dt_graph(reference, tmp_path / "shown.onnx", 17)
+        proto = onnx.load(str(tmp_path / "shown.onnx"))
+        for p in onnx.load(str(path)).metadata_props:
+            proto.metadata_props.add(key=p.key, value="false" if p.key == "hide_actions" else p.value)
+        path = tmp_path / "shown.onnx"
+        onnx.save(proto, str(path))
+    dt = ExportedDT(path)
+    i = game.agents.index("pursuer_1")
+    obs = game.reset(seed=5)
+    dt.reset(3, "q90")
+    rng = np.random.default_rng(1)
+    low, high = game.action_bounds
+    reward = None
+    worst, moved = 0.0, []
+    for _ in range(60):
+        want = reference.act(obs[:, i], reward=reward)
+        got = dt.act(obs[:, i], reward=reward)
+        worst = max(worst, float(np.max(np.abs(got - want))))
+        moved.append(want)
+        actions = rng.uniform(low, high, size=(3, *low.shape))
+        actions[:, i] = want
+        result = game.step(actions)
+        # the game's reward, scaled up so that the returns-to-go move the actions measurably
+        obs, reward = result.obs, 2000.0 * result.reward[:, i] + rng.uniform(-3000.0, 3000.0, 3)
+    assert worst <= TOLERANCE
+    assert np.ptp(np.array(moved), axis=0).min() > 0.0  # it acts, not a constant
