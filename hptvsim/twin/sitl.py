@@ -19,7 +19,8 @@ over which it behaves as ArduSub does (facts from ``../shared/notes/mavlink.md``
   manual modes (x forward, y lateral, z vertical with 500 neutral, r yaw; -1000..1000);
   SET_POSITION_TARGET_LOCAL_NED only in GUIDED (frames LOCAL_NED, LOCAL_OFFSET_NED, BODY_NED,
   BODY_OFFSET_NED, BODY_FRD; body-frame vectors rotated by the heading; position, velocity or
-  both; yaw or yaw rate; acceleration ignored), holding position 3 s after the last setpoint;
+  both; yaw or yaw rate; acceleration never used, and a setpoint whose mask does not mark it
+  ignored is dropped, as ArduSub's handler does), holding position 3 s after the last setpoint;
   the pilot-input failsafe in every mode (``FS_PILOT_INPUT`` 0 off, 1 warn, 2 disarm after
   ``FS_PILOT_TIMEOUT`` s without MANUAL_CONTROL); PARAM_REQUEST_LIST, PARAM_REQUEST_READ and
   PARAM_SET for those and the vehicle's parameters.
@@ -727,10 +728,13 @@ class SitlVehicle:
         frame = int(msg.coordinate_frame)
         if frame not in _FRAMES:
             return
+        # as ArduSub reads the mask: any bit of a group marks the group ignored, and a setpoint
+        # whose acceleration is not marked ignored is dropped (acceleration is never used)
         mask = int(msg.type_mask)
-        pos_ignore = mask & 0b111 == 0b111
-        vel_ignore = mask & 0b111000 == 0b111000
-        if pos_ignore and vel_ignore:
+        pos_ignore = bool(mask & 0b111)
+        vel_ignore = bool(mask & 0b111000)
+        acc_ignore = bool(mask & 0b111000000)
+        if not acc_ignore or (pos_ignore and vel_ignore):
             return
         pos, eul = self.model.pose()
         yaw = float(eul[2])

@@ -470,3 +470,86 @@ def test_scenario_agent_current_and_seabed() -> None:
     v.model.x[2] = 1e4  # far below any seabed
     v.step(0.02)
     assert v.model.x[2] <= v.env.seabed(v.model.x[0:3]) + 1e-9
+
+
+def test_alt_hold_holds_depth_and_stabilize_does_not() -> None:
+    """work_class is buoyant: ALT_HOLD keeps its depth with the throttle centred; STABILIZE lets it rise."""
+    run = _start(depth=6.0)
+    g = run.gcs
+    try:
+        g.set_mode(ALT_HOLD)
+        g.arm()
+        g.wait_clock(6.0, feed=g.neutral)
+        assert g.position()[2] == pytest.approx(6.0, abs=0.1)
+        g.set_mode(STABILIZE)
+        g.wait_clock(6.0, feed=g.neutral)
+        assert g.position()[2] < 5.7
+    finally:
+        run.close()
+
+
+def test_planar_vehicle_keeps_its_depth() -> None:
+    run = _start(dof=3, depth=3.0)
+    g = run.gcs
+    try:
+        g.set_mode(GUIDED)
+        g.arm()
+        p0 = g.position()
+        g.wait_clock(6.0, feed=lambda: g.fly(mavutil.mavlink.MAV_FRAME_LOCAL_NED, 0.0, 0.3, 0.2))
+        d = g.position() - p0
+        assert d[1] > 1.0 and abs(d[0]) < 0.3 * d[1], d  # east
+        assert g.position()[2] == 3.0  # the planar model's fixed depth
+        assert (g.recv("SCALED_PRESSURE2").press_abs * 100.0 - 101325.0) / (1025.0 * 9.81) == pytest.approx(
+            3.0, rel=0.03
+        )
+    finally:
+        run.close()
+
+
+def test_a_fitted_vehicle_files_parameters_are_flown(tmp_path: Path) -> None:
+    """A vehicle file as ``hptvsim vehicle fit`` writes one: its parameters are the vehicle's."""
+    text = BLUEROV2.read_text().replace("X_u = -13.7", "X_u = -21.5")
+    fitted = tmp_path / "fitted.toml"
+    fitted.write_text(text)
+    v = build_vehicle(str(fitted), dof=3)
+    assert v.get_param("X_u") == pytest.approx(-21.5)
+    assert v.model.bluerov2  # the name says BlueROV2: its thrusters' PWM is sent
+    v6 = build_vehicle(str(fitted), dof=6)
+    assert v6.get_param("X_u") == pytest.approx(-21.5)
+
+
+def test_guided_position_offsets_and_ignored_acceleration() -> None:
+    """Position targets (body-frame offsets rotated by the heading); an acceleration is ignored."""
+    run = _start(heading=math.pi / 2, depth=5.0)
+    g = run.gcs
+    pos_only = 0b1101_1111_1000  # x, y, z; velocity, acceleration, yaw, yaw rate ignored (3576)
+    try:
+        g.set_mode(GUIDED)
+        g.arm()
+        # BODY_OFFSET_NED: 2 m ahead = 2 m east when heading east; sent once, it is a destination
+        g.conn.mav.set_position_target_local_ned_send(0, 1, 1, 9, pos_only, 2.0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0)
+        g.wait_clock(2.5, feed=g.neutral)
+        g.conn.mav.set_position_target_local_ned_send(0, 1, 1, 9, pos_only, 2.0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0)
+        g.wait_clock(2.5, feed=g.neutral)
+        p = g.position()
+        assert p[1] > 2.5 and abs(p[0]) < 0.5, p  # 2 m + 2 m (the second from where it was), east
+        # a velocity with acceleration values: ignored (only the ignore bits of the mask matter)
+        vel_acc = 0b0101_1100_0111  # 1479: velocity + yaw rate, acceleration marked ignored
+
+        def send(mask: int) -> None:
+            g.neutral()
+            g.conn.mav.set_position_target_local_ned_send(
+                0, 1, 1, 1, mask, 0, 0, 0, 0.0, -0.3, 0.0, 9.0, 9.0, 9.0, 0, 0
+            )
+
+        p0 = g.position()
+        g.wait_clock(4.0, feed=lambda: send(vel_acc))
+        d = g.position() - p0
+        assert d[1] < -0.6 and abs(d[0]) < 0.3, d  # west, the commanded velocity; the acceleration unused
+        # with the acceleration bits clear, ArduSub drops the setpoint: after the 3 s timeout it holds
+        g.wait_clock(4.0, feed=lambda: send(0b0100_0000_0111))
+        p1 = g.position()
+        g.wait_clock(3.0, feed=lambda: send(0b0100_0000_0111))
+        assert np.linalg.norm(g.position() - p1) < 0.1
+    finally:
+        run.close()
