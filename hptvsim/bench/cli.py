@@ -242,3 +242,21 @@ def bench_episode_cmd(quick: bool, scenario: str, as_json: bool) -> None:
     from hptvsim.bench.episode import bench_episode
 
     emit(bench_episode(quick=quick, scenario=scenario), as_json)
+
+
+@bench.command("threads")
+@click.option(
+    "--quick",
+    is_flag=True,
+    help="300 steps and one run per row (default: whole episodes, best of two).",
+)
+@click.option("--scenario", default="target", show_default=True)
+@_JSON
+def bench_threads_cmd(quick: bool, scenario: str, as_json: bool) -> None:
+    """`hptvsim episode` wall time alone and beside two busy processes: torch default threads vs one."""
+    from hptvsim.viz.cli import check_scenario_arg
+
+    check_scenario_arg(scenario)
+    from hptvsim.bench.threads import bench_threads
+
+    emit(bench_threads(quick=quick, scenario=scenario), as_json)

@@ -83,7 +83,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from hptvsim._process import pid_alive, usable_cores
+from hptvsim._process import pid_alive, set_torch_threads, usable_cores
 from hptvsim.experiments.repro_archive import archive_files, present, restore_files
 from hptvsim.experiments.repro_dt import (
     DT_METRICS,
@@ -787,9 +787,7 @@ def _die_with_parent() -> None:
     parent asks (:data:`STOP_SIGNAL`), at the end of the episode in progress, so that nothing is
     lost and a resumed run stays bit-identical to an uninterrupted one.
     """
-    import torch
-
-    torch.set_num_threads(1)
+    set_torch_threads(1)
     if sys.platform.startswith("linux"):
         with suppress(OSError):
             ctypes.CDLL("libc.so.6").prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from hptvsim._process import set_torch_threads
 from hptvsim.train.config import ConfigError, load_config, resolve_config_path
 
 __all__ = ["Job", "SweepSpec", "load_sweep", "plan_jobs", "run_sweep"]
@@ -131,13 +132,11 @@ def plan_jobs(spec: SweepSpec) -> list[Job]:
 
 def _run_job(config: str, overrides: dict[str, Any], run_dir: str, label: str) -> dict[str, Any]:
     """Train one job (in a Ray worker or in this process); finished jobs are skipped, killed ones resumed."""
-    import torch
-
     from hptvsim.experiments.policies import named_policy
     from hptvsim.train.checkpoint import has_checkpoint
     from hptvsim.train.trainer import train
 
-    torch.set_num_threads(1)
+    set_torch_threads(1)
     out = Path(run_dir)
     if (out / "summary.json").is_file():
         return {"run_dir": run_dir, "status": "done before"}

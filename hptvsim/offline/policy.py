@@ -37,6 +37,7 @@ import numpy as np
 import numpy.typing as npt
 import torch
 
+from hptvsim._process import set_torch_threads
 from hptvsim.envs.core import GameCore
 from hptvsim.envs.protocol import Game
 from hptvsim.envs.task import reward_terms
@@ -315,6 +316,7 @@ def load_policy_file(path: Path) -> dict[str, Any]:
     Raises:
         ValueError: Not a DT policy file.
     """
+    set_torch_threads()  # one thread for inference, or $HPTVSIM_TORCH_THREADS, or a trainer's
     try:
         payload: dict[str, Any] = torch.load(Path(path), map_location="cpu", weights_only=True)
     except Exception as exc:

@@ -39,6 +39,7 @@ import numpy as np
 import numpy.typing as npt
 import torch
 
+from hptvsim._process import set_torch_threads
 from hptvsim.offline.dataset import DEFAULT_DATASET_DIR, Trajectories, load_trajectories, versions
 from hptvsim.offline.model import DecisionTransformer, DTConfig, DTShape
 
@@ -479,7 +480,7 @@ def train(
             )
     cfg_path.write_text(dump_toml(cfg.as_dict()))
     if cfg.threads is not None:
-        torch.set_num_threads(cfg.threads)
+        set_torch_threads(cfg.threads)
     data = model_data(cfg)
     state_dim = data[0].trajectories.observations.shape[1]
     act_dim = data[0].trajectories.actions.shape[1]

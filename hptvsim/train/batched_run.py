@@ -47,6 +47,7 @@ from typing import Any, Literal
 import numpy as np
 import torch
 
+from hptvsim._process import set_torch_threads
 from hptvsim.envs.protocol import Game
 from hptvsim.train.batched import (
     EndedEpisode,
@@ -311,7 +312,7 @@ def train_batched(
         FileNotFoundError: ``resume`` without a checkpoint for every seed.
         ValueError: Neither ``make_game`` nor stages; ``cfg.fixed`` without ``fixed``.
     """
-    torch.set_num_threads(cfg.threads)
+    set_torch_threads(cfg.threads)
     if make_game is not None:
         stages = [(StageGame("train", "", {}, cfg.budget_steps), make_game)]
     elif cfg.stages:

@@ -49,6 +49,9 @@ def load_sb3_model(path: Path) -> Any:
     """
     from stable_baselines3 import PPO, SAC
 
+    from hptvsim._process import set_torch_threads
+
+    set_torch_threads()  # one thread for inference, or $HPTVSIM_TORCH_THREADS, or a trainer's
     errors = []
     for cls, custom in ((SAC, {"buffer_size": 1}), (PPO, None)):
         try:

@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from hptvsim._process import set_torch_threads
 from hptvsim.train.checkpoint import (
     CHECKPOINT_DIR,
     LoopState,
@@ -357,11 +358,10 @@ def train(
             is trained already; nothing is trained or written then.
         TrainingInterrupted: Ctrl-C; a checkpoint was written first.
     """
-    import torch
     from stable_baselines3.common.utils import set_random_seed
 
     run_dir = Path(run_dir)
-    torch.set_num_threads(1)
+    set_torch_threads(1)
     rng_state: dict[str, Any] | None = None
     changes: list[str] = []
     if resume:
