@@ -6,7 +6,12 @@ from pathlib import Path
 
 import click
 
-__all__ = ["register"]
+__all__ = ["DEFAULT_OUT_DIR", "register"]
+
+DEFAULT_OUT_DIR = Path("hptvsim-out") / "cosim"
+"""Where ``hptvsim cosim run`` writes ``<graph name>.csv`` without ``--out`` (the working
+directory's ``hptvsim-out/``, as every command's outputs; never beside the graph file, which may
+be in the source tree)."""
 
 
 def _write(
@@ -19,8 +24,8 @@ def _write(
     """Write ``time`` and the outputs: CSV (Reals to 17 digits, Booleans as true/false) or Parquet.
 
     The trajectory schema's ``wide`` layout (:mod:`hptvsim.cosim.trajectory`): its ``time`` column
-    [s], then one column per output, named as the graph's outputs (the CSV header carries no
-    units; the Parquet fields carry them as metadata).
+    [s], then one column per output, named as the graph's outputs: the CSV header is the plain
+    names (``time,sphere_x,...``; no units), the Parquet fields carry the units as metadata.
     Parquet columns carry the FMI types: float64 (Real, Float64), float32, int32 (Integer), the
     FMI 3 integer types as they are (its Enumerations as int64), bool (Boolean), string (String).
     Parquet fields carry each output's ``unit`` and ``display_unit`` as metadata (``time``: s).
@@ -85,7 +90,7 @@ def register(main: click.Group) -> None:
         type=click.Path(dir_okay=False, path_type=Path),
         default=None,
         help="Outputs over time: .csv, or .parquet with each column in its FMI type "
-        "(default: <graph>.csv beside the graph).",
+        "(default: hptvsim-out/cosim/<graph file's name>.csv).",
     )
     @click.option(
         "--set",
@@ -137,11 +142,17 @@ def register(main: click.Group) -> None:
                 f"{stop_time} s is not a positive multiple of the graph's step_size {graph.step_size} s",
                 param_hint="--stop-time",
             )
-        target = out_file if out_file is not None else graph_file.with_suffix(".csv")
+        target = out_file if out_file is not None else DEFAULT_OUT_DIR / f"{graph_file.stem}.csv"
         if target.suffix not in (".csv", ".parquet"):
             raise click.BadParameter(
                 f"{target.name}: valid suffixes are .csv and .parquet", param_hint="--out"
             )
+        try:
+            target.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise click.BadParameter(
+                f"cannot create {target.parent}: {exc.strerror}", param_hint="--out"
+            ) from None
         held: dict[str, str] = {}
         names = [i.name for i in graph.inputs]
         for item in settings:

@@ -20,7 +20,8 @@ over which it behaves as ArduSub does (facts from ``../shared/notes/mavlink.md``
   SET_POSITION_TARGET_LOCAL_NED only in GUIDED (frames LOCAL_NED, LOCAL_OFFSET_NED, BODY_NED,
   BODY_OFFSET_NED, BODY_FRD; body-frame vectors rotated by the heading; position, velocity or
   both; yaw or yaw rate; acceleration never used, and a setpoint whose mask does not mark it
-  ignored is dropped, as ArduSub's handler does), holding position 3 s after the last setpoint;
+  ignored is dropped, as ArduSub's handler does); 3 s after the last setpoint its velocity and
+  yaw rate drop to zero (a position target stays; without one it holds where it is);
   the pilot-input failsafe in every mode (``FS_PILOT_INPUT`` 0 off, 1 warn, 2 disarm after
   ``FS_PILOT_TIMEOUT`` s without MANUAL_CONTROL); PARAM_REQUEST_LIST, PARAM_REQUEST_READ and
   PARAM_SET for those and the vehicle's parameters.
@@ -521,14 +522,19 @@ class SitlVehicle:
             return demand
         # GUIDED
         vel_n = R @ vel_b
-        timed_out = self.time - self._target_time > GUIDED_TIMEOUT_S
-        if timed_out and self._hold_pos is None:
-            self._hold_pos = pos.copy()
-            self._hold_yaw = yaw
-            self._target_pos = self._target_vel = None
-            self._target_yaw = self._target_yaw_rate = None
+        if self.time - self._target_time > GUIDED_TIMEOUT_S and (
+            self._target_vel is not None or self._target_yaw_rate is not None
+        ):
+            # GUIDED_POSVEL_TIMEOUT_MS: the velocity and yaw-rate targets drop to zero; a
+            # position target stays, else the vehicle holds where it is
+            self._target_vel = None
+            if self._target_yaw_rate is not None:
+                self._target_yaw_rate = None
+                self._target_yaw = yaw
+            if self._target_pos is None:
+                self._hold_pos = pos.copy()
         v_cmd = np.zeros(3)
-        if not timed_out and (self._target_pos is not None or self._target_vel is not None):
+        if self._target_pos is not None or self._target_vel is not None:
             if self._target_vel is not None:
                 v_cmd = self._target_vel.copy()
             if self._target_pos is not None:
@@ -539,9 +545,9 @@ class SitlVehicle:
         if speed > v_max:
             v_cmd[0:2] *= v_max / speed
         v_cmd[2] = float(np.clip(v_cmd[2], -w_max, w_max)) if m.dof == 6 else 0.0
-        if not timed_out and self._target_yaw_rate is not None:
+        if self._target_yaw_rate is not None:
             r_cmd = self._target_yaw_rate
-        elif not timed_out and self._target_yaw is not None:
+        elif self._target_yaw is not None:
             r_cmd = 2.0 * _wrap(self._target_yaw - yaw)
         elif self._hold_yaw is not None:
             r_cmd = 2.0 * _wrap(self._hold_yaw - yaw)
@@ -761,6 +767,7 @@ class SitlVehicle:
             self._target_yaw_rate = float(msg.yaw_rate)
         self._target_time = self.time
         self._hold_pos = None
+        self._hold_yaw = yaw  # the heading kept when the setpoint names neither yaw nor yaw rate
 
     # -- sending ---------------------------------------------------------------------------------
 

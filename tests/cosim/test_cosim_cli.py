@@ -7,6 +7,7 @@ import shutil
 from pathlib import Path
 
 import numpy as np
+import pytest
 from click.testing import CliRunner
 from cosim_fixtures import lowpass_fmu, lowpass_step
 
@@ -45,16 +46,26 @@ from = "uuv.x"
 """
 
 
-def test_cosim_run_writes_the_outputs(tmp_path: Path, lowpass_fmu: Path) -> None:
-    shutil.copy(lowpass_fmu, tmp_path / "LowPass.fmu")
-    (tmp_path / "g.toml").write_text(GRAPH)
+def test_cosim_run_writes_the_outputs(
+    tmp_path: Path, lowpass_fmu: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Into ``hptvsim-out/cosim/`` of the working directory (issue 50.5), never beside the graph."""
+    graphs, work = tmp_path / "graphs", tmp_path / "work"
+    graphs.mkdir()
+    work.mkdir()
+    shutil.copy(lowpass_fmu, graphs / "LowPass.fmu")
+    (graphs / "g.toml").write_text(GRAPH)
+    monkeypatch.chdir(work)
     runner = CliRunner()
     res = runner.invoke(
-        main, ["cosim", "run", str(tmp_path / "g.toml"), "--stop-time", "5", "--set", "demand=1.5"]
+        main, ["cosim", "run", str(graphs / "g.toml"), "--stop-time", "5", "--set", "demand=1.5"]
     )
     assert res.exit_code == 0, res.output
-    rows = np.loadtxt(tmp_path / "g.csv", delimiter=",", skiprows=1)
-    assert (tmp_path / "g.csv").read_text().splitlines()[0] == "time,cmd,x"
+    out = work / "hptvsim-out" / "cosim" / "g.csv"
+    assert sorted(p.name for p in graphs.iterdir()) == ["LowPass.fmu", "g.toml"]  # nothing beside it
+    assert res.output.strip().endswith(f"outputs: {out.resolve()}")
+    rows = np.loadtxt(out, delimiter=",", skiprows=1)
+    assert out.read_text().splitlines()[0] == "time,cmd,x"
     assert rows.shape == (11, 3)
     assert np.array_equal(rows[:, 0], np.arange(11) * 0.5)
     y = 0.0
@@ -62,10 +73,10 @@ def test_cosim_run_writes_the_outputs(tmp_path: Path, lowpass_fmu: Path) -> None
         y = lowpass_step(y, 1.5, T=1.0, h=0.5)
         assert rows[k, 1] == y
     assert rows[-1, 2] > 2.0  # the sphere moved north
-    bad = runner.invoke(main, ["cosim", "run", str(tmp_path / "g.toml"), "--set", "speed=1"])
+    bad = runner.invoke(main, ["cosim", "run", str(graphs / "g.toml"), "--set", "speed=1"])
     assert bad.exit_code != 0
     assert "no external input named 'speed'" in bad.output
-    bad = runner.invoke(main, ["cosim", "run", str(tmp_path / "g.toml"), "--stop-time", "0.3"])
+    bad = runner.invoke(main, ["cosim", "run", str(graphs / "g.toml"), "--stop-time", "0.3"])
     assert "not a positive multiple" in bad.output
 
 

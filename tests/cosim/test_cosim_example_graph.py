@@ -10,6 +10,7 @@ from click.testing import CliRunner
 from hptvsim.cli import main
 
 GRAPH = Path(__file__).resolve().parents[2] / "configs" / "cosim" / "follow-the-turn.toml"
+README = (Path(__file__).resolve().parents[2] / "README.md").read_text()
 
 
 def test_the_example_graph_runs_and_the_uuv_follows_the_spheres_turn(tmp_path: Path) -> None:
@@ -18,6 +19,8 @@ def test_the_example_graph_runs_and_the_uuv_follows_the_spheres_turn(tmp_path: P
         main, ["cosim", "run", str(GRAPH), "--stop-time", "30", "--set", "turn=0.3", "--out", str(out)]
     )
     assert res.exit_code == 0, res.output
+    header = out.read_text().splitlines()[0]
+    assert f"`{header}`" in README  # what the README's co-simulation section quotes (issue 50.4)
     with out.open(newline="") as f:
         rows = list(csv.DictReader(f))
     assert len(rows) == 121 and float(rows[-1]["time"]) == 30.0

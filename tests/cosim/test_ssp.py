@@ -222,16 +222,19 @@ def _hand_ssp(
     return path
 
 
-def test_a_hand_written_ssp_runs_in_ours(tmp_path: Path, lowpass_fmu: Path) -> None:
+def test_a_hand_written_ssp_runs_in_ours(
+    tmp_path: Path, lowpass_fmu: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     ssp = _hand_ssp(tmp_path / "hand.ssp", lowpass_fmu)
     graph = load_ssp(ssp)
     assert graph.name == "filter-only"
     assert graph.step_size == 0.25
     assert dict(graph.component("filter").parameters) == {"T": 0.5, "K": 3.0}
     assert graph.inputs[0].start == 2.0  # the binding of the input it drives
+    monkeypatch.chdir(tmp_path)
     res = CliRunner().invoke(main, ["cosim", "run", str(ssp), "--stop-time", "2"])
     assert res.exit_code == 0, res.output
-    rows = np.loadtxt(tmp_path / "hand.csv", delimiter=",", skiprows=1)
+    rows = np.loadtxt(tmp_path / "hptvsim-out" / "cosim" / "hand.csv", delimiter=",", skiprows=1)
     assert rows.shape == (9, 2)
     y = 0.0
     for k in range(1, 9):
@@ -239,7 +242,9 @@ def test_a_hand_written_ssp_runs_in_ours(tmp_path: Path, lowpass_fmu: Path) -> N
         assert rows[k, 1] == y
 
 
-def test_step_size_from_the_caller_when_the_ssp_states_none(tmp_path: Path, lowpass_fmu: Path) -> None:
+def test_step_size_from_the_caller_when_the_ssp_states_none(
+    tmp_path: Path, lowpass_fmu: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     text = HAND_SSD.replace("SSV_PATH", "params/filter.ssv").replace("ELEMENT", "filter")
     text = text.replace('<osp:FixedStepAlgorithm baseStepSize="0.25"/>', "")
     ssp = tmp_path / "nostep.ssp"
@@ -250,6 +255,7 @@ def test_step_size_from_the_caller_when_the_ssp_states_none(tmp_path: Path, lowp
     with pytest.raises(GraphError, match="states no step size"):
         load_ssp(ssp)
     assert load_ssp(ssp, step_size=0.125).step_size == 0.125
+    monkeypatch.chdir(tmp_path)  # the outputs go to ./hptvsim-out/cosim/
     runner = CliRunner()
     bad = runner.invoke(main, ["cosim", "run", str(ssp)])
     assert bad.exit_code != 0

@@ -526,13 +526,14 @@ def test_guided_position_offsets_and_ignored_acceleration() -> None:
     try:
         g.set_mode(GUIDED)
         g.arm()
-        # BODY_OFFSET_NED: 2 m ahead = 2 m east when heading east; sent once, it is a destination
-        g.conn.mav.set_position_target_local_ned_send(0, 1, 1, 9, pos_only, 2.0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0)
-        g.wait_clock(2.5, feed=g.neutral)
-        g.conn.mav.set_position_target_local_ned_send(0, 1, 1, 9, pos_only, 2.0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0)
-        g.wait_clock(2.5, feed=g.neutral)
+        # BODY_OFFSET_NED: 20 m ahead = 20 m east when heading east; sent once, it is a destination
+        # that outlasts GUIDED's 3 s timeout (which stops velocity targets only)
+        g.conn.mav.set_position_target_local_ned_send(0, 1, 1, 9, pos_only, 20.0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0)
+        g.wait_clock(3.0, feed=g.neutral)
+        assert g.position()[1] < 15.0  # not there when the timeout passes
+        g.wait_clock(20.0, feed=g.neutral)
         p = g.position()
-        assert p[1] > 2.5 and abs(p[0]) < 0.5, p  # 2 m + 2 m (the second from where it was), east
+        assert p[1] == pytest.approx(20.0, abs=0.3) and abs(p[0]) < 0.3, p
         # a velocity with acceleration values: ignored (only the ignore bits of the mask matter)
         vel_acc = 0b0101_1100_0111  # 1479: velocity + yaw rate, acceleration marked ignored
 
