@@ -331,12 +331,15 @@ def register(main: click.Group) -> None:
                 )
             )
         for k, (name, spec, default, run_over, own) in enumerate(jobs):
-            if own:  # a run in the env it trained in: its layout, as its fixed policies played it
+            if obs_layout(spec) is None:  # a game without observation options (3-D, toy)
                 continue
             try:  # the policies' own observation layout (extended_obs), from their metadata
+                # a run in its own env: its models' layout decides (its fixed policies played
+                # in it during training as they will here)
+                specs = [default] if own else _used_specs(spec, default, run_over)
                 jobs[k] = (
                     name,
-                    layout_env(spec, _used_specs(spec, default, run_over), explicit=tuple(user_options)),
+                    layout_env(spec, specs, explicit=tuple(user_options)),
                     default,
                     run_over,
                     own,

@@ -175,3 +175,12 @@ def test_a_runs_models_observe_the_layout_it_trained_in(one: Path) -> None:
     assert policy_obs_layout(f"run:{one}/seed0/stages/target") == found
     plain = EnvSpec(kind="hptvsim", scenario="target")
     assert layout_env(plain, [f"run:{one}"] * 3 + ["maisac-evader"]).options["extended_obs"] is True
+
+
+def test_evaluate_refuses_an_option_against_a_runs_layout(one: Path) -> None:
+    res = invoke("evaluate", one, "--env-option", "extended_obs=false", "--episodes", "1")
+    assert res.exit_code == 1
+    assert res.output.startswith(
+        f"Error: --env-option extended_obs=false contradicts run:{one}/seed0, trained"
+    )
+    assert res.output.count("\n") == 1, res.output
