@@ -272,7 +272,7 @@ def register(main: click.Group) -> None:
         from hptvsim.train.config import ConfigError, check_env_spec
         from hptvsim.train.envs import EnvSpec, make_env_factory
         from hptvsim.train.evaluate import across_seeds, evaluate, markdown_table
-        from hptvsim.train.runs import expand_runs, open_run
+        from hptvsim.train.runs import expand_runs, obs_layout, open_run
 
         over: dict[str, str] = {}
         if pursuers:
