@@ -16,7 +16,8 @@ over which it behaves as ArduSub does (facts from ``../shared/notes/mavlink.md``
 * **does**: ``MAV_CMD_COMPONENT_ARM_DISARM`` with COMMAND_ACK (it never arms by itself;
   disarmed, the thrusters are neutral); SET_MODE and ``MAV_CMD_DO_SET_MODE`` for MANUAL,
   STABILIZE, ALT_HOLD and GUIDED (other modes: ``MAV_RESULT_FAILED``); MANUAL_CONTROL in the
-  manual modes (x forward, y lateral, z vertical with 500 neutral, r yaw; -1000..1000);
+  manual modes (x forward, y lateral, z vertical with 500 neutral, r yaw; -1000..1000; only
+  from ``SYSID_MYGCS`` and aimed at this system, as ArduSub takes it);
   SET_POSITION_TARGET_LOCAL_NED only in GUIDED (frames LOCAL_NED, LOCAL_OFFSET_NED, BODY_NED,
   BODY_OFFSET_NED, BODY_FRD; body-frame vectors rotated by the heading; position, velocity or
   both; yaw or yaw rate; acceleration never used, and a setpoint whose mask does not mark it
@@ -669,7 +670,10 @@ class SitlVehicle:
         elif kind == "SET_MODE" and self._for_me(msg):
             ok = self._set_mode(int(msg.custom_mode)) if msg.base_mode & _CUSTOM else False
             self._ack(11, _ACCEPTED if ok else _FAILED)
-        elif kind == "MANUAL_CONTROL" and self._for_me(msg):
+        elif kind == "MANUAL_CONTROL":
+            # ArduSub: only from its GCS (SYSID_MYGCS) and aimed at it (``target``, no broadcast)
+            if msg.get_srcSystem() != int(self.params["SYSID_MYGCS"]) or msg.target != self.sysid:
+                return
             self._last_pilot = self.time
             if self.mode in (MANUAL, STABILIZE, ALT_HOLD) and not self._failsafe:
                 self._stick = np.array(
@@ -677,6 +681,10 @@ class SitlVehicle:
                 )
                 self._stick = np.clip(self._stick, -1.0, 1.0)
             self._failsafe = False
+        elif kind == "RC_CHANNELS_OVERRIDE":
+            # from its GCS it feeds the pilot-input failsafe (the channels themselves are not flown)
+            if msg.get_srcSystem() == int(self.params["SYSID_MYGCS"]) and self._for_me(msg):
+                self._last_pilot = self.time
         elif kind == "SET_POSITION_TARGET_LOCAL_NED" and self._for_me(msg):
             if self.mode == GUIDED and self.armed:
                 self._setpoint(msg)

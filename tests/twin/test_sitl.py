@@ -279,12 +279,16 @@ def test_pilot_input_failsafe_disarms_in_guided(sitl: Running) -> None:
     # fed with neutral MANUAL_CONTROL it stays armed, setpoints or not
     g.wait_clock(2.5, feed=lambda: g.fly(1, 0.2, 0.0))
     assert g.heartbeat().base_mode & mavutil.mavlink.MAV_MODE_FLAG_SAFETY_ARMED
-    # setpoints alone do not feed it
+    # setpoints alone do not feed it, nor MANUAL_CONTROL aimed at another vehicle or from another system
     text = None
     t_stop = g.clock
     end = t_stop + 3.0
     while g.clock < end:
         _velocity(g, 1, 0.2, 0.0)
+        g.conn.mav.manual_control_send(2, 0, 0, 500, 0, 0)  # target: system 2
+        g.conn.mav.srcSystem = 200  # not SYSID_MYGCS (255)
+        g.neutral()
+        g.conn.mav.srcSystem = 255
         msg = g.recv(["ATTITUDE", "STATUSTEXT"])
         if msg.get_type() == "STATUSTEXT":
             text = (msg.text, g.clock)
@@ -528,7 +532,9 @@ def test_guided_position_offsets_and_ignored_acceleration() -> None:
         g.arm()
         # BODY_OFFSET_NED: 20 m ahead = 20 m east when heading east; sent once, it is a destination
         # that outlasts GUIDED's 3 s timeout (which stops velocity targets only)
-        g.conn.mav.set_position_target_local_ned_send(0, 1, 1, 9, pos_only, 20.0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0)
+        g.conn.mav.set_position_target_local_ned_send(
+            0, 1, 1, 9, pos_only, 20.0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0
+        )
         g.wait_clock(3.0, feed=g.neutral)
         assert g.position()[1] < 15.0  # not there when the timeout passes
         g.wait_clock(20.0, feed=g.neutral)
