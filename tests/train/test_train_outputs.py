@@ -53,6 +53,25 @@ def test_policy_specs_are_checked(run_dir: Path) -> None:
     assert act(env.reset(seed=0)[0]["pursuer_0"]).shape == (2,)
 
 
+def test_run_specs_take_a_one_game_runs_stage_folders(run_dir: Path) -> None:
+    """A one-game run's ``stages/<stage>`` folder names its models too (issue 50.3)."""
+    from hptvsim.train.runs import locate, open_run
+
+    run = open_run(run_dir)
+    assert (run.regime, run.stage_names, run.finished_stages()) == (
+        "game",
+        ["source", "target"],
+        ["source", "target"],
+    )
+    assert locate(run_dir)[1:] == (run_dir / "stages" / "target", run.stage("target"))
+    assert locate(run_dir / "stages" / "source")[1] == run_dir / "stages" / "source"
+    with pytest.raises(FileNotFoundError, match="is the models of 'source', not of 'target'"):
+        locate(run_dir / "stages" / "source", "target")
+    env = make_env_factory(PURSUIT)()
+    act = policy_from_spec(f"run:{run_dir}/stages/source", env, "pursuer_0")
+    assert act(env.reset(seed=0)[0]["pursuer_0"]).shape == (2,)
+
+
 def test_evaluate_command_writes_json_and_markdown(run_dir: Path, tmp_path: Path) -> None:
     res = CliRunner().invoke(
         main,
