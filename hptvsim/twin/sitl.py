@@ -60,6 +60,7 @@ __all__ = [
     "MAX_MESSAGES_PER_STEP",
     "SUPPORTED_MODES",
     "Environment",
+    "Running",
     "SitlError",
     "SitlVehicle",
     "VehicleModel",
@@ -67,6 +68,7 @@ __all__ = [
     "connect",
     "make_vehicle_model",
     "serve",
+    "start",
 ]
 
 ARDUSUB_MODES: Final = {
@@ -345,7 +347,7 @@ class SitlVehicle:
         self.time = 0.0  # s, the vehicle's clock (since boot)
         self.armed = False
         self.mode = MANUAL
-        self.statustexts: list[str] = []
+        self.statustexts: list[tuple[float, str]] = []  # (its clock [s], text) of each STATUSTEXT sent
         self.params: dict[str, float] = {k: v[0] for k, v in _ARDUSUB_PARAMS.items()}
         self.params["SYSID_THISMAV"] = float(self.sysid)
         self._vehicle_params = self._tunable()
@@ -640,6 +642,8 @@ class SitlVehicle:
             ahead = (self.time - sim0) / speedup - (time.monotonic() - wall0)  # s of wall time
             if ahead > 0:
                 stop.wait(ahead)
+            elif ahead < -0.2:  # stalled (a loaded machine): go on from now, never race to catch up
+                wall0, sim0 = time.monotonic(), self.time
 
     # -- receiving -------------------------------------------------------------------------------
 
@@ -781,7 +785,7 @@ class SitlVehicle:
 
     def statustext(self, text: str, severity: int = 2) -> None:
         """Send (and keep) a STATUSTEXT."""
-        self.statustexts.append(text)
+        self.statustexts.append((self.time, text))
         if self.conn is not None:
             self.conn.mav.statustext_send(severity, text.encode()[:50])
 
@@ -963,6 +967,33 @@ def build_vehicle(
         return float(world.heightmap.depth_at(p[0:2]))
 
     return SitlVehicle(model, connection, environment=Environment(current=current, seabed=seabed))
+
+
+class Running:
+    """A SITL vehicle stepping in a thread of its own (:func:`start`); :meth:`stop` ends it."""
+
+    def __init__(self, vehicle: SitlVehicle, *, speedup: float = 1.0, dt: float = 0.02) -> None:
+        self.vehicle = vehicle
+        self.event = threading.Event()
+        self.thread = threading.Thread(
+            target=serve,
+            args=(vehicle,),
+            kwargs={"speedup": speedup, "stop": self.event, "dt": dt},
+            name=f"sitl-{vehicle.sysid}",
+            daemon=True,
+        )
+
+    def stop(self, timeout: float = 10.0) -> None:
+        """Stop stepping (the vehicle disarms, its link closes) and wait for the thread [s]."""
+        self.event.set()
+        self.thread.join(timeout)
+
+
+def start(vehicle: SitlVehicle, *, speedup: float = 1.0, dt: float = 0.02) -> Running:
+    """Run a vehicle in a thread (several can run in one process, each on its own link)."""
+    run = Running(vehicle, speedup=speedup, dt=dt)
+    run.thread.start()
+    return run
 
 
 def connect(url: str, sysid: int) -> Any:
