@@ -17,7 +17,9 @@ calibrated from its logs.
 * :mod:`hptvsim.twin.beside`: the twin beside the vehicle (its FMU driven by the logged
   commands, re-synchronised; k-step prediction errors);
 * :mod:`hptvsim.twin.fit`, :mod:`hptvsim.twin.fit_report`, :mod:`hptvsim.twin.fit_cli`: the
-  grey-box calibration (``hptvsim vehicle fit``, ``hptvsim twin predict``).
+  grey-box calibration (``hptvsim vehicle fit``, ``hptvsim twin predict``);
+* :mod:`hptvsim.twin.sitl`, :mod:`hptvsim.twin.sitl_cli`: a simulated vehicle that speaks
+  ArduSub's MAVLink (``hptvsim vehicle sitl``).
 
 The twin layer sits above the visualisation layer: it may import the episodes, the views and
 everything below them; the service and the command line import it.
