@@ -558,3 +558,31 @@ def test_guided_position_offsets_and_ignored_acceleration() -> None:
         assert np.linalg.norm(g.position() - p1) < 0.1
     finally:
         run.close()
+
+
+def test_two_vehicles_in_one_process_each_answer_for_themselves() -> None:
+    """Two SITL vehicles (system ids 1 and 2) in one process, each on its own link, as a pilot runs them."""
+    ports = [_free_udp_port(), _free_udp_port()]
+    gcs = [Gcs(p) for p in ports]
+    vt = BUILTIN_VEHICLES["spherical"]
+    runs = []
+    try:
+        for sysid, port in ((1, ports[0]), (2, ports[1])):
+            model = make_vehicle_model(vt, dof=6, start=(0.0, 0.0, 5.0, 0.0))
+            runs.append(
+                start(SitlVehicle(model, connect(f"udpout:127.0.0.1:{port}", sysid)), speedup=SPEEDUP)
+            )
+        hb = [g.recv("HEARTBEAT") for g in gcs]
+        assert [h.get_srcSystem() for h in hb] == [1, 2]
+        # a command aimed at system 1 sent on system 2's link is not for it: no answer, not armed
+        gcs[1].conn.mav.command_long_send(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0)
+        with pytest.raises(AssertionError, match="no"):
+            gcs[1].recv("COMMAND_ACK", timeout=1.0)
+        gcs[1].conn.mav.command_long_send(2, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0)
+        assert gcs[1].recv("COMMAND_ACK").result == 0
+        assert runs[1].vehicle.armed and not runs[0].vehicle.armed
+    finally:
+        for r in runs:
+            r.stop()
+        for g in gcs:
+            g.close()
