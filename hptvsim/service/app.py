@@ -610,10 +610,28 @@ def _event_streams_by_item(app: FastAPI) -> None:
                         stream = answer.get("content", {}).get("text/event-stream")
                         if isinstance(stream, dict) and "itemSchema" in stream:
                             stream.pop("schema", None)
+            _null_defaults(doc)
             app.openapi_schema = doc
         return app.openapi_schema
 
     app.openapi = openapi  # type: ignore[method-assign]  # FastAPI's documented way to amend it
+
+
+def _null_defaults(doc: dict[str, Any]) -> None:
+    """State the request bodies' null defaults (``seed``: null, the scenario's), which FastAPI drops.
+
+    FastAPI writes the document without its null values, a field's ``"default": null`` among
+    them; a body field whose default is null stands for the scenario's own value, and a client
+    reading the document should see that ``{}`` is a complete request (issue 50.8).
+    """
+    from hptvsim.service.schemas import EpisodeCreate, StepIn
+
+    schemas = doc.get("components", {}).get("schemas", {})
+    for model in (EpisodeCreate, StepIn):
+        props = schemas.get(model.__name__, {}).get("properties", {})
+        for name, field in model.model_fields.items():
+            if name in props and not field.is_required() and field.default is None:
+                props[name].setdefault("default", None)
 
 
 def _start_viser(app: FastAPI, svc: Service, s: Settings) -> Any:

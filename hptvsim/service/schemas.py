@@ -168,8 +168,17 @@ def _episode_create_schema(schema: dict[str, Any]) -> None:
     schema.update(shipped_scenario_rules())
 
 
+_NULL_DEFAULT: dict[str, Any] = {"default": None}
+"""A field whose default, null, stands for the scenario's own value, stated in the document."""
+
+
 class EpisodeCreate(Strict):
-    """A new episode."""
+    """A new episode: every field has a default, so ``{}`` runs the scenario ``source``.
+
+    The OpenAPI document states each default (``scenario``: ``source``, ``mode``: ``run``,
+    ``policies``: ``{}``, the roles' default policies, ``seed``, ``max_steps`` and
+    ``sensor_fidelity``: null, the scenario's own).
+    """
 
     model_config = ConfigDict(extra="forbid", json_schema_extra=_episode_create_schema)
 
@@ -177,7 +186,7 @@ class EpisodeCreate(Strict):
         "source",
         description="a shipped scenario's name (GET /api/v1/scenarios) or a scenario as data (the "
         "tables of a scenario file; see `hptvsim scenario schema`); file terrain may only name the "
-        "shipped data files",
+        "shipped data files; default: source",
         examples=["source"],
     )
     mode: Literal["run", "interactive"] = Field(
@@ -193,24 +202,27 @@ class EpisodeCreate(Strict):
         "the shipped trained policy (GET /api/v1/policies, default_for), else pure_pursuit for "
         "pursuers and potential_field for evaders",
         max_length=64,
-        json_schema_extra=NO_OTHER_KEYS,
+        json_schema_extra={**NO_OTHER_KEYS, "default": {}},
     )
     control: list[AgentName] = Field(
         default_factory=list,
         description="interactive mode: the agents the client steps; one also given a policy "
         "(policies.<agent>) follows it in the steps whose actions leave it out",
         max_length=64,
-        json_schema_extra={"uniqueItems": True},
+        json_schema_extra={"uniqueItems": True, "default": []},
     )
     seed: json_int(0, MAX_SEED) | None = Field(  # type: ignore[valid-type]  # an Annotated type
         None,
         description="seed of spawn poses, sensor noise and random policies (default: the scenario's)",
+        json_schema_extra=_NULL_DEFAULT,
     )
     max_steps: json_int(1, 10_000_000) | None = Field(  # type: ignore[valid-type]  # an Annotated type
-        None, description="step limit (default: the scenario's; bounded by the service)"
+        None,
+        description="step limit (default: the scenario's; bounded by the service)",
+        json_schema_extra=_NULL_DEFAULT,
     )
     sensor_fidelity: Literal["geometric", "signal"] | None = Field(
-        None, description="sonar model (default: the scenario's)"
+        None, description="sonar model (default: the scenario's)", json_schema_extra=_NULL_DEFAULT
     )
     backend: Literal["batched", "fmu"] = Field(
         "batched", description="batched: the compiled dynamics; fmu: one FMI 2.0 FMU instance per vehicle"
@@ -409,7 +421,15 @@ def request_models(settings: Settings) -> RequestModels:
     names = tuple(scenario_names())
     scenario_name: Any = Literal[names]  # built from the catalog
     accepted = sorted({n for p in policies() for n in (p.name, *p.aliases)})
-    policy_name: Any = Literal[tuple(accepted)]  # built from the catalog
+    # the document lists every name (each shipped scenario's branch of the body's anyOf, the
+    # names of its agents' roles and game); the server checks a name against the scenario's
+    # game and the agent's role (validation.resolve_request), so a refusal lists the names
+    # that fit, as the command line's does, never the other game's
+    policy_name: Any = Annotated[
+        str,
+        StringConstraints(max_length=200),  # bounded; any other name is refused by the catalog
+        WithJsonSchema({"type": "string", "enum": accepted}),
+    ]
     inline = Annotated[dict[str, Any], WithJsonSchema(scenario_json_schema(standalone=False))]
     fields = EpisodeCreate.model_fields
     episode_create = create_model(
@@ -418,7 +438,9 @@ def request_models(settings: Settings) -> RequestModels:
         scenario=(
             scenario_name | inline,
             Field(
-                fields["scenario"].default, description=fields["scenario"].description, examples=["source"]
+                fields["scenario"].default,
+                description=fields["scenario"].description,
+                examples=[fields["scenario"].default],
             ),
         ),
         policies=(
@@ -427,7 +449,7 @@ def request_models(settings: Settings) -> RequestModels:
                 default_factory=dict,
                 description=fields["policies"].description,
                 max_length=settings.max_agents,
-                json_schema_extra=NO_OTHER_KEYS,
+                json_schema_extra={**NO_OTHER_KEYS, "default": {}},
             ),
         ),
         control=(
@@ -436,12 +458,16 @@ def request_models(settings: Settings) -> RequestModels:
                 default_factory=list,
                 description=fields["control"].description,
                 max_length=settings.max_agents,
-                json_schema_extra={"uniqueItems": True},
+                json_schema_extra={"uniqueItems": True, "default": []},
             ),
         ),
         max_steps=(
             json_int(1, settings.max_steps) | None,
-            Field(None, description="step limit (default: the scenario's, at most this service's limit)"),
+            Field(
+                None,
+                description="step limit (default: the scenario's, at most this service's limit)",
+                json_schema_extra=_NULL_DEFAULT,
+            ),
         ),
     )
     step_in = create_model(
