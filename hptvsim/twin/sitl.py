@@ -6,12 +6,13 @@ file from ``hptvsim vehicle fit`` included) in raw force mode, driven by an Ardu
 controller, in the scenario's currents and above its seabed, and a MAVLink connection (pymavlink)
 over which it behaves as ArduSub does (facts from ``../shared/notes/mavlink.md``):
 
-* **sends** HEARTBEAT 1 Hz (``MAV_TYPE_SUBMARINE``, ``MAV_AUTOPILOT_ARDUPILOTMEGA``, ArduSub's
-  mode number in ``custom_mode``, bit 128 when armed), SYS_STATUS 2 Hz, ATTITUDE 10 Hz,
-  LOCAL_POSITION_NED, GLOBAL_POSITION_INT and SCALED_PRESSURE2 (depth as water pressure) 5 Hz,
-  SERVO_OUTPUT_RAW 5 Hz (a BlueROV2 vehicle: the eight motors' PWM of ArduSub's vectored-6DOF
-  mixing, through which the forces are applied with the T200 curve of
-  :mod:`hptvsim.twin.thrusters`), SYSTEM_TIME 1 Hz and TIMESYNC (answers, and one every 10 s);
+* **sends** at the rates of a real BlueROV2's stream (:data:`RATES_S`): HEARTBEAT 1 Hz
+  (``MAV_TYPE_SUBMARINE``, ``MAV_AUTOPILOT_ARDUPILOTMEGA``, ArduSub's mode number in
+  ``custom_mode``, bit 128 when armed), SYS_STATUS 2 Hz, ATTITUDE 20 Hz, LOCAL_POSITION_NED and
+  GLOBAL_POSITION_INT 3 Hz, SCALED_PRESSURE2 (depth as water pressure) 2 Hz, SERVO_OUTPUT_RAW
+  2 Hz (a BlueROV2 vehicle: the eight motors' PWM, through which the forces are applied with the
+  T200 curve of :mod:`hptvsim.twin.thrusters`), SYSTEM_TIME 3 Hz and TIMESYNC (answers, and one
+  every 10 s);
   times are its own clock (``time_boot_ms``), which ``speedup`` runs faster than the wall's;
 * **does**: ``MAV_CMD_COMPONENT_ARM_DISARM`` with COMMAND_ACK (it never arms by itself;
   disarmed, the thrusters are neutral); SET_MODE and ``MAV_CMD_DO_SET_MODE`` for MANUAL,
@@ -58,6 +59,7 @@ from hptvsim.twin.thrusters import (
 __all__ = [
     "ARDUSUB_MODES",
     "MAX_MESSAGES_PER_STEP",
+    "RATES_S",
     "SUPPORTED_MODES",
     "Environment",
     "Running",
@@ -89,6 +91,19 @@ SUPPORTED_MODES: Final = frozenset({0, 2, 4, 19})
 """The modes this vehicle flies: STABILIZE, ALT_HOLD, GUIDED, MANUAL."""
 MANUAL, STABILIZE, ALT_HOLD, GUIDED = 19, 0, 2, 4
 MAX_MESSAGES_PER_STEP: Final = 200
+RATES_S: Final = {
+    "HEARTBEAT": 1.0,
+    "ATTITUDE": 1.0 / 20.0,
+    "LOCAL_POSITION_NED": 1.0 / 3.0,  # and GLOBAL_POSITION_INT
+    "SCALED_PRESSURE2": 1.0 / 2.0,
+    "SERVO_OUTPUT_RAW": 1.0 / 2.0,
+    "SYS_STATUS": 1.0 / 2.0,
+    "SYSTEM_TIME": 1.0 / 3.0,
+    "TIMESYNC": 10.0,
+}
+"""Period [s] of each message: the rates of a BlueROV2's ArduSub in ``../shared/data/ardusub/small.tlog``
+(ATTITUDE 19.9 Hz, LOCAL_POSITION_NED and GLOBAL_POSITION_INT 3.0 Hz, SCALED_PRESSURE2 2.4 Hz,
+SERVO_OUTPUT_RAW and SYS_STATUS 2.0 Hz, SYSTEM_TIME 3.0 Hz, HEARTBEAT 1.0 Hz, TIMESYNC 0.1 Hz)."""
 GUIDED_TIMEOUT_S: Final = 3.0  # s, GUIDED_POSVEL_TIMEOUT_MS
 H_MAX: Final = 0.02  # s, the largest integration step
 G: Final = 9.81  # m/s^2
@@ -819,7 +834,7 @@ class SitlVehicle:
         pos, eul = m.pose()
         vel_b, rates = m.velocity()
         vel_n = _rot(*eul) @ vel_b
-        if self._due("hb", 1.0):
+        if self._due("hb", RATES_S["HEARTBEAT"]):
             base = _CUSTOM | (_ARMED if self.armed else 0)
             base |= {
                 MANUAL: _MANUAL_FLAG,
@@ -829,16 +844,16 @@ class SitlVehicle:
             state = _MAV_STATE_ACTIVE if self.armed else _MAV_STATE_STANDBY
             mav.heartbeat_send(_MAV_TYPE_SUBMARINE, _MAV_AUTOPILOT_ARDUPILOTMEGA, base, self.mode, state)
         self._send_param_batch()
-        if self._due("system_time", 1.0):
+        if self._due("system_time", RATES_S["SYSTEM_TIME"]):
             mav.system_time_send(int(time.time() * 1e6), ms)
-        if self._due("timesync", 10.0):
+        if self._due("timesync", RATES_S["TIMESYNC"]):
             mav.timesync_send(0, int(self.time * 1e9))
-        if self._due("sys_status", 0.5):
+        if self._due("sys_status", RATES_S["SYS_STATUS"]):
             sensors = 0x1 | 0x2 | 0x4 | 0x8 | 0x20 | 0x8000  # gyro, accel, mag, baro, ... motor outputs
             mav.sys_status_send(sensors, sensors, sensors, 0, 16000, -1, -1, 0, 0, 0, 0, 0, 0)
-        if self._due("attitude", 0.1):
+        if self._due("attitude", RATES_S["ATTITUDE"]):
             mav.attitude_send(ms, *(float(a) for a in eul), *(float(r) for r in rates))
-        if self._due("position", 0.2):
+        if self._due("position", RATES_S["LOCAL_POSITION_NED"]):
             mav.local_position_ned_send(ms, *(float(v) for v in pos), *(float(v) for v in vel_n))
             lat = self.home[0] + math.degrees(pos[0] / EARTH_RADIUS)
             lon = self.home[1] + math.degrees(pos[1] / (EARTH_RADIUS * math.cos(math.radians(self.home[0]))))
@@ -852,12 +867,13 @@ class SitlVehicle:
                 *(round(v * 100) for v in vel_n),
                 hdg,
             )
+        if self._due("pressure", RATES_S["SCALED_PRESSURE2"]):
             rho = float(m.p[m.plant.param_names.index("rho")])
             press = P_SURFACE + rho * G * max(float(pos[2]), 0.0)  # Pa
             mav.scaled_pressure2_send(ms, press / 100.0, 0.0, 1500)
-            if m.bluerov2:
-                pwm = [round(v) for v in self._pwm]
-                mav.servo_output_raw_send((ms * 1000) % 2**32, 0, *pwm)
+        if m.bluerov2 and self._due("servo", RATES_S["SERVO_OUTPUT_RAW"]):
+            pwm = [round(v) for v in self._pwm]
+            mav.servo_output_raw_send((ms * 1000) % 2**32, 0, *pwm)
 
     def _send_param_batch(self) -> None:
         """Send the next parameters of a PARAM_REQUEST_LIST (at most 20 per step)."""

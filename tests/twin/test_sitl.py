@@ -31,6 +31,7 @@ from pymavlink import mavutil
 from hptvsim.dynamics import BUILTIN_VEHICLES
 from hptvsim.twin.sitl import (
     ARDUSUB_MODES,
+    RATES_S,
     SitlVehicle,
     _vehicle_type,
     build_vehicle,
@@ -170,11 +171,17 @@ def test_heartbeat_is_ardusubs(sitl: Running) -> None:
     assert hb.get_srcSystem() == 1 and hb.get_srcComponent() == 1
     for kind in ("SYS_STATUS", "ATTITUDE", "GLOBAL_POSITION_INT", "SCALED_PRESSURE2", "SYSTEM_TIME"):
         sitl.gcs.recv(kind)
-    # heartbeats come once a second of the vehicle's clock
+    # on the vehicle's clock, over 4 heartbeats (4 s): a real BlueROV2's rates (small.tlog)
     sitl.gcs.heartbeat()
     t0 = sitl.gcs.clock
-    sitl.gcs.heartbeat()
-    assert sitl.gcs.clock - t0 == pytest.approx(1.0, abs=0.15)
+    counts: dict[str, int] = {}
+    for _ in range(4):
+        while (m := sitl.gcs.recv(list(RATES_S))).get_type() != "HEARTBEAT":
+            counts[m.get_type()] = counts.get(m.get_type(), 0) + 1
+    assert sitl.gcs.clock - t0 == pytest.approx(4.0, abs=0.15)
+    for kind in ("ATTITUDE", "LOCAL_POSITION_NED", "SCALED_PRESSURE2", "SYS_STATUS", "SYSTEM_TIME"):
+        assert counts[kind] == pytest.approx(4.0 / RATES_S[kind], abs=1.5), (kind, counts)
+    assert RATES_S["ATTITUDE"] == 0.05 and RATES_S["LOCAL_POSITION_NED"] == pytest.approx(1 / 3)
     # TIMESYNC: a request (tc1 = 0) is answered with the vehicle's clock
     sitl.gcs.conn.mav.timesync_send(0, 123456789)
     ts = sitl.gcs.recv("TIMESYNC", cond=lambda m: m.ts1 == 123456789)
