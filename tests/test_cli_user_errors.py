@@ -232,6 +232,14 @@ CASES: dict[str, tuple[list[str], tuple[str, ...]]] = {
         ("nosuch", "work_class"),
     ),
     "twin-predict": (["twin", "predict", "garbage.bin", "--vehicle", "spherical"], ("garbage.bin", "'time'")),
+    "vehicle-sitl": (
+        ["vehicle", "sitl", "--vehicle", "nosuch", "--mavlink", "udpout:127.0.0.1:9"],
+        ("nosuch", "work_class"),
+    ),
+    "vehicle-sitl-mavlink": (
+        ["vehicle", "sitl", "--vehicle", "work_class", "--mavlink", "serial:/dev/nosuch"],
+        ("serial:/dev/nosuch", "udpout:HOST:PORT"),
+    ),
     "cosim-run-broken": (["cosim", "run", "bad.toml"], ("bad.toml", "line 1")),
     "cosim-run-missing": (["cosim", "run", "missing.toml"], ("missing.toml", "does not exist")),
     "cosim-export-ssp": (["cosim", "export-ssp", "bad.toml", "--out", "x.ssp"], ("bad.toml", "line 1")),
@@ -299,6 +307,7 @@ CASES: dict[str, tuple[list[str], tuple[str, ...]]] = {
     "bench-sensors": (["bench", "sensors", "--nosuch"], ("--nosuch", "No such option")),
     "bench-env": (["bench", "env", "--scenario", "nosuch"], ("nosuch", "target")),
     "bench-episode": (["bench", "episode", "--scenario", "nosuch"], ("nosuch", "target")),
+    "bench-threads": (["bench", "threads", "--scenario", "nosuch"], ("nosuch", "target")),
     "bench-world": (["bench", "world", "--nosuch"], ("--nosuch", "No such option")),
     "bench-train": (["bench", "train", "--env", "nosuch"], ("nosuch", "hptvsim")),
     "bench-learn": (["bench", "learn", "--trainer", "nosuch"], ("nosuch", "fast ippo")),
