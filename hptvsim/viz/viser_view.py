@@ -528,7 +528,10 @@ def distance_plot(static: EpisodeStatic | None) -> dict[str, Any]:
     return {
         "data": tuple(np.zeros(1) for _ in series),
         "series": tuple(series),
-        "scales": {"x": {"time": False}},
+        # the x range from the data's first and last time at every update (a (None, None) range:
+        # viser resolves each side from the data); an auto x scale stayed at the range of the
+        # data the plot was created with (0-1 s) in a browser that connected later
+        "scales": {"x": {"time": False, "range": (None, None)}},
         "axes": ({"label": TIME_LABEL}, {"label": f"to {target} [m]"}),
         "aspect": 1.2,  # width / height: tall enough for the y label in the narrow panel
     }

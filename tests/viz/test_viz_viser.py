@@ -180,7 +180,7 @@ def test_the_distance_plot_counts_simulated_seconds_in_each_pursuers_colour() ->
     """uPlot reads x as Unix time unless told otherwise (0-300 s showed as 1970 dates)."""
     target = run_episode("target", seed=0, max_steps=1).static
     cfg = distance_plot(target)
-    assert cfg["scales"] == {"x": {"time": False}}
+    assert cfg["scales"] == {"x": {"time": False, "range": (None, None)}}
     assert cfg["axes"][0]["label"] == TIME_LABEL == "time [s]"
     assert cfg["axes"][1]["label"] == "to the evader [m]"
     series = cfg["series"]
@@ -195,7 +195,7 @@ def test_the_distance_plot_counts_simulated_seconds_in_each_pursuers_colour() ->
     goto = distance_plot(run_episode("goto_tiny", seed=0, max_steps=1).static)  # no pursuer: to the goal
     assert goto["axes"][1]["label"] == "to the goal [m]"
     assert [(s["label"], s["stroke"]) for s in goto["series"][1:]] == [("evader_0", agent_color("evader", 0))]
-    assert distance_plot(None)["scales"] == {"x": {"time": False}}
+    assert distance_plot(None)["scales"] == {"x": {"time": False, "range": (None, None)}}
 
 
 def test_the_live_view_sends_a_seconds_axis_and_replots_per_episode() -> None:
@@ -211,7 +211,7 @@ def test_the_live_view_sends_a_seconds_axis_and_replots_per_episode() -> None:
             plots = client.received("GuiUplotMessage")
             assert plots, [m.get("type") for m in client.messages][:40]
             props = plots[-1]["props"]
-            assert props["scales"] == {"x": {"time": False}}
+            assert props["scales"] == {"x": {"time": False, "range": [None, None]}}  # as sent
             assert [a["label"] for a in props["axes"]] == ["time [s]", "to the evader [m]"]
             strokes = [s.get("stroke") for s in props["series"][1:4]]
             assert strokes == [agent_color("pursuer", k) for k in range(3)]
@@ -231,7 +231,7 @@ def test_the_live_view_sends_a_seconds_axis_and_replots_per_episode() -> None:
             removed = {m["uuid"] for m in client.received("GuiRemoveMessage")}
             assert first in removed  # the old plot went with its series
             props = client.received("GuiUplotMessage")[-1]["props"]
-            assert props["scales"] == {"x": {"time": False}}
+            assert props["scales"] == {"x": {"time": False, "range": [None, None]}}  # as sent
             assert [(s["label"], s.get("stroke")) for s in props["series"][1:]] == [
                 ("evader_0", agent_color("evader", 0))
             ]
