@@ -307,6 +307,7 @@ CASES: dict[str, tuple[list[str], tuple[str, ...]]] = {
     "bench-sensors": (["bench", "sensors", "--nosuch"], ("--nosuch", "No such option")),
     "bench-env": (["bench", "env", "--scenario", "nosuch"], ("nosuch", "target")),
     "bench-episode": (["bench", "episode", "--scenario", "nosuch"], ("nosuch", "target")),
+    "bench-threads": (["bench", "threads", "--scenario", "nosuch"], ("nosuch", "target")),
     "bench-world": (["bench", "world", "--nosuch"], ("--nosuch", "No such option")),
     "bench-train": (["bench", "train", "--env", "nosuch"], ("nosuch", "hptvsim")),
     "bench-learn": (["bench", "learn", "--trainer", "nosuch"], ("nosuch", "fast ippo")),
