@@ -285,6 +285,20 @@ COMMANDS: dict[str, tuple[Run | Help, ...]] = {
             (),
         ),
     ),
+    "hptvsim reproduce --plan section5-scale --address HEAD:6379 --out /shared/repro/section5-scale": (
+        Help(
+            "needs a Ray cluster and shared storage (tests/train/test_repro_cluster.py: two raylets)",
+            "hptvsim reproduce --help",
+            r"--address TEXT",
+        ),
+    ),
+    "RAY_ADDRESS=HEAD:6379 hptvsim reproduce --status --out /shared/repro/section5-scale": (
+        Help(
+            "needs a Ray cluster (tests/train/test_repro_cluster.py asks one for its status)",
+            "hptvsim reproduce --help",
+            r"\$RAY_ADDRESS",
+        ),
+    ),
     "hptvsim reproduce --report-only": (
         Run(
             "hptvsim reproduce --report-only --out {tmp}/rep --report {tmp}/report.md",

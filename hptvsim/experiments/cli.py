@@ -508,6 +508,14 @@ def register(main: click.Group) -> None:
         "running sweep's rate and time left; write and train nothing.",
     )
     @click.option("--no-figures", is_flag=True, help="Write the report without figures.")
+    @click.option(
+        "--address",
+        envvar="RAY_ADDRESS",
+        default=None,
+        help="Run every run and DT step as a Ray task on this cluster (HOST:PORT, ray://HOST:PORT or "
+        "auto; default: $RAY_ADDRESS, else local processes); --out and the plan on storage every node "
+        "shares. With --status: also the cluster's nodes and which run each trains.",
+    )
     def reproduce_cmd(
         plan_file: str,
         out_dir: Path | None,
@@ -518,6 +526,7 @@ def register(main: click.Group) -> None:
         report_only: bool,
         status_only: bool,
         no_figures: bool,
+        address: str | None,
     ) -> None:
         """The paper's section-V experiments on the pursuit game, with seeds, intervals and verdicts.
 
@@ -547,6 +556,10 @@ def register(main: click.Group) -> None:
         if report_only and status_only:
             raise click.UsageError("give one of --status and --report-only, not both")
         try:
+            if address:  # first: a refused address costs no planning
+                from hptvsim.experiments.repro_cluster import check_address
+
+                check_address(address)
             plan = load_plan(resolve_plan_path(plan_file))
             for e in experiments:
                 if not (e == DT_EXPERIMENT and plan.dt is not None):
@@ -583,6 +596,17 @@ def register(main: click.Group) -> None:
                 + (f"; {n_dt} of {len(dts)} DT steps finished" if dts else "")
             )
             click.echo(sweep_eta(out, all_steps - steps))
+            if address:
+                from hptvsim.experiments.repro_cluster import cluster_status
+
+                try:
+                    lines = cluster_status(
+                        address, out, [j.run_dir for j, *_ in rows] + [j.run_dir for j, _ in dts]
+                    )
+                except ConfigError as exc:
+                    raise click.ClickException(str(exc)) from None
+                for line in lines:
+                    click.echo(line)
             return
         if report_only:
             click.echo(str(write_report(plan, out, report, figures=not no_figures)))
@@ -592,8 +616,9 @@ def register(main: click.Group) -> None:
         runs = (
             f"{n} run" + ("" if n == 1 else "s") + (f" and {n_dt} DT step{'s' * (n_dt != 1)}" if n_dt else "")
         )
-        click.echo(f"{runs} in {out} ({workers or plan.workers} side by side); report: {report}")
-        note = workers_warning(workers or plan.workers)
+        side = "on the Ray cluster" if address else f"({workers or plan.workers} side by side)"
+        click.echo(f"{runs} in {out} {side}; report: {report}")
+        note = None if address else workers_warning(workers or plan.workers)
         if note:
             click.echo(note, err=True)
         try:
@@ -606,7 +631,10 @@ def register(main: click.Group) -> None:
                 seeds=seeds or None,
                 figures=not no_figures,
                 log=click.echo,
+                address=address or None,
             )
+        except ConfigError as exc:  # the cluster refused: a bad address, a node without the shared folder
+            raise click.ClickException(str(exc)) from None
         except KeyboardInterrupt:
             click.echo("interrupted; run the same command to go on", err=True)
             sys.exit(130)

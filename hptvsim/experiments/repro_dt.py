@@ -122,9 +122,13 @@ ARCHIVE_FILES = (
     "run/config.toml",
     "run/loss.csv",
     "eval.json",
+    "run.json",
     "summary.json",
 )
-"""What the archive keeps of a finished DT step (``summary.json`` last: a copy cut short is unfinished)."""
+"""What the archive keeps of a finished DT step (``summary.json`` last: a copy cut short is unfinished).
+
+``run.json`` is there when the step ran as a Ray task (:mod:`hptvsim.experiments.repro_cluster`):
+the node it ran on."""
 
 
 @dataclass(frozen=True)

@@ -780,6 +780,11 @@ def _stop_requested() -> bool:
     return _stop["requested"]
 
 
+def _set_stop(value: bool) -> None:
+    """Set or clear this process's stop request (in a task of :mod:`hptvsim.experiments.repro_cluster`)."""
+    _stop["requested"] = value
+
+
 def _die_with_parent() -> None:
     """Worker initializer: one torch thread; on Linux, end when the parent process ends.
 
@@ -2422,6 +2427,7 @@ def reproduce(
     figures: bool = True,
     log: Callable[[str], None] = print,
     stop_grace_s: float = 600.0,
+    address: str | None = None,
 ) -> dict[str, Any]:
     """Train, evaluate and report (see the module docstring); returns the job statuses.
 
@@ -2451,6 +2457,9 @@ def reproduce(
         figures: Draw the figures.
         log: Where status lines go.
         stop_grace_s: Longest wait [s] for the runs to reach their episodes' ends when interrupted.
+        address: A Ray cluster's address: every run and DT step is a Ray task there, one CPU
+            each, ``workers`` at a time (default: the cluster's CPUs); ``out`` and the plan must
+            be on storage every node shares (:mod:`hptvsim.experiments.repro_cluster`).
     """
     out.mkdir(parents=True, exist_ok=True)
     archive = archive_dir(report, plan)
@@ -2495,6 +2504,11 @@ def reproduce(
 
     total_steps = sum(budgets.values())
     meter = _RateMeter()
+    cluster = None
+    if address is not None:  # the same loop below, its units as Ray tasks
+        from hptvsim.experiments.repro_cluster import ClusterPool
+
+        cluster = ClusterPool(address, out, plan.path, _set_stop, log)
 
     def show_progress() -> None:  # the bar counts env steps over every run: its rate and ETA mean something
         steps, finished, training = sweep_progress(out, budgets)
@@ -2521,7 +2535,7 @@ def reproduce(
         )
     import multiprocessing
 
-    pool = ProcessPoolExecutor(
+    pool: Any = cluster or ProcessPoolExecutor(
         max_workers=n, mp_context=multiprocessing.get_context("spawn"), initializer=_die_with_parent
     )
     previous_term = None  # SIGTERM (kill, docker stop) stops the sweep as Ctrl-C does
@@ -2544,6 +2558,8 @@ def reproduce(
     try:
         queue: list[Unit] = [*plan_units(plan, jobs), *plan_units(plan, retrain), *dt_jobs]
         while queue or pending:
+            if cluster is not None and workers is None:
+                n = cluster.capacity  # the cluster's CPUs now: nodes come and go
             while len(pending) < n and (job := next_unit(queue)) is not None:
                 log(f"[{time.strftime('%H:%M:%S')}] start {job.run_dir}")
                 pending[pool.submit(run_unit, str(plan.path), job, str(out))] = job
@@ -2579,7 +2595,10 @@ def reproduce(
             f"its episode with a checkpoint (at most {stop_grace_s / 60:.0f} min; Ctrl-C again stops "
             "at once, and the runs lose what they did since their last checkpoint)"
         )
-        _stop_workers(pending, stop_grace_s, log)
+        if cluster is not None:
+            cluster.stop(pending, stop_grace_s, log, _status_line)
+        else:
+            _stop_workers(pending, stop_grace_s, log)
         pool.shutdown(wait=False, cancel_futures=True)
         log("writing the report from the finished runs; run the same command to go on")
         write_report(plan, out, report, figures=figures)
