@@ -38,7 +38,7 @@ Folders::
 The archive (:func:`archive_finished`) keeps what the report reads of every finished run (its
 config, ``run.json``, ``summary.json``, the episode and update logs, gzipped
 (:mod:`hptvsim.experiments.repro_archive`), the stages' ``stage.json`` and the evaluations; no
-models, no checkpoints: tens of kB per run) in a folder that is
+models, no checkpoints: about 100 kB per run) in a folder that is
 committed with the report, so the results outlive the run folders: a fresh clone's sweep
 restores them (:func:`restore_archived`) and trains only the runs not in the archive, and the
 report regenerates from a clone alone. An archived run is restored only while the plan still
