@@ -85,3 +85,22 @@ def test_a_run_restored_without_its_logs_gets_them_from_the_gzipped_archive(tmp_
     before = {p: p.read_bytes() for p in (archive / "base-seed0").rglob("*") if p.is_file()}
     archive_finished(plan, out, archive)  # archiving it again writes the same bytes
     assert {p: p.read_bytes() for p in (archive / "base-seed0").rglob("*") if p.is_file()} == before
+
+
+def test_a_dt_step_restored_without_its_loss_log_gets_it_from_the_gzipped_archive(tmp_path: Path) -> None:
+    """The same for a DT step: its ``run/loss.csv`` (gzipped in the archive) behind D1a/D1b."""
+    from hptvsim.experiments.repro_dt import collect_dt, restore_dt
+
+    plan = load_plan(ROOT / "configs" / "reproduce" / "section5-scale.toml")
+    assert plan.dt is not None
+    archive, out = tmp_path / "archive", tmp_path / "out"
+    shutil.copytree(SCALE_ARCHIVE / "dt-base-seed0", archive / "dt-base-seed0")
+    assert (archive / "dt-base-seed0" / "run" / "loss.csv.gz").is_file()
+    assert restore_dt(plan.dt, out, archive, plan.fixed_episodes, log=lambda _: None) == ["dt-base-seed0"]
+    metrics = collect_dt(plan.dt, out, plan.fixed_episodes).values[0]
+    assert {"loss_change", "loss_ratio", "distance_slope"} <= set(metrics)
+
+    (out / "dt" / "base-seed0" / "run" / "loss.csv").unlink()  # as an older hptvsim restores it
+    assert "loss_ratio" not in collect_dt(plan.dt, out, plan.fixed_episodes).values[0]
+    assert restore_dt(plan.dt, out, archive, plan.fixed_episodes, log=lambda _: None) == ["dt-base-seed0"]
+    assert collect_dt(plan.dt, out, plan.fixed_episodes).values[0] == metrics
