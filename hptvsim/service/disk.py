@@ -25,6 +25,7 @@ __all__ = [
     "QuotaExceededError",
     "folder_bytes",
     "no_space_message",
+    "remove_stale_temporaries",
 ]
 
 MIB = 1024 * 1024
@@ -57,6 +58,52 @@ class QuotaExceededError(Exception):
         self.used = used
         self.needed = needed
         self.quota = quota
+
+
+def _pid_alive(pid: int) -> bool:
+    """Whether a process ``pid`` runs on this machine."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # another user's: alive
+        return True
+    return True
+
+
+def remove_stale_temporaries(root: Path) -> int:
+    """Remove the temporaries of writes that were interrupted in the episodes' folders; returns how many.
+
+    A file is written whole or not at all through a temporary beside it named
+    ``.NAME.PID.HEX.SUFFIX`` (:func:`hptvsim._files.atomic_path`); a writer killed part-way leaves
+    it behind, where it would count against the disk quota forever. One whose writer (``PID``)
+    no longer runs is removed; one of a running process (``hptvsim twin replay --store`` beside
+    the service) is left to it.
+    """
+    removed = 0
+    try:
+        folders = [Path(e.path) for e in os.scandir(root) if e.is_dir(follow_symlinks=False)]
+    except FileNotFoundError:
+        return 0
+    for folder in folders:
+        try:
+            entries = list(os.scandir(folder))
+        except OSError:
+            continue
+        for entry in entries:
+            parts = entry.name.split(".")
+            # ".recording.rrd.123.abcd.rrd".split(".") -> ["", "recording", "rrd", "123", "abcd", "rrd"]
+            pid = next((int(p) for p in parts[2:-1] if p.isdigit()), None)
+            if not entry.name.startswith(".") or pid is None or not entry.is_file(follow_symlinks=False):
+                continue
+            if _pid_alive(pid):
+                continue
+            try:
+                os.unlink(entry.path)
+                removed += 1
+            except OSError:
+                pass
+    return removed
 
 
 def folder_bytes(folder: Path) -> int:
@@ -143,7 +190,11 @@ class DiskUsage:
         self._estimated_total = 0
 
     def recompute(self) -> int:
-        """Measure every folder under the root (at start); returns the total [B]."""
+        """Measure every folder under the root (at start); returns the total [B].
+
+        Temporaries of writes that were interrupted are removed first (:func:`remove_stale_temporaries`).
+        """
+        remove_stale_temporaries(self.root)
         sizes: dict[str, int] = {}
         try:
             with os.scandir(self.root) as entries:

@@ -14,6 +14,7 @@ This is the local operator's command: the API has no way for a client to name a 
 from __future__ import annotations
 
 import logging
+import os
 import shutil
 import threading
 import time
@@ -30,9 +31,17 @@ from hptvsim.twin.log import VehicleLog
 from hptvsim.twin.mavlink import TwinLogError
 from hptvsim.twin.replay import TwinEpisode, episode_of, write_recording
 
-__all__ = ["TwinListenTask", "store_twin_episode"]
+__all__ = ["TWIN_BYTES_PER_FRAME", "TwinListenTask", "TwinStoreRefusedError", "store_twin_episode"]
 
 log = logging.getLogger(__name__)
+
+TWIN_BYTES_PER_FRAME = 400
+"""Disk one frame of a twin episode takes [B], at most (recording and trajectory; about 260 B measured
+for a million frames)."""
+
+
+class TwinStoreRefusedError(ValueError):
+    """A stream's episode would not fit the disk quota or the file system (one line)."""
 
 
 def store_twin_episode(
@@ -47,10 +56,26 @@ def store_twin_episode(
         database_url: The service's database (default: the SQLite file in ``data_dir``).
 
     A failure leaves nothing: the episode's folder is removed and no row is added.
+
+    Raises:
+        TwinStoreRefusedError: The episode would take the stored ones over the disk quota
+            (``HPTVSIM_DISK_QUOTA_MB``), as the service refuses any episode.
     """
-    settings = Settings(data_dir=Path(data_dir).resolve(), database_url=database_url)
+    from hptvsim.service.disk import MIB, DiskUsage
+
+    quota_var = {k: v for k, v in os.environ.items() if k == "HPTVSIM_DISK_QUOTA_MB"}
+    quota_mb = Settings.from_env(quota_var).disk_quota_mb  # the quota the operator's service runs with
+    settings = Settings(data_dir=Path(data_dir).resolve(), database_url=database_url, disk_quota_mb=quota_mb)
     episode_id = uuid.uuid4().hex[:16]
     out_dir = settings.episodes_dir / episode_id
+    estimate = max(len(episode.frames), 1) * TWIN_BYTES_PER_FRAME  # B
+    used = DiskUsage(settings.episodes_dir).recompute()  # B
+    if used + estimate > quota_mb * MIB:
+        raise TwinStoreRefusedError(
+            f"disk_quota_mb: the stored episodes in {settings.episodes_dir} use {used / MIB:.1f} MiB of the "
+            f"{quota_mb} MiB quota and this episode needs about {estimate / MIB:.1f} MiB more; delete "
+            "ended episodes or raise HPTVSIM_DISK_QUOTA_MB"
+        )
     started = utcnow()
     store = Store(settings.db_url)
     try:
@@ -188,6 +213,9 @@ class TwinListenTask:
             if episode is not None:
                 try:
                     self._finish(episode, log_)
+                except TwinStoreRefusedError as exc:
+                    log.warning("twin episode %s not stored: %s", episode, exc)
+                    self._fail(episode, str(exc))
                 except Exception:
                     log.exception("storing the twin episode %s failed", episode)
                     self._fail(episode, "storing the stream failed; the service logged the details")
@@ -233,12 +261,41 @@ class TwinListenTask:
     def _finish(self, episode_id: str, vehicle_log: VehicleLog) -> None:
         episode = episode_of(vehicle_log, label=f"twin: {self.address}")
         out_dir = self.svc.settings.episodes_dir / episode_id
+        self._admit(episode_id, len(episode.frames))
         out_dir.mkdir(parents=True, exist_ok=True)
         result = write_recording(episode, out_dir / RECORDING_FILE)
         files = write_outputs(out_dir, result)
         self._publish("frame", episode.frames[-1].to_dict())
         self.svc._store_final(episode_id, "finished", None, self.svc._result_columns(files))
         self.svc._publish_status(episode_id, "finished", summary=files["summary"])
+
+    def _admit(self, episode_id: str, frames: int) -> None:
+        """Count the episode's files against the disk quota before writing them, as any episode's.
+
+        Raises:
+            TwinStoreRefusedError: The quota or the file system has no room for them.
+        """
+        from hptvsim.service.disk import MIB, QuotaExceededError
+
+        estimate = max(frames, 1) * TWIN_BYTES_PER_FRAME
+        settings = self.svc.settings
+        try:
+            free = shutil.disk_usage(settings.episodes_dir).free  # B
+        except OSError:
+            free = None
+        if free is not None and free < estimate:
+            raise TwinStoreRefusedError(
+                f"disk: {free / MIB:.1f} MiB free and the stream's {frames} frames need about "
+                f"{estimate / MIB:.1f} MiB; free disk space or delete ended episodes"
+            )
+        try:
+            self.svc.disk.admit(episode_id, estimate, settings.disk_quota_mb * MIB, self.svc._is_active)
+        except QuotaExceededError as exc:
+            raise TwinStoreRefusedError(
+                f"disk_quota_mb: the stored episodes use {exc.used / MIB:.1f} MiB of the "
+                f"{settings.disk_quota_mb} MiB quota and the stream's {frames} frames need about "
+                f"{estimate / MIB:.1f} MiB more; delete ended episodes or raise HPTVSIM_DISK_QUOTA_MB"
+            ) from None
 
     def _fail(self, episode_id: str, error: str) -> None:
         self.svc._store_final(episode_id, "failed", error, {})

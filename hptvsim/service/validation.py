@@ -24,6 +24,7 @@ __all__ = [
     "Resolved",
     "check_episode_costs",
     "check_policies_fit",
+    "refuse_control_characters",
     "resolve_request",
     "scenario_summary",
     "screen_inline",
@@ -84,6 +85,8 @@ def shipped_scenario(name: str) -> Any:
     from hptvsim.catalog import CatalogError
     from hptvsim.catalog import shipped_scenario as load
 
+    if isinstance(name, str):
+        refuse_control_characters(name, "scenario")
     try:
         return load(name)
     except CatalogError as exc:
@@ -119,16 +122,33 @@ def _number(value: Any) -> float | None:
     return float(value)
 
 
+def refuse_control_characters(raw: str, field: str) -> None:
+    """A 422 naming ``field`` when a string that becomes a path holds a control character (NUL...).
+
+    The file system refuses a NUL byte with an exception (``ValueError: embedded null byte``), and
+    no file name the service reads holds a control character.
+    """
+    bad = next((c for c in raw if ord(c) < 32 or 127 <= ord(c) < 160), None)
+    if bad is not None:
+        raise ApiError(
+            422,
+            f"{field}: holds the control character U+{ord(bad):04X}; valid: a file name of printable "
+            "characters",
+            field,
+        )
+
+
 def _shipped_file(raw: Any, field: str, folder: str, example: str) -> Path:
     """A shipped file named relative to the scenarios folder, inside ``folder``; else a 422.
 
-    Absolute paths, ``~``, ``..``, backslashes and anything that resolves outside the shipped
-    folder are refused before the file system is asked about them.
+    Control characters, absolute paths, ``~``, ``..``, backslashes and anything that resolves
+    outside the shipped folder are refused before the file system is asked about them.
     """
     from hptvsim.world.scenario import scenario_dir
 
     if not isinstance(raw, str) or not raw:
         raise ApiError(422, f"{field}: give a shipped file, e.g. {example}", field)
+    refuse_control_characters(raw, field)
     p = Path(raw)
     root = scenario_dir().resolve()
     if p.is_absolute() or raw.startswith("~") or ".." in p.parts or "\\" in raw:
@@ -142,7 +162,7 @@ def _shipped_file(raw: Any, field: str, folder: str, example: str) -> Path:
     try:
         resolved = (root / p).resolve()
         shipped_file = resolved.is_relative_to(shipped_root) and resolved.is_file()
-    except OSError:  # a name too long for the file system, say
+    except (OSError, ValueError):  # a name too long for the file system, say
         shipped_file = False
     if not shipped_file:
         shipped = sorted(

@@ -49,7 +49,10 @@ def _outputs(
     if store_dir is not None:
         assert store is not None
         label = f"twin: {episode.log.source}"
-        episode_id = store(episode, store_dir, label=label)
+        try:
+            episode_id = store(episode, store_dir, label=label)
+        except ValueError as exc:  # over the service's disk quota
+            raise TwinError(str(exc)) from None
         click.echo(
             f"stored episode {episode_id} ({label}) in {store_dir.resolve()}; `hptvsim serve` lists it"
         )

@@ -48,8 +48,11 @@ from hptvsim._files import write_atomic
 
 __all__ = [
     "CSV_COLUMNS",
+    "GAP_S",
     "GRAVITY",
+    "LIMITS",
     "PWM_CHANNELS",
+    "SPAN_PER_MESSAGE",
     "WATER_DENSITY",
     "LogEvent",
     "Samples",
@@ -83,7 +86,28 @@ CSV_COLUMNS: Final[tuple[str, ...]] = (
 )
 """The calibration CSV's header (units in the module docstring)."""
 
-EventKind = Literal["armed", "disarmed", "mode"]
+GAP_S: Final = 2.0  # s
+"""A vehicle clock that moves on by more than this between two messages (or back by more) starts a
+new segment: the episode's time skips the gap (see :class:`Samples`)."""
+
+SPAN_PER_MESSAGE: Final = 0.5  # s
+"""The most episode time one message with a clock accounts for across gaps: a gap of the stream keeps
+its real length while the span stays within this times the messages received (a real stream sends tens
+of messages a second); longer jumps are skipped."""
+
+LIMITS: Final[Mapping[str, float]] = {
+    "position": 1.0e5,  # m, |x|, |y| of a local position (100 km from its origin)
+    "depth": 1.2e4,  # m, |z| (the deepest sea is 11 km)
+    "speed": 50.0,  # m/s, each velocity component (an ROV makes 1-2 m/s)
+    "angle": 7.0,  # rad, |roll|, |pitch|, |yaw| (a little over 2 pi)
+    "rate": 50.0,  # rad/s, each body rate
+    "pressure": 1.3e8,  # Pa, most water pressure (11 km of sea water), and > 0
+    "pwm": 3000.0,  # us, a servo output (0-3000; 1100-1900 in use)
+}
+"""The physically possible range of each quantity a log's message carries: a message with a
+value outside it, or not finite, is dropped and counted (:attr:`Samples.dropped`)."""
+
+EventKind = Literal["armed", "disarmed", "mode", "discontinuity"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -92,7 +116,8 @@ class LogEvent:
 
     Attributes:
         time: Time since the log's first sample [s].
-        kind: ``armed``, ``disarmed`` or ``mode``.
+        kind: ``armed``, ``disarmed``, ``mode`` or ``discontinuity`` (the vehicle's clock
+            jumped: a gap in the stream, a reboot; the episode's time skips it).
         text: What a reader is told (``mode MANUAL``, ``armed``).
     """
 
@@ -103,9 +128,14 @@ class LogEvent:
 
 @dataclass
 class Samples:
-    """The raw samples of a log's streams, as a reader collects them (times on the log's own clock [s]).
+    """The raw samples of a log's streams, as a reader collects them.
 
     Each stream is a list of rows ``(t, value, ...)``; :meth:`VehicleLog.from_samples` sorts them.
+    Times ``t`` [s] are the episode's clock, made from the vehicle's by :meth:`episode_time`:
+    the vehicle's clock within a segment, and a new segment wherever the vehicle's clock moves
+    on by more than ``gap_s`` between two messages or back by more than that. So the span of
+    the times, and with it the grid, is bounded by what was received (at most ``gap_s`` plus
+    :data:`SPAN_PER_MESSAGE` per message with a clock), never by what a clock says.
 
     Attributes:
         position: ``(t, x, y, z)`` [s, m NED].
@@ -123,6 +153,12 @@ class Samples:
         armed_before: The armed state before the first report, when the log tells it (a
             dataflash log's first ``ARM`` message is a change), else None.
         warnings: What the reader noticed (a truncated file), one line each.
+        dropped: Messages dropped for a value that is not finite or not physically possible,
+            by ``"MESSAGE: reason"``.
+        discontinuities: ``(t, clock before, clock after)`` [s] of every jump of the vehicle's
+            clock (``t`` on the episode's clock, where the new segment starts).
+        clocked: Messages that carried a clock (what bounds the span).
+        gap_s: The longest step of the vehicle's clock within a segment [s].
     """
 
     position: list[tuple[float, float, float, float]] = field(default_factory=list)
@@ -139,6 +175,48 @@ class Samples:
     last_time: float | None = None
     armed_before: bool | None = None
     warnings: list[str] = field(default_factory=list)
+    dropped: dict[str, int] = field(default_factory=dict)
+    discontinuities: list[tuple[float, float, float]] = field(default_factory=list)
+    clocked: int = 0
+    gap_s: float = GAP_S
+    _seg: tuple[float, float] | None = None  # (vehicle clock, episode time) where the segment began
+    _last_clock: float | None = None
+
+    def episode_time(self, clock: float) -> float:
+        """The episode's time [s] of a message stamped ``clock`` [s] on the vehicle's clock.
+
+        A step of the clock by more than :attr:`gap_s` since the last message (forwards or back)
+        is a discontinuity and starts a new segment. A forward gap keeps its real length while
+        the episode's span stays within :data:`SPAN_PER_MESSAGE` per message received (a stream
+        that paused); any other jump (backwards, or further than the messages can account for)
+        is skipped: the new segment starts :data:`GAP_S` after the latest time.
+        """
+        self.clocked += 1
+        last = self._last_clock
+        self._last_clock = clock
+        if self._seg is None or last is None:
+            self._seg = (clock, 0.0)
+        elif abs(clock - last) > self.gap_s:
+            c0, t0 = self._seg
+            at = t0 + (last - c0)  # the last message's episode time
+            latest = self.last_time if self.last_time is not None else at
+            span = latest - (self.first_time if self.first_time is not None else 0.0)
+            forward = clock - last
+            if forward > 0.0 and span + forward <= SPAN_PER_MESSAGE * self.clocked and at + forward > latest:
+                start = at + forward  # a pause of the stream: its real length
+            else:
+                start = latest + GAP_S
+            self._seg = (clock, start)
+            self.discontinuities.append((start, last, clock))
+        c0, t0 = self._seg
+        t = t0 + (clock - c0)
+        self.clock(t)
+        return t
+
+    def drop(self, message: str, reason: str) -> None:
+        """Count a message dropped for ``reason``."""
+        key = f"{message}: {reason}"
+        self.dropped[key] = self.dropped.get(key, 0) + 1
 
     def clock(self, t: float) -> None:
         """Note a time on the log's clock [s] (the span of the log)."""
@@ -265,6 +343,8 @@ class VehicleLog:
         clock_start: The log's first time on its own clock [s] (the vehicle's time since boot
             for MAVLink; ``TimeUS`` for dataflash): grid time ``t`` is ``clock_start + t`` there.
         warnings: What reading it noticed (a truncated file), one line each.
+        dropped: Messages dropped for an impossible value, by ``"MESSAGE: reason"``.
+        segments: Segments of the vehicle's clock (1 + its discontinuities).
     """
 
     source: str
@@ -294,6 +374,8 @@ class VehicleLog:
     duration: float = 0.0
     clock_start: float = 0.0
     warnings: tuple[str, ...] = ()
+    dropped: Mapping[str, int] = dataclasses.field(default_factory=dict)
+    segments: int = 1
 
     def __len__(self) -> int:
         return int(self.t.size)
@@ -331,7 +413,15 @@ class VehicleLog:
             raise ValueError("the samples hold no time")
         t0 = samples.first_time
         duration = samples.last_time - t0
-        grid = np.arange(0.0, duration + 0.5 * dt, dt)
+        rows = math.floor(duration / dt + 0.5) + 1
+        per_message = max(samples.gap_s, GAP_S) + SPAN_PER_MESSAGE  # s of span at most
+        bound = max(samples.clocked, 1) * (math.ceil(per_message / dt) + 1) + 1
+        if samples.clocked and rows > bound:  # a reader that did not segment its clock (episode_time)
+            raise ValueError(
+                f"{duration:.6g} s of samples at {dt:g} s make {rows} rows from {samples.clocked} "
+                f"messages; at most {bound} (a clock that jumps must start a new segment)"
+            )
+        grid = np.arange(rows, dtype=np.float64) * dt
         tp, pos = _stream(samples.position, 3, t0)
         tv, vel = _stream(samples.velocity, 3, t0)
         ta, att = _stream(samples.attitude, 3, t0)
@@ -352,6 +442,18 @@ class VehicleLog:
             p_ref = float(press[0, 0])  # Pa, the first reading: the surface
             depth = (_interp(tb, press, grid)[:, 0] - p_ref) / (WATER_DENSITY * GRAVITY)
         armed, events = _armed_and_events(samples, t0, grid)
+        warnings = list(samples.warnings)
+        if samples.dropped:
+            total = sum(samples.dropped.values())
+            why = ", ".join(f"{n} {k}" for k, n in sorted(samples.dropped.items()))
+            warnings.append(f"dropped {total} messages with impossible values ({why})")
+        if samples.discontinuities:
+            jumps = samples.discontinuities
+            warnings.append(
+                f"{len(jumps)} discontinuities of the vehicle's clock (a step over {samples.gap_s:g} s; "
+                f"the first from {jumps[0][1]:.3f} s to {jumps[0][2]:.3f} s): a new segment at each "
+                "(a jump the messages cannot account for is skipped)"
+            )
         return cls(
             source=source,
             kind=kind,
@@ -379,7 +481,9 @@ class VehicleLog:
             counts=dict(samples.counts),
             duration=float(duration),
             clock_start=float(t0),
-            warnings=tuple(samples.warnings),
+            warnings=tuple(warnings),
+            dropped=dict(samples.dropped),
+            segments=len(samples.discontinuities) + 1,
         )
 
     def csv_text(self) -> str:
@@ -451,5 +555,13 @@ def _armed_and_events(
         if name != mode:
             events.append(LogEvent(time=t - t0, kind="mode", text=f"mode {name}"))
             mode = name
+    for t, before, after in samples.discontinuities:
+        events.append(
+            LogEvent(
+                time=t - t0,
+                kind="discontinuity",
+                text=f"clock jumped from {before:.3f} s to {after:.3f} s",
+            )
+        )
     events.sort(key=lambda e: e.time)
     return armed, tuple(events)

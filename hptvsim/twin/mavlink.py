@@ -38,19 +38,22 @@ from __future__ import annotations
 
 import contextlib
 import io
+import logging
 import math
 import os
+import re
 import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any, Final
 
-from hptvsim.twin.log import PWM_CHANNELS, Samples, VehicleLog
+from hptvsim.twin.log import GAP_S, LIMITS, PWM_CHANNELS, Samples, VehicleLog
 
 __all__ = [
     "DATAFLASH_MAGIC",
     "Collector",
     "TwinLogError",
+    "check_values",
     "log_kind",
     "mode_name",
     "read_log",
@@ -92,17 +95,53 @@ def mode_name(custom_mode: int, vehicle_type: int | None = None) -> str:
     return str(table.get(int(custom_mode), f"MODE_{int(custom_mode)}"))
 
 
+def check_values(values: dict[str, float]) -> str | None:
+    """Why a message's values are impossible (``"yaw not finite"``), or None when they are fine.
+
+    ``values`` maps a field to ``(quantity of LIMITS, value)``-named keys: ``"yaw:angle"``.
+    """
+    for key, value in values.items():
+        name, _, quantity = key.partition(":")
+        v = float(value)
+        if not math.isfinite(v):
+            return f"{name} not finite"
+        limit = LIMITS[quantity]
+        if quantity in ("pressure", "pwm"):
+            if not 0.0 <= v <= limit:
+                return f"{name} outside 0-{limit:g}"
+        elif abs(v) > limit:
+            return f"{name} beyond {limit:g}"
+    return None
+
+
 class Collector:
     """Turns messages (pymavlink's objects) into :class:`~hptvsim.twin.log.Samples`, one at a time.
 
+    Mechanisms that bound what a sender can make of it:
+
+    * **time**: every message's clock goes through :meth:`Samples.episode_time
+      <hptvsim.twin.log.Samples.episode_time>`: a jump of the vehicle's clock (forwards or
+      backwards by more than ``gap_s``) starts a new segment, so the grid grows with the
+      messages received, never with a clock's span;
+    * **values**: a message with a value that is not finite or not physically possible
+      (:data:`~hptvsim.twin.log.LIMITS`) is dropped and counted in
+      :attr:`Samples.dropped <hptvsim.twin.log.Samples.dropped>`;
+    * **vehicles** (MAVLink): one vehicle, the first system id heard from its autopilot
+      (component 1; a ground station's 255 is never a vehicle), or the one ``sysid`` names;
+      another system's messages are counted in :attr:`others`, never merged into the track.
+
     Args:
         kind: ``tlog`` (MAVLink messages; also a live stream) or ``bin`` (dataflash messages).
+        gap_s: The longest step of the vehicle's clock within a segment [s].
+        sysid: The vehicle's MAVLink system id (None: the first one heard).
     """
 
-    def __init__(self, kind: str) -> None:
+    def __init__(self, kind: str, *, gap_s: float = GAP_S, sysid: int | None = None) -> None:
         self.kind = kind
-        self.samples = Samples()
-        self._now: float | None = None  # s, the latest vehicle clock (MAVLink)
+        self.samples = Samples(gap_s=gap_s)
+        self.sysid = sysid
+        self.others: dict[int, int] = {}  # messages of other systems' autopilots, by system id
+        self._now: float | None = None  # s, the latest episode time (MAVLink)
         self._pressure1: list[tuple[float, float]] = []  # board barometer, a fallback
         self._baro: dict[int, list[tuple[float, float]]] = {}
         self._bad = 0
@@ -134,18 +173,32 @@ class Collector:
 
     def _clock(self, msg: Any) -> float | None:
         if hasattr(msg, "time_boot_ms"):
-            t = float(msg.time_boot_ms) * 1e-3  # s
+            clock = float(msg.time_boot_ms) * 1e-3  # s
         elif msg.get_type() == "SERVO_OUTPUT_RAW":  # its time_usec is since boot (GPS's may be UTC)
-            t = float(msg.time_usec) * 1e-6  # s
+            clock = float(msg.time_usec) * 1e-6  # s
         else:
             return self._now
+        t = self.samples.episode_time(clock)
         self._now = t
-        self.samples.clock(t)
         return t
+
+    def _drop(self, kind: str, values: dict[str, float]) -> bool:
+        """Whether the message is dropped (and counted) for an impossible value."""
+        why = check_values(values)
+        if why is None:
+            return False
+        self.samples.drop(kind, why)
+        return True
 
     def _feed_mavlink(self, kind: str, msg: Any) -> bool:
         s = self.samples
-        if msg.get_srcSystem() == GCS_SYSTEM or msg.get_srcComponent() != AUTOPILOT_COMPONENT:
+        system = msg.get_srcSystem()
+        if system == GCS_SYSTEM or msg.get_srcComponent() != AUTOPILOT_COMPONENT:
+            return False
+        if self.sysid is None:
+            self.sysid = int(system)
+        elif system != self.sysid:
+            self.others[int(system)] = self.others.get(int(system), 0) + 1
             return False
         if kind == "PARAM_VALUE":
             s.params[str(msg.param_id)] = float(msg.param_value)
@@ -163,6 +216,8 @@ class Collector:
             return False
         t = self._clock(msg)
         if t is None:
+            return False
+        if self._drop(kind, _mavlink_values(kind, msg)):
             return False
         if kind == "ATTITUDE":
             s.attitude.append((t, msg.roll, msg.pitch, msg.yaw))
@@ -189,8 +244,9 @@ class Collector:
             return True
         if not hasattr(msg, "TimeUS"):
             return False
-        t = msg.TimeUS * 1e-6  # s
-        s.clock(t)
+        t = s.episode_time(float(msg.TimeUS) * 1e-6)  # s
+        if self._drop(kind, _bin_values(kind, msg)):
+            return False
         d = math.radians
         if kind == "ATT":
             s.attitude.append((t, d(msg.Roll), d(msg.Pitch), d(msg.Yaw)))
@@ -227,7 +283,60 @@ class Collector:
         if not s.pressure and self._pressure1:
             s.pressure = list(self._pressure1)
             s.warnings.append("no external depth sensor (SCALED_PRESSURE2): depth from the board's barometer")
+        if self.others and not any("other vehicles" in w for w in s.warnings):
+            heard = ", ".join(f"system {k} ({n} messages)" for k, n in sorted(self.others.items()))
+            s.warnings.append(
+                f"this is the vehicle of system id {self.sysid}; other vehicles' messages were not merged "
+                f"into its track: {heard}"
+            )
         return s
+
+
+def _mavlink_values(kind: str, msg: Any) -> dict[str, float]:
+    """The values of a used MAVLink message to check (``field:quantity`` of LIMITS)."""
+    if kind == "ATTITUDE":
+        return {
+            "roll:angle": msg.roll,
+            "pitch:angle": msg.pitch,
+            "yaw:angle": msg.yaw,
+            "rollspeed:rate": msg.rollspeed,
+            "pitchspeed:rate": msg.pitchspeed,
+            "yawspeed:rate": msg.yawspeed,
+        }
+    if kind == "LOCAL_POSITION_NED":
+        return {
+            "x:position": msg.x,
+            "y:position": msg.y,
+            "z:depth": msg.z,
+            "vx:speed": msg.vx,
+            "vy:speed": msg.vy,
+            "vz:speed": msg.vz,
+        }
+    if kind in ("SCALED_PRESSURE2", "SCALED_PRESSURE"):
+        return {"press_abs:pressure": msg.press_abs * 100.0}  # hPa -> Pa
+    return {}  # SERVO_OUTPUT_RAW: integers of 0-65535, checked as what they are
+
+
+def _bin_values(kind: str, msg: Any) -> dict[str, float]:
+    """The values of a used dataflash message to check (``field:quantity`` of LIMITS)."""
+    if kind == "ATT":
+        return {f"{k}:angle": math.radians(getattr(msg, k)) for k in ("Roll", "Pitch", "Yaw")}
+    if kind in ("XKF1", "NKF1"):
+        return {
+            "PN:position": msg.PN,
+            "PE:position": msg.PE,
+            "PD:depth": msg.PD,
+            "VN:speed": msg.VN,
+            "VE:speed": msg.VE,
+            "VD:speed": msg.VD,
+        }
+    if kind == "IMU":
+        return {f"{k}:rate": getattr(msg, k) for k in ("GyrX", "GyrY", "GyrZ")}
+    if kind == "BARO":
+        return {"Press:pressure": msg.Press}
+    if kind == "RCOU":
+        return {f"C{k}:pwm": getattr(msg, f"C{k}", 0) for k in range(1, PWM_CHANNELS + 1)}
+    return {}
 
 
 _MAVLINK_USED: Final = frozenset(
@@ -246,24 +355,68 @@ def _position(conn: Any) -> int:
 
 
 @contextlib.contextmanager
-def _quiet_stdout() -> Iterator[None]:
-    """Standard output (Python's and the C library's) silenced: pymavlink prints what it skips there.
+def _pymavlink_output(into: list[str], *, fds: tuple[int, ...] = (1,)) -> Iterator[None]:
+    """The prints of pymavlink itself (``bad header ...``, ``Skipped ... bad bytes``) caught into ``into``.
 
-    File descriptor 1 is the whole process's: this is for a command reading a file, not for a
-    server's threads (the service never reads a log file; its live listener reads no file).
+    The file descriptors ``fds`` are caught (the C library's prints: pymavlink's dataflash
+    indexer writes to descriptor 2), and ``sys.stdout``/``sys.stderr`` at Python's level (a
+    progress bar made before keeps its own stream). Each line goes to the debug log, never to
+    the terminal. File descriptors are the whole process's: this is for a command reading a
+    file, not for a server's threads (the service never reads a log file; its live listener
+    reads no file).
     """
+    import tempfile
+
     sys.stdout.flush()
-    saved = os.dup(1)
-    try:
-        with open(os.devnull, "w") as null, contextlib.redirect_stdout(io.StringIO()):
-            os.dup2(null.fileno(), 1)
-            try:
+    sys.stderr.flush()
+    saved = {fd: os.dup(fd) for fd in fds}
+    text = io.StringIO()
+    with tempfile.TemporaryFile() as out:
+        try:
+            for fd in fds:
+                os.dup2(out.fileno(), fd)
+            with contextlib.redirect_stdout(text), contextlib.redirect_stderr(text):
                 yield
-            finally:
-                sys.stdout.flush()
-                os.dup2(saved, 1)
-    finally:
-        os.close(saved)
+        finally:
+            for fd, copy in saved.items():
+                os.dup2(copy, fd)
+                os.close(copy)
+            out.seek(0)
+            caught = out.read(_CAUGHT_MAX).decode(errors="replace") + text.getvalue()[:_CAUGHT_MAX]
+    for line in caught.splitlines():
+        if line.strip():
+            into.append(line)
+            _log.debug("pymavlink: %s", line)
+
+
+_CAUGHT_MAX: Final = 1 << 20  # bytes of pymavlink's prints kept
+_log = logging.getLogger(__name__)
+
+SCAN_BYTES: Final = 4 << 20
+"""A file with no MAVLink or dataflash start byte in its first bytes this many [B] is given up at once."""
+
+_START_BYTES: Final = (b"\xfd", b"\xfe", DATAFLASH_MAGIC)  # MAVLink 2, MAVLink 1, dataflash
+
+
+def _no_message_start(path: Path) -> bool:
+    """Whether the file's first :data:`SCAN_BYTES` hold no byte a message could start with."""
+    with path.open("rb") as fh:
+        head = fh.read(SCAN_BYTES)
+    return not any(b in head for b in _START_BYTES)
+
+
+def _damage_from_prints(lines: list[str]) -> list[tuple[int, int]]:
+    """``(where, bytes)`` [B] of each stretch pymavlink skipped in a dataflash log, from its prints."""
+    damage: list[tuple[int, int]] = []
+    for line in lines:
+        m = re.search(r"Skipped (\d+) bad bytes in log at offset (\d+)", line)
+        if m:
+            start, n = int(m.group(2)), int(m.group(1))
+            if damage and damage[-1][0] + damage[-1][1] + 64 >= start:
+                damage[-1] = (damage[-1][0], start + n - damage[-1][0])
+            else:
+                damage.append((start, n))
+    return damage
 
 
 def read_log(
@@ -292,36 +445,59 @@ def read_log(
     if size == 0:
         raise TwinLogError(f"{p}: the file is empty; expected {EXPECTED}")
     kind = log_kind(p)
+    if _no_message_start(p):
+        raise TwinLogError(
+            f"{p}: not {EXPECTED}: no MAVLink or dataflash message in its first {SCAN_BYTES >> 20} MiB"
+        )
     collector = Collector(kind)
-    total = 0  # bytes of whole MAVLink messages, each with its 8-byte tlog timestamp
+    good_end = 0  # B, where the last whole message ended
+    damage: list[tuple[int, int]] = []  # (where [B], how many bytes) of each damaged stretch
+    crc_fails: list[tuple[int, int, int]] = []  # (where [B], bytes, message id) of whole frames
+    good_ids: set[int] = set()  # message ids read whole
+    caught: list[str] = []
     conn: Any = None
     try:
-        with _quiet_stdout():
+        with _pymavlink_output(caught, fds=(1, 2)):  # the dataflash indexer (C) prints to fd 2
             if kind == "bin":
                 conn = DFReader.DFReader_binary(str(p), zero_time_base=True)
-            elif p.suffix.lower() == ".tlog":
+        with _pymavlink_output(caught):
+            if kind == "tlog" and p.suffix.lower() == ".tlog":
                 conn = mavutil.mavlink_connection(str(p), dialect="ardupilotmega")
-            else:  # another name: still a telemetry log (mavlink_connection goes by the name)
+            elif kind == "tlog":  # another name: still a telemetry log (mavlink_connection goes by the name)
                 mavutil.set_dialect("ardupilotmega")
                 conn = mavutil.mavmmaplog(str(p))
             n = 0
+            whole = 0
             while True:
                 msg = conn.recv_match()
                 if msg is None:
                     break
                 n += 1
                 collector.feed(msg)
-                if kind == "tlog":
-                    if msg.get_type() == "BAD_DATA":
-                        total += 8 + len(msg.data)
+                at = _position(conn)
+                if msg.get_type() == "BAD_DATA":
+                    start = max(at - len(msg.data), 0)
+                    crc = re.match(r"invalid MAVLink CRC in msgID (\d+)", str(getattr(msg, "reason", "")))
+                    if crc is not None:  # a whole frame: damaged only if that message reads fine elsewhere
+                        crc_fails.append((start, len(msg.data), int(crc.group(1))))
+                    elif damage and damage[-1][0] + damage[-1][1] + 64 >= start:  # the same stretch
+                        damage[-1] = (damage[-1][0], at - damage[-1][0])
                     else:
-                        total += 8 + len(msg.get_msgbuf())
+                        damage.append((start, len(msg.data)))
+                else:
+                    whole += 1
+                    good_end = at
+                    if kind == "tlog":
+                        good_ids.add(msg.get_msgId())
+
                 if progress is not None and n % 4096 == 0:
-                    progress(_position(conn), size)
-            read_to = total if kind == "tlog" else _position(conn)
+                    progress(at, size)
+            if kind == "bin":
+                good_end = _position(conn)
     except TwinLogError:
         raise
     except Exception as exc:  # pymavlink raises many kinds on a damaged file
+        _log.debug("pymavlink failed on %s", p, exc_info=True)
         raise TwinLogError(f"{p}: not readable as {EXPECTED} ({type(exc).__name__}: {exc})") from None
     finally:
         if conn is not None:
@@ -338,11 +514,24 @@ def read_log(
             f"{p}: {EXPECTED} without the vehicle's attitude or position "
             f"(it holds {whole} messages, none of them ATTITUDE/LOCAL_POSITION_NED or ATT/XKF1)"
         )
-    if read_to < size:
+    if kind == "bin":
+        damage = _damage_from_prints(caught)
+    else:  # a checksum that fails on every message of an id: another MAVLink version's definition
+        damage = sorted(damage + [(a, n) for a, n, i in crc_fails if i in good_ids])
+    damage = [d for d in damage if d[0] < good_end]  # in the middle: whole messages after it
+    if damage:
+        where = ", ".join(f"byte {a} ({n} B)" for a, n in damage[:5])
+        more = f" and {len(damage) - 5} more" if len(damage) > 5 else ""
+        samples.warnings.insert(
+            0,
+            f"{p.name}: damaged in the middle, not truncated: {len(damage)} unreadable stretches "
+            f"skipped, at {where}{more}",
+        )
+    if good_end < size:
         assert samples.last_time is not None
         samples.warnings.insert(
             0,
-            f"{p.name}: truncated: its last {size - read_to} bytes are not a whole message; "
+            f"{p.name}: truncated: its last {size - good_end} bytes are not a whole message; "
             f"read {whole} whole messages ({samples.last_time - samples.first_time:.1f} s)",
         )
     return VehicleLog.from_samples(samples, source=os.path.basename(p), kind=kind, dt=dt)

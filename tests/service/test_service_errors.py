@@ -98,6 +98,46 @@ def test_inline_scenarios_are_data_checked_by_the_schema(api: httpx.Client) -> N
     _bad(api, {"scenario": fine}, "scenario.simulation.h_max")
 
 
+# any text, control characters (NUL first) and path-like shapes weighted in
+_PATH_TEXT = st.one_of(
+    st.sampled_from(["\x00", "data/\x00salish_sea.tif", "vehicles/\x1b.toml", "data/salish_sea.tif\x00"]),
+    st.text(alphabet=st.characters(max_codepoint=0x2FF), max_size=24),
+    st.builds(lambda a, b: f"{a}/{b}", st.sampled_from(["data", "vehicles", "..", ""]), st.text(max_size=12)),
+)
+
+
+def test_fuzzed_nested_paths_of_an_inline_scenario_never_give_a_server_error(api: httpx.Client) -> None:
+    """A targeted strategy for the fields schemathesis rarely reaches: the inline scenario's nested paths.
+
+    Issue 49: a NUL byte in ``scenario.terrain.path`` gave a 500 (``embedded null byte`` from
+    ``Path.resolve``); every string that becomes a path is refused with a 422 naming its field.
+    """
+    tables = api.get("/scenarios/goto_tiny").json()
+    group = {k: v for k, v in tables["vehicles"][0].items() if k != "type"}
+    seen: list[str] = []
+
+    @given(path=_PATH_TEXT, where=st.sampled_from(["terrain", "vehicle", "scenario"]))
+    @settings(max_examples=60, deadline=None, suppress_health_check=list(HealthCheck), database=None)
+    def fuzz(path: str, where: str) -> None:
+        if where == "terrain":
+            body: Any = {"scenario": {**tables, "terrain": {"kind": "file", "path": path}}}
+            field = "scenario.terrain.path"
+        elif where == "vehicle":
+            body = {"scenario": {**tables, "vehicles": [{**group, "vehicle_file": path}]}}
+            field = "scenario.vehicles[0].vehicle_file"
+        else:
+            body, field = {"scenario": path, "max_steps": 5}, "scenario"
+        r = api.post("/episodes", json=body)
+        assert r.status_code < 500, f"{where} {path!r}: {r.status_code} {r.text[:300]}"
+        if any(ord(c) < 32 for c in path):
+            assert r.status_code == 422, r.text
+            assert r.json()["detail"].startswith(field), r.text
+            seen.append(path)
+
+    fuzz()
+    assert seen  # the strategy did reach control characters
+
+
 def test_oversized_bodies_are_refused(api: httpx.Client) -> None:
     big = b'{"label": "' + b"a" * (2 << 20) + b'"}'
     r = api.post("/episodes", content=big, headers={"content-type": "application/json"})

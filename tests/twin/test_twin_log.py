@@ -94,14 +94,22 @@ def test_bin_log(bin_data: VehicleLog) -> None:
     assert log.counts["ATT"] == 237 and log.counts["XKF1"] == 237 and log.counts["RCOU"] == 237
     assert log.counts["PARM"] == 876
     assert log.params["FRAME_CONFIG"] == 1  # vectored (6 thrusters)
+    # 61.2 s with 35.8 s without any message (289.4 s to 325.2 s): a new segment there (issue 49),
+    # which keeps its real length (the log's thousands of messages account for it)
     assert log.duration == pytest.approx(61.2, abs=0.5)
+    assert log.segments == 2
+    assert any("from 289.398 s to 325.164 s" in w for w in log.warnings)
     # the EKF's position never left the origin: nothing moves in this log
     known = np.isfinite(log.x)
     assert known.any() and np.all(log.x[known] == 0) and np.all(log.y[known] == 0)
     # pose streams cover 23.6 s of it, NaN elsewhere (nothing invented outside a stream's span)
     assert known.mean() == pytest.approx(0.385, abs=0.02)
     # armed from the start (logging starts at arming) until the ARM message at 8.8 s
-    assert [(e.kind, round(e.time, 1)) for e in log.events] == [("mode", 0.0), ("disarmed", 8.8)]
+    assert [(e.kind, round(e.time, 1)) for e in log.events] == [
+        ("mode", 0.0),
+        ("disarmed", 8.8),
+        ("discontinuity", 59.5),
+    ]
     assert log.armed[log.t < 8.7].all() and not log.armed[log.t > 8.9].any()
     pwm = log.pwm[np.isfinite(log.pwm).all(axis=1)]
     assert (pwm[:, 6:] == 0).all() and pwm[:, :6].min() >= 1490 and pwm[:, :6].max() <= 1510
