@@ -300,11 +300,14 @@ class Settings:
             local = host == "localhost" or ipaddress.ip_address(host).is_loopback
         except ValueError:
             local = False
-        if not local and self.api_key is None and not self.insecure_open:
+        if not local and not self.insecure_open:
+            # the API key guards the API, not the telemetry port: MAVLink packets carry no key, and
+            # the listener does not verify MAVLink 2 signatures yet (issue 49)
             raise SettingsError(
-                f"twin_listen = {self.twin_listen!r} takes telemetry from the network, where anyone could "
-                "send a vehicle of their own; listen on 127.0.0.1, or set HPTVSIM_API_KEY (or "
-                "HPTVSIM_INSECURE_OPEN=1 on a network of your own)"
+                f"twin_listen = {self.twin_listen!r} takes unauthenticated telemetry from the network, "
+                "where anyone could send a vehicle of their own (an API key does not protect that port); "
+                "listen on 127.0.0.1 and forward the vehicle's stream there, or set HPTVSIM_INSECURE_OPEN=1 "
+                "on a network of your own"
             )
 
     @property

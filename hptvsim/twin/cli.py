@@ -16,6 +16,9 @@ import click
 
 __all__ = ["TwinError", "register"]
 
+LISTEN_MAX_MESSAGES = 1_000_000
+"""``twin listen``'s message cap (the service's ``HPTVSIM_TWIN_MAX_MESSAGES`` default)."""
+
 StoreEpisode = Callable[..., str]
 """``store(episode, data_dir, *, label) -> episode id`` (:func:`hptvsim.service.twin.store_twin_episode`)."""
 
@@ -161,6 +164,14 @@ def register(main: click.Group, *, store: StoreEpisode | None = None) -> click.G
     @click.option(
         "--dt", type=click.FloatRange(min=0.0, min_open=True, max=10.0), default=0.1, show_default=True
     )
+    @click.option(
+        "--max-messages",
+        type=click.IntRange(min=1),
+        default=LISTEN_MAX_MESSAGES,
+        show_default=True,
+        help="The stream has ended after this many MAVLink messages (what it can hold in memory is "
+        "bounded, as the service's HPTVSIM_TWIN_MAX_MESSAGES).",
+    )
     def listen(
         address: str,
         record: Path | None,
@@ -170,6 +181,7 @@ def register(main: click.Group, *, store: StoreEpisode | None = None) -> click.G
         viser_port: int,
         idle_timeout: float,
         dt: float,
+        max_messages: int,
     ) -> None:
         """Follow a live MAVLink stream (as QGroundControl does) until it stops; then record it."""
         from hptvsim.twin.listen import Listener, parse_address, viser_sink
@@ -191,7 +203,12 @@ def register(main: click.Group, *, store: StoreEpisode | None = None) -> click.G
             on_static, on_frame = viser_sink(view, f"twin {address}")
             click.echo(f"viser view: {view.url}")
         listener = Listener(
-            address, dt=dt, idle_timeout_s=idle_timeout, on_static=on_static, on_frame=on_frame
+            address,
+            dt=dt,
+            idle_timeout_s=idle_timeout,
+            on_static=on_static,
+            on_frame=on_frame,
+            max_messages=max_messages,
         )
         try:
             listener.open()
@@ -204,6 +221,8 @@ def register(main: click.Group, *, store: StoreEpisode | None = None) -> click.G
                 view.stop()
         episode = episode_of(log)
         click.echo(f"{listener.state.messages} messages, {listener.state.frames} live frames")
+        if listener.state.messages >= max_messages:
+            click.echo(f"Warning: stopped at --max-messages {max_messages}; the stream may go on", err=True)
         _report(log, len(episode.frames))
         _outputs(episode, record, csv, store_dir, store)
 

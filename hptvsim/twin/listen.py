@@ -49,6 +49,11 @@ def parse_address(address: str) -> tuple[str, int]:
     """
     scheme, _, rest = address.partition(":")
     host, _, port = rest.rpartition(":")
+    if ":" in host or "[" in host or "]" in host:  # pymavlink's udpin takes IPv4 addresses and names only
+        raise ValueError(
+            f"address {address!r} is an IPv6 address, which the MAVLink listener does not support; "
+            "valid: udp:HOST:PORT with an IPv4 address or a host name (e.g. udp:127.0.0.1:14550)"
+        )
     if scheme not in ("udp", "udpin") or not host or not port.isdigit() or not 0 < int(port) < 65536:
         raise ValueError(f"address {address!r} is invalid; valid: udp:HOST:PORT (e.g. udp:127.0.0.1:14550)")
     return host, int(port)

@@ -302,3 +302,68 @@ def test_a_live_stream_of_hostile_packets_stays_bounded_and_keeps_the_good_ones(
     assert log.dropped.get("LOCAL_POSITION_NED: x not finite") == 1
     episode = episode_of(log)
     assert np.isfinite([f.agent(VEHICLE).x for f in episode.frames]).all()
+
+
+# --- addresses, settings, temporaries ---------------------------------------------------------------
+
+
+def test_ipv6_and_network_listen_addresses_are_refused_in_one_line() -> None:
+    from hptvsim.service.settings import Settings, SettingsError
+    from hptvsim.twin.listen import parse_address
+
+    for address in ("udp:::1:14550", "udp:[::1]:14550"):
+        with pytest.raises(ValueError, match="IPv6 address, which the MAVLink listener does not support"):
+            parse_address(address)
+        with pytest.raises(SettingsError, match="IPv6"):
+            Settings.from_env({"HPTVSIM_TWIN_LISTEN": address})
+    # an API key guards the API, not the telemetry port: a keyed service refuses a network address
+    with pytest.raises(SettingsError, match="unauthenticated telemetry"):
+        Settings.from_env({"HPTVSIM_TWIN_LISTEN": "udp:0.0.0.0:14550", "HPTVSIM_API_KEY": "k" * 32})
+    assert Settings.from_env({"HPTVSIM_TWIN_LISTEN": "udp:127.0.0.1:14550", "HPTVSIM_API_KEY": "k" * 32})
+
+
+def test_the_listen_command_has_a_message_cap(tmp_path: Path) -> None:
+    port = _free_udp_port()
+
+    def body(mav: Callable[..., Any]) -> None:
+        for k in range(400):
+            _steady(mav, k)
+
+    proc = subprocess.Popen(
+        [*HPTVSIM, "twin", "listen", f"udp:127.0.0.1:{port}", "--max-messages", "50", "--idle-timeout", "20"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=tmp_path,
+    )
+    try:
+        time.sleep(0.5)
+        deadline = time.monotonic() + 60
+        sender: threading.Thread | None = None
+        while proc.poll() is None and time.monotonic() < deadline:
+            if sender is None or not sender.is_alive():
+                sender = _udp_sender(port, body, delay=0.0)
+            time.sleep(0.5)
+        out, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0, err
+    assert "50 messages" in out and "stopped at --max-messages 50" in err
+
+
+def test_temporaries_of_interrupted_writes_are_removed_at_start(tmp_path: Path) -> None:
+    from hptvsim.service.disk import DiskUsage
+
+    folder = tmp_path / "episodes" / "abc"
+    folder.mkdir(parents=True)
+    dead = subprocess.run(
+        [sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True
+    )
+    stale = folder / f".recording.rrd.{int(dead.stdout)}.0a1b2c3d.rrd"
+    stale.write_bytes(b"x" * 100_000)
+    mine = folder / f".recording.rrd.{os.getpid()}.0a1b2c3d.rrd"  # a live writer's
+    mine.write_bytes(b"x")
+    (folder / "recording.rrd").write_bytes(b"kept")
+    DiskUsage(tmp_path / "episodes").recompute()
+    assert not stale.exists() and mine.exists() and (folder / "recording.rrd").exists()
