@@ -40,6 +40,12 @@ from hptvsim.world import cli as world_cli
 @click.version_option(__version__, prog_name="hptvsim")
 def main() -> None:
     """hptvsim: underwater pursuit-evasion simulator, FMUs, environments, training, service."""
+    from hptvsim._process import torch_threads_setting
+
+    try:  # a bad $HPTVSIM_TORCH_THREADS is refused before any command runs, not at a policy's load
+        torch_threads_setting()
+    except ValueError as exc:
+        raise click.ClickException(str(exc)) from None
 
 
 # --- fmu --------------------------------------------------------------------------------------

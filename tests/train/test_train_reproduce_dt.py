@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from train_helpers import ROOT
 
+from hptvsim.experiments.repro_archive import GZIP_SUFFIX, is_packed
 from hptvsim.experiments.repro_dt import (
     ARCHIVE_FILES,
     DTClaim,
@@ -339,10 +340,14 @@ def test_the_report_judges_the_dt_claims_from_the_dt_steps_and_archives_them(tmp
     )
     for job in plan.dt.jobs():
         kept = tmp_path / "docs" / "r" / "results" / f"dt-{job.name}"
-        assert {str(p.relative_to(kept)) for p in kept.rglob("*") if p.is_file()} == set(ARCHIVE_FILES) - {
+        had = set(ARCHIVE_FILES) - {
             "datasets/done.json",
             "run/config.toml",
-        }  # what the step had, no more
+            "run.json",
+        }  # run.json: Ray tasks
+        assert {str(p.relative_to(kept)) for p in kept.rglob("*") if p.is_file()} == {
+            f"{rel}{GZIP_SUFFIX}" if is_packed(rel) else rel for rel in had
+        }  # what the step had, no more (CSV logs gzipped)
     tables = [line for line in text.splitlines() if line.startswith("|")]
     write_report(plan, tmp_path / "fresh", report, figures=False)
     assert [line for line in report.read_text().splitlines() if line.startswith("|")] == tables
